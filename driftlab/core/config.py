@@ -1,0 +1,210 @@
+"""The one configuration schema shared by the CLI, the REST API and storage.
+
+An :class:`EpisodeConfig` groups frozen, validated sections. Every value is reachable by a dotted key
+(``plant.friction_scale``, ``mpc.q_sideslip``, ``vehicle.mass_kg`` ...) through :func:`apply_overrides`,
+and :func:`config_to_dict` / :func:`config_from_dict` round-trip it through plain JSON types.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, field, fields, is_dataclass, replace
+from typing import Any
+
+from driftlab.core.errors import ConfigError
+from driftlab.core.mpc import MpcConfig
+from driftlab.core.plant import PlantConfig
+from driftlab.core.vehicle import VehicleParams
+
+THETA_KEYS = ("c_lr", "c_rl", "dV", "k")
+
+
+@dataclass(frozen=True)
+class Theta:
+    """The parameters BO learns (paper section III-C).
+
+    Attributes:
+        c_lr: trigger fraction ending the left-hand drift [-].
+        c_rl: trigger fraction ending the right-hand drift [-].
+        dV: speed correction added to the equilibrium speed, V_hat = V_eq + dV [m/s] (paper eq. 10).
+        k: look-ahead steering feedback gain, delta_f = delta + k e_la [rad/m] (paper eq. 11).
+    """
+
+    c_lr: float = 0.02
+    c_rl: float = 0.02
+    dV: float = 0.0
+    k: float = 0.05
+
+    def __post_init__(self) -> None:
+        limits = {"c_lr": (0.0, 0.5), "c_rl": (0.0, 0.5), "dV": (-5.0, 5.0), "k": (-1.0, 1.0)}
+        for name, (lo, hi) in limits.items():
+            value = getattr(self, name)
+            if isinstance(value, bool) or not (isinstance(value, (int, float)) and math.isfinite(value)
+                                               and lo <= value <= hi):
+                raise ConfigError(f"theta.{name} must be a number in [{lo}, {hi}], got {value!r}")
+
+    @classmethod
+    def from_mapping(cls, values: dict[str, Any]) -> Theta:
+        unknown = set(values) - set(THETA_KEYS)
+        if unknown:
+            raise ConfigError(f"theta has no key {sorted(unknown)[0]!r}; allowed: {', '.join(THETA_KEYS)}")
+        return cls(**{k: float(v) for k, v in values.items()})
+
+    def as_dict(self) -> dict[str, float]:
+        return {k: float(getattr(self, k)) for k in THETA_KEYS}
+
+
+PAPER_THETA = Theta(c_lr=0.0273, c_rl=0.0215, dV=0.12, k=0.21)
+
+
+@dataclass(frozen=True)
+class ScenarioConfig:
+    """The figure-8 scenario.
+
+    Attributes:
+        left_radius_m, right_radius_m: circle radii [m].
+        sideslip_rad: |beta| of the sustained drifts [rad].
+        lookahead_m: look-ahead distance x_la of the steering feedback [m].
+        max_time_s: the episode stops here if not finished [s].
+        settle_tolerance_rad: |beta - beta_ref| that ends an inertia phase [rad].
+    """
+
+    left_radius_m: float = 44.0
+    right_radius_m: float = 44.0
+    sideslip_rad: float = 0.4
+    lookahead_m: float = 7.0
+    max_time_s: float = 40.0
+    settle_tolerance_rad: float = 0.05
+
+    def __post_init__(self) -> None:
+        _check_ranges(self, "scenario", {
+            "left_radius_m": (5.0, 500.0), "right_radius_m": (5.0, 500.0), "sideslip_rad": (0.05, 1.0),
+            "lookahead_m": (0.0, 50.0), "max_time_s": (1.0, 300.0), "settle_tolerance_rad": (0.001, 0.5)})
+
+
+@dataclass(frozen=True)
+class FailureLimits:
+    """When an episode is stopped as failed (REFERENCE.md section 7's rules, none flagged a good run).
+
+    Attributes:
+        max_sideslip_rad: |beta| above this: spun out.
+        max_yaw_rate_radps: |r| above this: spun out (flick peaks reach ~2 rad/s).
+        max_lateral_error_m: |e| above this: left the track.
+        min_speed_mps: V below this: stalled.
+        gripup_sideslip_rad: |beta| below this or of the wrong sign counts as gripping up ...
+        gripup_time_s: ... for longer than this ...
+        gripup_grace_s: ... counted from this long after a trigger (the flick crosses beta = 0).
+    """
+
+    max_sideslip_rad: float = 1.2
+    max_yaw_rate_radps: float = 3.0
+    max_lateral_error_m: float = 10.0
+    min_speed_mps: float = 8.0
+    gripup_sideslip_rad: float = 0.1
+    gripup_time_s: float = 1.0
+    gripup_grace_s: float = 2.5
+
+    def __post_init__(self) -> None:
+        _check_ranges(self, "failure", {
+            "max_sideslip_rad": (0.2, 1.6), "max_yaw_rate_radps": (0.5, 10.0), "max_lateral_error_m": (0.5, 50.0),
+            "min_speed_mps": (0.5, 30.0), "gripup_sideslip_rad": (0.0, 0.5), "gripup_time_s": (0.05, 10.0),
+            "gripup_grace_s": (0.0, 10.0)})
+
+
+@dataclass(frozen=True)
+class EpisodeConfig:
+    """Everything an episode needs besides theta."""
+
+    vehicle: VehicleParams = field(default_factory=VehicleParams)
+    plant: PlantConfig = field(default_factory=PlantConfig)
+    mpc: MpcConfig = field(default_factory=MpcConfig)
+    scenario: ScenarioConfig = field(default_factory=ScenarioConfig)
+    failure: FailureLimits = field(default_factory=FailureLimits)
+
+    @classmethod
+    def for_plant(cls, name: str) -> EpisodeConfig:
+        """Preset by plant name: "default" (mismatched) or "nominal" (equals the controller's model)."""
+        if name == "default":
+            return cls()
+        if name == "nominal":
+            return cls(plant=PlantConfig.nominal())
+        raise ConfigError(f"plant must be 'default' or 'nominal', got {name!r}")
+
+
+def _check_ranges(obj: Any, section: str, limits: dict[str, tuple[float, float]]) -> None:
+    for name, (lo, hi) in limits.items():
+        value = getattr(obj, name)
+        if isinstance(value, bool) or not (isinstance(value, (int, float)) and math.isfinite(value)
+                                           and lo <= value <= hi):
+            raise ConfigError(f"{section}.{name} must be a number in [{lo}, {hi}], got {value!r}")
+
+
+def _coerce(section: str, name: str, current: Any, raw: Any) -> Any:
+    key = f"{section}.{name}"
+    if isinstance(current, bool):
+        if isinstance(raw, bool):
+            return raw
+        if isinstance(raw, str) and raw.lower() in ("true", "1", "yes", "on", "false", "0", "no", "off"):
+            return raw.lower() in ("true", "1", "yes", "on")
+        raise ConfigError(f"{key} must be true or false, got {raw!r}")
+    if isinstance(current, int):
+        try:
+            value = int(raw) if not isinstance(raw, bool) else None
+        except (TypeError, ValueError):
+            value = None
+        if value is None or (isinstance(raw, float) and raw != value):
+            raise ConfigError(f"{key} must be an integer, got {raw!r}")
+        return value
+    if isinstance(current, float):
+        try:
+            if isinstance(raw, bool):
+                raise ValueError
+            return float(raw)
+        except (TypeError, ValueError):
+            raise ConfigError(f"{key} must be a number, got {raw!r}") from None
+    if not isinstance(raw, str):
+        raise ConfigError(f"{key} must be a string, got {raw!r}")
+    return raw
+
+
+def apply_overrides(config: EpisodeConfig, overrides: dict[str, Any]) -> EpisodeConfig:
+    """A copy of ``config`` with dotted keys set, e.g. {"plant.cg_height_m": 0.3}; validated.
+
+    Raises:
+        ConfigError: unknown key, wrong type or value out of range (the message names the key).
+    """
+    sections = {f.name: getattr(config, f.name) for f in fields(config)}
+    changes: dict[str, dict[str, Any]] = {}
+    for dotted, raw in overrides.items():
+        section, _, name = dotted.partition(".")
+        if section not in sections or not name:
+            raise ConfigError(f"unknown config key {dotted!r}; keys look like "
+                              f"'<section>.<field>' with section one of {', '.join(sections)}")
+        valid = {f.name for f in fields(sections[section])}
+        if name not in valid:
+            raise ConfigError(f"unknown config key {dotted!r}; {section} has: {', '.join(sorted(valid))}")
+        current = getattr(sections[section], name)
+        changes.setdefault(section, {})[name] = _coerce(section, name, current, raw)
+    updated = {s: replace(sections[s], **c) for s, c in changes.items()}
+    return replace(config, **updated)
+
+
+def config_to_dict(config: EpisodeConfig) -> dict[str, dict[str, Any]]:
+    """Nested plain dict {section: {field: value}}."""
+    return {f.name: {g.name: getattr(getattr(config, f.name), g.name) for g in fields(getattr(config, f.name))}
+            for f in fields(config) if is_dataclass(getattr(config, f.name))}
+
+
+def config_from_dict(data: dict[str, dict[str, Any]], base: EpisodeConfig | None = None) -> EpisodeConfig:
+    """Inverse of :func:`config_to_dict`; missing keys keep ``base``'s values."""
+    flat = {}
+    for section, values in data.items():
+        if not isinstance(values, dict):
+            raise ConfigError(f"config.{section} must be an object of field values")
+        flat.update({f"{section}.{k}": v for k, v in values.items()})
+    return apply_overrides(base or EpisodeConfig(), flat)
+
+
+def config_keys() -> dict[str, Any]:
+    """Every dotted key with its default value (for help texts and the README)."""
+    return {f"{s}.{k}": v for s, section in config_to_dict(EpisodeConfig()).items() for k, v in section.items()}

@@ -1,0 +1,154 @@
+"""The drift controller: MPC toward the planner's reference plus performance-driven control.
+
+Performance-driven control (paper section III-B): the reference speed is V_hat = V_eq + dV (eq. 10), and
+the steering sent to the car is delta_f = delta_mpc + k e_la with e_la = e + x_la sin(dpsi) (eq. 11). With
+the error conventions of :mod:`driftlab.core.track` (e > 0 and dpsi > 0 to the right of the path), k > 0
+steers back toward the path. The MPC's own input state keeps delta_mpc, as in the paper's block diagram.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from functools import lru_cache
+
+import numpy as np
+
+from driftlab.core.equilibrium import Equilibrium, drift_equilibrium
+from driftlab.core.mpc import N_X, DisturbanceEstimator, MpcConfig, MpcSolution, ReferenceQp, to_scaled
+from driftlab.core.track import LEFT
+from driftlab.core.vehicle import VehicleParams, drift_derivatives_vec, pack_params
+
+
+@dataclass(frozen=True)
+class ControllerModel:
+    """What the controller knows: its vehicle model, the two reference equilibria and their QPs."""
+
+    params: np.ndarray
+    left: Equilibrium
+    right: Equilibrium
+    left_qp: ReferenceQp
+    right_qp: ReferenceQp
+
+    def equilibrium(self, direction: int) -> Equilibrium:
+        return self.left if direction == LEFT else self.right
+
+    def qp(self, direction: int) -> ReferenceQp:
+        return self.left_qp if direction == LEFT else self.right_qp
+
+
+@lru_cache(maxsize=16)
+def build_controller_model(vehicle: VehicleParams, mpc: MpcConfig, left_radius_m: float,
+                           right_radius_m: float, sideslip_rad: float) -> ControllerModel:
+    """Equilibria and condensed QPs for both sides; cached, as BO reuses them for every episode.
+
+    Raises:
+        NoEquilibriumError: the model has no drift at one of the radii.
+    """
+    params = pack_params(vehicle)
+    left = drift_equilibrium(left_radius_m, -abs(sideslip_rad), params)
+    right = drift_equilibrium(right_radius_m, abs(sideslip_rad), params)
+    return ControllerModel(params, left, right, ReferenceQp(mpc, left, params), ReferenceQp(mpc, right, params))
+
+
+def lookahead_error_m(lateral_error_m: float, course_error_rad: float, lookahead_m: float) -> float:
+    """e_la = e + x_la sin(dpsi) (paper section III-B)."""
+    return lateral_error_m + lookahead_m * np.sin(course_error_rad)
+
+
+class DriftController:
+    """One episode's controller state: last inputs, disturbance estimate."""
+
+    def __init__(self, model: ControllerModel, mpc: MpcConfig, speed_offset_mps: float,
+                 feedback_gain_radpm: float, lookahead_m: float) -> None:
+        self.model = model
+        self.mpc = mpc
+        self.speed_offset_mps = speed_offset_mps
+        self.feedback_gain_radpm = feedback_gain_radpm
+        self.lookahead_m = lookahead_m
+        start = model.left
+        self.last_mpc_inputs = start.inputs.copy()  # [delta_mpc rad, Fxr N]
+        self.last_applied = start.inputs.copy()
+        self.last_state: np.ndarray | None = None
+        self.direction = LEFT
+        # Disturbances beyond these are not a model mismatch the linear MPC can use.
+        limit = np.array([5.0, 2.0, 5.0])
+        self.estimator = DisturbanceEstimator(mpc.disturbance_gain, mpc.dt_s, limit)
+
+    def reference(self, direction: int) -> np.ndarray:
+        """z_ref = [V_eq + dV, beta_eq, r_eq, delta_eq, Fxr_eq kN] of the side being driven.
+
+        With the offset-free extension on, the equilibrium is first moved to where the linear model plus
+        the estimated disturbance is steady at the same beta and path radius (:func:`steady_state_target`).
+        """
+        eq = self.model.equilibrium(direction)
+        z_eq = to_scaled(eq.state, eq.inputs)
+        if self.mpc.disturbance_gain > 0.0:
+            z_eq = steady_state_target(self.model.qp(direction), self.estimator.value * _mirror(direction))
+        z_ref = z_eq.copy()
+        z_ref[0] += self.speed_offset_mps
+        if self.mpc.disturbance_gain > 0.0:
+            z_ref[2] = z_ref[0] * eq.yaw_rate_radps / eq.speed_mps  # keep r = V / R
+        return z_ref
+
+    def freeze_estimate(self, frozen: bool) -> None:
+        """Hold the disturbance estimate (during a flick the mismatch is not that of a steady drift)."""
+        self.estimator.frozen = frozen
+
+    def _update_disturbance(self, state: np.ndarray) -> np.ndarray:
+        if self.last_state is None or self.mpc.disturbance_gain == 0.0:
+            return self.estimator.value
+        # One-step prediction of the *nonlinear* model under the inputs actually sent: the innovation is the
+        # plant-model mismatch, not the linearization error of the MPC's prediction.
+        predicted = _model_step(self.last_state, self.last_applied, self.model.params, self.mpc.dt_s)
+        # The estimate is kept in left-hand form; a right-hand drift sees it mirrored (paper eq. 9).
+        return self.estimator.update((state - predicted) * _mirror(self.direction)) * _mirror(self.direction)
+
+    def step(self, state: np.ndarray, actuators: np.ndarray, direction: int, lateral_error_m: float,
+             course_error_rad: float) -> tuple[float, float, MpcSolution]:
+        """Commands (steer rad, drive N) for the measured state [V, beta, r] and actuator positions
+        [delta rad, Fxr N] (used where the controller models actuator lag)."""
+        self.direction = direction
+        disturbance = self._update_disturbance(state)
+        z_now = to_scaled(state, self.last_mpc_inputs)
+        if self.mpc.models_actuator_lag:
+            z_now = np.concatenate([to_scaled(state, actuators), z_now[N_X:]])
+        solution = self.model.qp(direction).solve(z_now, self.reference(direction), disturbance)
+        self.last_mpc_inputs = np.array([solution.steer_rad, solution.drive_force_n])
+        e_la = lookahead_error_m(lateral_error_m, course_error_rad, self.lookahead_m)
+        limit = self.mpc.steer_limit_rad
+        steer = float(np.clip(solution.steer_rad + self.feedback_gain_radpm * e_la, -limit, limit))
+        self.last_applied = np.array([steer, solution.drive_force_n])
+        self.last_state = state.copy()
+        return steer, solution.drive_force_n, solution
+
+
+def _mirror(direction: int) -> np.ndarray:
+    """Sign flips taking a left-hand (V, beta, r) quantity to the given side."""
+    return np.array([1.0, 1.0, 1.0]) if direction == LEFT else np.array([1.0, -1.0, -1.0])
+
+
+def steady_state_target(qp: ReferenceQp, disturbance: np.ndarray) -> np.ndarray:
+    """Offset-free target: the steady state of the linear model plus disturbance d at the same beta and
+    path radius as the reference equilibrium.
+
+    Unknowns dV, d_delta, d_Fxr with x_s = x_eq + [dV, 0, dV / R]; solves A (x_s - x_eq) + B (u_s - u_eq)
+    + d = 0 (3 equations, 3 unknowns). Returns z_s (Fxr in kN).
+    """
+    z_eq = qp.z_lin[:N_X + 2]  # [V, beta, r, delta, Fxr kN]
+    radius = z_eq[0] / z_eq[2]
+    a_c, b_c = qp.a_cont, qp.b_cont
+    lhs = np.column_stack([a_c[:, 0] + a_c[:, 2] / radius, b_c[:, 0], b_c[:, 1]])
+    dv, dsteer, ddrive = np.linalg.solve(lhs, -disturbance)
+    return z_eq + np.array([dv, 0.0, dv / radius, dsteer, ddrive])
+
+
+def _model_step(state: np.ndarray, inputs: np.ndarray, params: np.ndarray, dt_s: float) -> np.ndarray:
+    """RK4 step of the controller's 3-state model (one step; its modes are slow against dt)."""
+    k1 = drift_derivatives_vec(state, inputs, params)
+    k2 = drift_derivatives_vec(state + 0.5 * dt_s * k1, inputs, params)
+    k3 = drift_derivatives_vec(state + 0.5 * dt_s * k2, inputs, params)
+    k4 = drift_derivatives_vec(state + dt_s * k3, inputs, params)
+    return state + dt_s / 6.0 * (k1 + 2 * k2 + 2 * k3 + k4)
+
+
+__all__ = ["ControllerModel", "DriftController", "build_controller_model", "lookahead_error_m", "N_X"]

@@ -1,0 +1,98 @@
+"""Episode metrics and the paper's objective J (eq. 12)."""
+
+from __future__ import annotations
+
+import math
+from dataclasses import asdict, dataclass
+
+import numpy as np
+
+from driftlab.core.planner import Phase
+from driftlab.core.track import FigureEight, wrap_angle
+
+COURSE_WEIGHT = 5.0  # lambda_1 (paper section IV-A)
+SIDESLIP_WEIGHT = 1.0  # lambda_2
+SUSTAINED_PHASES = (Phase.LEFT_DRIFT, Phase.RIGHT_DRIFT, Phase.LEFT_DRIFT_FINAL)
+
+
+@dataclass(frozen=True)
+class EpisodeMetrics:
+    objective_j: float  # log(mean(|e| + 5 |dpsi| + |beta - beta_ref|)) over every step
+    completed_fraction: float  # share of the 8's length driven, [0, 1]
+    mean_abs_e_m: float
+    max_abs_e_m: float
+    mean_abs_beta_err_rad: float  # sustained phases only
+    beta_flip_s: list[float]  # per transition: trigger to beta changing sign
+    beta_settle_s: list[float]  # per transition: trigger to |beta - beta_ref| < 0.05 rad
+    min_speed_mps: float
+    max_abs_yaw_rate_radps: float
+    trigger_times_s: list[float]
+    duration_s: float
+
+    def as_dict(self) -> dict:
+        out = asdict(self)
+        out.pop("objective_j")
+        return out
+
+
+def objective_j(e_m: np.ndarray, dpsi_rad: np.ndarray, beta_err_rad: np.ndarray) -> float:
+    """J = log(mean_k(|e_k| + 5 |dpsi_k| + |beta_k - beta_eq|)) (paper eq. 12)."""
+    cost = np.abs(e_m) + COURSE_WEIGHT * np.abs(dpsi_rad) + SIDESLIP_WEIGHT * np.abs(beta_err_rad)
+    return float(math.log(max(float(np.mean(cost)), 1e-12)))
+
+
+def progress_m(traj: np.ndarray, track: FigureEight, col: dict[str, int]) -> float:
+    """Arc length driven along the scenario, summed over steps on the circle of each step's phase."""
+    total = 0.0
+    for i in range(1, len(traj)):
+        phase = Phase(int(traj[i, col["phase"]]))
+        circle = track.circle(phase.direction)
+        a0 = circle.polar_angle(traj[i - 1, col["x_m"]], traj[i - 1, col["y_m"]])
+        a1 = circle.polar_angle(traj[i, col["x_m"]], traj[i, col["y_m"]])
+        total += circle.direction * wrap_angle(a1 - a0) * circle.radius_m
+    return total
+
+
+def _transition_times(t: np.ndarray, beta: np.ndarray, beta_ref: np.ndarray, trigger_s: float,
+                      tolerance: float) -> tuple[float, float]:
+    after = t >= trigger_s
+    flipped = after & (beta * beta_ref > 0)
+    settled = after & (np.abs(beta - beta_ref) < tolerance)
+    flip = float(t[np.argmax(flipped)] - trigger_s) if flipped.any() else math.nan
+    settle = float(t[np.argmax(settled)] - trigger_s) if settled.any() else math.nan
+    return flip, settle
+
+
+def compute_metrics(traj: np.ndarray, trigger_times_s: list[float], track: FigureEight,
+                    col: dict[str, int]) -> EpisodeMetrics:
+    if len(traj) == 0:
+        return EpisodeMetrics(math.log(1e3), 0.0, math.nan, math.nan, math.nan, [], [], math.nan, math.nan, [], 0.0)
+    t = traj[:, col["t_s"]]
+    e = traj[:, col["e_m"]]
+    beta = traj[:, col["beta_rad"]]
+    beta_ref = traj[:, col["beta_ref_rad"]]
+    phase = traj[:, col["phase"]].astype(int)
+    beta_err = beta - beta_ref
+    finished = phase[-1] == Phase.FINISHED
+    # An unfinished run never counts as whole, however far it went round.
+    driven = progress_m(traj, track, col) / track.scenario_length_m
+    fraction = 1.0 if finished else min(max(driven, 0.0), 0.99)
+    sustained = np.isin(phase, [int(p) for p in SUSTAINED_PHASES])
+    flips, settles = [], []
+    for trigger in trigger_times_s:
+        flip, settle = _transition_times(t, beta, beta_ref, trigger, 0.05)
+        flips.append(flip)
+        settles.append(settle)
+    return EpisodeMetrics(
+        objective_j=objective_j(e, traj[:, col["dpsi_rad"]], beta_err),
+        completed_fraction=float(fraction),
+        mean_abs_e_m=float(np.mean(np.abs(e))),
+        max_abs_e_m=float(np.max(np.abs(e))),
+        mean_abs_beta_err_rad=float(np.mean(np.abs(beta_err[sustained]))) if sustained.any() else math.nan,
+        beta_flip_s=flips,
+        beta_settle_s=settles,
+        min_speed_mps=float(np.min(traj[:, col["V_mps"]])),
+        max_abs_yaw_rate_radps=float(np.max(np.abs(traj[:, col["r_radps"]]))),
+        trigger_times_s=[float(x) for x in trigger_times_s],
+        duration_s=float(t[-1]),
+    )

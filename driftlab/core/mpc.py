@@ -1,0 +1,298 @@
+"""The linear MPC drift controller (paper section II-B), condensed and solved with OSQP.
+
+Augmented state z = [V, beta, r, delta, Fxr] with Fxr in kN (in newtons OSQP needs thousands of iterations,
+REFERENCE.md section 4), inputs the increments [d_delta, d_Fxr]. The model is linearized about the reference
+drift equilibrium and discretized (forward Euler as in the paper, or exact zero-order hold). Cost:
+sum_{k=1..Np} ||z_k - z_ref||_Q^2 + sum_{k=0..Nc-1} ||du_k||_R^2 (paper eq. 7), Np = Nc, box limits on
+delta, Fxr and both increments.
+
+Solving: the QP is condensed to the 2*Nc increments once per reference. Each step first forms the
+unconstrained minimizer with a precomputed gain; when it satisfies every limit it *is* the QP's solution
+(the constraints are inactive, the QP is strictly convex). Only otherwise OSQP (set up once, warm-started,
+only q, l, u updated) solves the constrained QP.
+
+Offset-free extension (not in the paper; ``disturbance_gain`` > 0): a constant additive disturbance d on
+(Vdot, betadot, rdot) is estimated each step from the difference between the measured state and the
+controller model's one-step prediction, and enters the prediction (Maeder, Borrelli & Morari 2009).
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, fields
+
+import numpy as np
+import osqp
+import scipy.linalg
+import scipy.sparse as sp
+
+from driftlab.core.equilibrium import Equilibrium, jacobians
+from driftlab.core.errors import ConfigError
+
+KN = 1e-3  # the QP's drive-force unit is kN
+N_X = 3
+N_U = 2
+N_Z = N_X + N_U
+
+
+@dataclass(frozen=True)
+class MpcConfig:
+    """Controller settings. Defaults are REFERENCE.md section 7's weights for the scaled state.
+
+    Attributes:
+        dt_s: sampling time [s].
+        horizon: Np = Nc [steps].
+        q_speed, q_sideslip, q_yaw_rate, q_steer, q_drive_kn: state weights Q for [V, beta, r, delta, Fxr kN].
+        r_steer_step, r_drive_step_kn: increment weights R for [d_delta, d_Fxr kN].
+        steer_limit_rad: |delta| limit [rad].
+        drive_min_n, drive_max_n: Fxr limits [N].
+        steer_rate_radps: |d_delta| / dt limit [rad/s].
+        drive_rate_nps: |d_Fxr| / dt limit [N/s].
+        discretization: "euler" (the paper) or "zoh" (exact for the linear model).
+        disturbance_gain: filter gain in [0, 1] of the offset-free disturbance estimate (0: the paper).
+        model_steer_lag_s, model_drive_lag_s: actuator time constants the controller's model assumes [s];
+            both 0 is the paper's model (inputs act at once).
+        osqp_eps: OSQP absolute and relative tolerance.
+    """
+
+    dt_s: float = 0.05
+    horizon: int = 20
+    q_speed: float = 1.0
+    q_sideslip: float = 417.0
+    q_yaw_rate: float = 26.0
+    q_steer: float = 5.5
+    q_drive_kn: float = 0.2
+    r_steer_step: float = 56.0
+    r_drive_step_kn: float = 0.024
+    steer_limit_rad: float = 0.6
+    drive_min_n: float = -6000.0
+    drive_max_n: float = 8000.0
+    steer_rate_radps: float = 3.0
+    drive_rate_nps: float = 20000.0
+    discretization: str = "euler"
+    disturbance_gain: float = 0.0
+    model_steer_lag_s: float = 0.0
+    model_drive_lag_s: float = 0.0
+    osqp_eps: float = 1e-6
+
+    def __post_init__(self) -> None:
+        ranges = {
+            "dt_s": (0.005, 0.5), "horizon": (1, 100), "steer_limit_rad": (0.05, 1.2),
+            "drive_min_n": (-30000.0, 0.0), "drive_max_n": (0.0, 30000.0), "steer_rate_radps": (0.05, 50.0),
+            "drive_rate_nps": (100.0, 1e6), "disturbance_gain": (0.0, 1.0), "osqp_eps": (1e-10, 1e-2),
+            "model_steer_lag_s": (0.0, 0.5), "model_drive_lag_s": (0.0, 1.0),
+        }
+        for f in fields(self):
+            value = getattr(self, f.name)
+            if f.name == "discretization":
+                if value not in ("euler", "zoh"):
+                    raise ConfigError(f"mpc.discretization must be 'euler' or 'zoh', got {value!r}")
+                continue
+            lo, hi = ranges.get(f.name, (0.0, 1e7))
+            if isinstance(value, bool) or not (isinstance(value, (int, float)) and math.isfinite(value)
+                                               and lo <= value <= hi):
+                raise ConfigError(f"mpc.{f.name} must be a number in [{lo}, {hi}], got {value!r}")
+        if not isinstance(self.horizon, int):
+            raise ConfigError(f"mpc.horizon must be an integer in [1, 100], got {self.horizon!r}")
+
+    @property
+    def models_actuator_lag(self) -> bool:
+        return self.model_steer_lag_s > 0.0 or self.model_drive_lag_s > 0.0
+
+    @property
+    def state_weights(self) -> np.ndarray:
+        return np.array([self.q_speed, self.q_sideslip, self.q_yaw_rate, self.q_steer, self.q_drive_kn])
+
+    @property
+    def input_weights(self) -> np.ndarray:
+        return np.array([self.r_steer_step, self.r_drive_step_kn])
+
+
+def to_scaled(state: np.ndarray, inputs: np.ndarray) -> np.ndarray:
+    """z = [V, beta, r, delta, Fxr kN] from state [V, beta, r] and inputs [delta, Fxr N]."""
+    return np.array([state[0], state[1], state[2], inputs[0], inputs[1] * KN])
+
+
+def _with_actuator_lag(a_c: np.ndarray, b_c: np.ndarray, config: MpcConfig) -> tuple[np.ndarray, np.ndarray]:
+    """Continuous model with first-order actuators: states [V, beta, r, delta_a, Fxr_a], inputs the commands."""
+    lags = np.array([max(config.model_steer_lag_s, 1e-4), max(config.model_drive_lag_s, 1e-4)])
+    a_sys = np.zeros((N_X + N_U, N_X + N_U))
+    a_sys[:N_X, :N_X] = a_c
+    a_sys[:N_X, N_X:] = b_c
+    a_sys[N_X:, N_X:] = np.diag(-1.0 / lags)
+    b_sys = np.zeros((N_X + N_U, N_U))
+    b_sys[N_X:, :] = np.diag(1.0 / lags)
+    return a_sys, b_sys
+
+
+def discretize(a_mat: np.ndarray, b_mat: np.ndarray, dt_s: float, method: str):
+    """Discrete (Ad, Bd, Gd) for x+ = Ad x + Bd u + Gd d, with d an additive disturbance on xdot."""
+    n, m = b_mat.shape
+    if method == "euler":
+        return np.eye(n) + dt_s * a_mat, dt_s * b_mat, dt_s * np.eye(n)
+    block = np.zeros((2 * n + m, 2 * n + m))
+    block[:n, :n] = a_mat
+    block[:n, n:n + m] = b_mat
+    block[:n, n + m:] = np.eye(n)
+    phi = scipy.linalg.expm(block * dt_s)
+    return phi[:n, :n], phi[:n, n:n + m], phi[:n, n + m:]
+
+
+@dataclass
+class MpcSolution:
+    """One step's result."""
+
+    steer_rad: float
+    drive_force_n: float
+    used_osqp: bool
+    ok: bool
+    increments: np.ndarray  # the whole optimal increment sequence, [d_delta, d_Fxr kN] per step
+
+
+class ReferenceQp:
+    """The condensed QP for one reference equilibrium (built once, reused every step)."""
+
+    def __init__(self, config: MpcConfig, equilibrium: Equilibrium, p_model: np.ndarray) -> None:
+        self.config = config
+        self.equilibrium = equilibrium
+        a_c, b_c = jacobians(equilibrium.state, equilibrium.inputs, p_model)
+        b_c = b_c.copy()
+        b_c[:, 1] /= KN  # per kN
+        self.a_cont, self.b_cont = a_c, b_c
+        self.models_lag = config.models_actuator_lag
+        a_sys, b_sys = (_with_actuator_lag(a_c, b_c, config) if self.models_lag else (a_c, b_c))
+        n_sys = a_sys.shape[0]  # 3, or 5 with actuator states [delta_actual, Fxr_actual kN]
+        ad, bd, gd = discretize(a_sys, b_sys, config.dt_s, config.discretization)
+        gd = gd[:, :N_X]  # the disturbance acts on (Vdot, betadot, rdot) only
+        self.ad, self.bd, self.gd = ad, bd, gd
+        z_eq = to_scaled(equilibrium.state, equilibrium.inputs)
+        self.n_z = n_z = n_sys + N_U
+        self.z_lin = np.concatenate([z_eq, z_eq[N_X:]]) if self.models_lag else z_eq
+        n_h = config.horizon
+        aa = np.zeros((n_z, n_z))
+        aa[:n_sys, :n_sys] = ad
+        aa[:n_sys, n_sys:] = bd
+        aa[n_sys:, n_sys:] = np.eye(N_U)
+        ba = np.vstack([bd, np.eye(N_U)])
+        ga = np.vstack([gd, np.zeros((N_U, N_X))])
+        phi = np.zeros((n_h * n_z, n_z))
+        gamma = np.zeros((n_h * n_z, n_h * N_U))
+        lam = np.zeros((n_h * n_z, N_X))
+        power = np.eye(n_z)
+        lam_acc = np.zeros((n_z, N_X))
+        a_pow_b = [ba]
+        for _ in range(1, n_h):
+            a_pow_b.append(aa @ a_pow_b[-1])
+        for k in range(n_h):
+            lam_acc = aa @ lam_acc + ga
+            power = aa @ power
+            phi[k * n_z:(k + 1) * n_z] = power
+            lam[k * n_z:(k + 1) * n_z] = lam_acc
+            for j in range(k + 1):
+                gamma[k * n_z:(k + 1) * n_z, j * N_U:(j + 1) * N_U] = a_pow_b[k - j]
+        # Q weighs [V, beta, r, delta, Fxr]: the actuator states when modelled, else the held commands.
+        weights = np.concatenate([config.state_weights, np.zeros(N_U)]) if self.models_lag \
+            else config.state_weights
+        q_bar = np.kron(np.eye(n_h), np.diag(weights))
+        r_bar = np.kron(np.eye(n_h), np.diag(config.input_weights))
+        hessian = gamma.T @ q_bar @ gamma + r_bar
+        hessian = 0.5 * (hessian + hessian.T)
+        self.hessian = hessian
+        self.gamma_t_q = gamma.T @ q_bar
+        self.phi = phi
+        self.lam = lam
+        chol = scipy.linalg.cho_factor(hessian)
+        gain = scipy.linalg.cho_solve(chol, self.gamma_t_q)  # H^-1 Gamma' Qbar
+        self.gain_state = gain @ phi
+        self.gain_disturbance = gain @ lam
+        self.gain_reference = gain
+        # Constraints on the increments: bounds on each du and on u_{-1} + cumulative sums.
+        cumsum = np.kron(np.tril(np.ones((n_h, n_h))), np.eye(N_U))
+        self.cumsum = cumsum
+        self.constraint_matrix = np.vstack([np.eye(n_h * N_U), cumsum])
+        step_limit = np.array([config.steer_rate_radps * config.dt_s, config.drive_rate_nps * config.dt_s * KN])
+        self.step_limit = np.tile(step_limit, n_h)
+        self.input_lo = np.tile(np.array([-config.steer_limit_rad, config.drive_min_n * KN]), n_h)
+        self.input_hi = np.tile(np.array([config.steer_limit_rad, config.drive_max_n * KN]), n_h)
+        self._solver: osqp.OSQP | None = None
+        self._ref_key = b""
+        self._ref_terms: tuple[np.ndarray, np.ndarray] | None = None
+
+    def _osqp(self) -> osqp.OSQP:
+        if self._solver is None:
+            solver = osqp.OSQP()
+            solver.setup(
+                sp.csc_matrix(np.triu(self.hessian)), np.zeros(self.hessian.shape[0]),
+                sp.csc_matrix(self.constraint_matrix),
+                np.concatenate([-self.step_limit, self.input_lo]), np.concatenate([self.step_limit, self.input_hi]),
+                eps_abs=self.config.osqp_eps, eps_rel=self.config.osqp_eps, polishing=True, verbose=False,
+                warm_starting=True, max_iter=4000,
+            )
+            self._solver = solver
+        return self._solver
+
+    def augmented_reference(self, z_ref: np.ndarray) -> np.ndarray:
+        """The 5-entry reference [V, beta, r, delta, Fxr kN] in this QP's state layout."""
+        return np.concatenate([z_ref, z_ref[N_X:]]) if self.models_lag else z_ref
+
+    def _reference_terms(self, z_ref: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        key = z_ref.tobytes()
+        if key != self._ref_key or self._ref_terms is None:  # the reference changes rarely: cache one
+            deviation = np.tile(self.augmented_reference(z_ref) - self.z_lin, self.config.horizon)
+            self._ref_terms = (self.gain_reference @ deviation, self.gamma_t_q @ deviation)
+            self._ref_key = key
+        return self._ref_terms
+
+    def solve(self, z_now: np.ndarray, z_ref: np.ndarray, disturbance: np.ndarray) -> MpcSolution:
+        """Optimal increments.
+
+        Args:
+            z_now: augmented state: [V, beta, r, (delta_actual, Fxr_actual kN,) delta_prev, Fxr_prev kN], the
+                last two being the commands of the previous step.
+            z_ref: reference [V, beta, r, delta, Fxr kN].
+            disturbance: estimated additive disturbance on (Vdot, betadot, rdot).
+        """
+        dz = z_now - self.z_lin
+        ref_gain_term, ref_linear_term = self._reference_terms(z_ref)
+        du = ref_gain_term - self.gain_state @ dz - self.gain_disturbance @ disturbance
+        u_prev = z_now[-N_U:]
+        cumulative = np.tile(u_prev, self.config.horizon) + self.cumsum @ du
+        tol = 1e-9
+        within = (np.all(np.abs(du) <= self.step_limit + tol) and np.all(cumulative >= self.input_lo - tol)
+                  and np.all(cumulative <= self.input_hi + tol))
+        used_osqp = False
+        ok = True
+        if not within:
+            used_osqp = True
+            solver = self._osqp()
+            offset = np.tile(u_prev, self.config.horizon)
+            q = self.gamma_t_q @ (self.phi @ dz + self.lam @ disturbance) - ref_linear_term
+            solver.update(q=q, l=np.concatenate([-self.step_limit, self.input_lo - offset]),
+                          u=np.concatenate([self.step_limit, self.input_hi - offset]))
+            result = solver.solve()
+            ok = result.info.status_val in (1, 2) and result.x is not None and np.all(np.isfinite(result.x))
+            du = np.clip(result.x, -self.step_limit, self.step_limit) if ok else np.zeros_like(du)
+        steer = float(np.clip(u_prev[0] + du[0], -self.config.steer_limit_rad, self.config.steer_limit_rad))
+        drive_kn = float(np.clip(u_prev[1] + du[1], self.config.drive_min_n * KN, self.config.drive_max_n * KN))
+        return MpcSolution(steer, drive_kn / KN, used_osqp, ok, du)
+
+
+class DisturbanceEstimator:
+    """Offset-free MPC's disturbance estimate d on (Vdot, betadot, rdot), a first-order filter.
+
+    The measurement d_meas = (x_meas - x_pred) / dt, x_pred being the controller model's one-step
+    prediction without disturbance; d follows it through d += gain (d_meas - d).
+    """
+
+    def __init__(self, gain: float, dt_s: float, limit: np.ndarray) -> None:
+        self.gain = gain
+        self.dt_s = dt_s
+        self.limit = limit
+        self.value = np.zeros(N_X)
+        self.frozen = False
+
+    def update(self, innovation: np.ndarray) -> np.ndarray:
+        if self.gain > 0.0 and not self.frozen:
+            measured = innovation / self.dt_s
+            self.value = np.clip(self.value + self.gain * (measured - self.value), -self.limit, self.limit)
+        return self.value

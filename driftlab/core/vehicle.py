@@ -1,0 +1,209 @@
+"""Single-track drift dynamics: the paper's 3-state model (Zhou et al. 2025, eq. 1-6).
+
+One compiled function, :func:`drift_derivatives`, serves the controller's model, its linearization,
+the equilibrium solver and the plant. The plant switches on what the paper's model leaves out
+(rear friction circle, longitudinal load transfer) through flags in the packed parameter vector; with the
+flags off it *is* the paper's model.
+
+Sign convention (REFERENCE.md section 2): y to the left, sideslip ``beta = atan(vy / vx)``, yaw rate and
+steering positive to the left, tyre slip = wheel velocity direction minus wheel heading, tyre force opposes
+slip. A left-hand drift has r > 0, beta < 0 and countersteer delta < 0.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import asdict, dataclass, replace
+
+import numpy as np
+from numba import njit
+
+from driftlab.core.errors import ConfigError
+
+# Layout of the packed parameter vector the compiled functions read (named, never bare numbers).
+P_MASS = 0
+P_YAW_INERTIA = 1
+P_CG_TO_FRONT = 2
+P_CG_TO_REAR = 3
+P_FRICTION = 4
+P_TYRE_B = 5
+P_TYRE_C = 6
+P_GRAVITY = 7
+P_CG_HEIGHT = 8
+P_FRICTION_CIRCLE = 9
+P_LOAD_TRANSFER = 10
+N_PARAMS = 11
+
+# Fixed-point passes for the load-transfer loop (loads depend on Fyf, which depends on loads). The loop
+# gain is about h/L * mu * sin(delta) ~ 0.05, so three passes leave < 1e-4 relative error.
+_LOAD_TRANSFER_PASSES = 3
+
+
+@dataclass(frozen=True)
+class VehicleParams:
+    """A car for the single-track model. Defaults: the Table-I fit of REFERENCE.md section 2.
+
+    Attributes:
+        mass_kg: vehicle mass m [kg].
+        yaw_inertia_kgm2: yaw moment of inertia Iz [kg m^2].
+        cg_to_front_m: distance a from the CG to the front axle [m].
+        cg_to_rear_m: distance b from the CG to the rear axle [m].
+        friction: tyre-road friction coefficient mu [-].
+        tyre_b: simplified Pacejka stiffness factor B [1/rad].
+        tyre_c: simplified Pacejka shape factor C [-].
+        cg_height_m: CG height above ground [m]; used only where load transfer is switched on.
+        gravity_mps2: gravitational acceleration g [m/s^2].
+    """
+
+    mass_kg: float = 1844.7
+    yaw_inertia_kgm2: float = 2300.0
+    cg_to_front_m: float = 1.39
+    cg_to_rear_m: float = 1.0008
+    friction: float = 0.85
+    tyre_b: float = 11.697
+    tyre_c: float = 1.4478
+    cg_height_m: float = 0.45
+    gravity_mps2: float = 9.81
+
+    def __post_init__(self) -> None:
+        limits = {
+            "mass_kg": (100.0, 20000.0),
+            "yaw_inertia_kgm2": (10.0, 50000.0),
+            "cg_to_front_m": (0.1, 5.0),
+            "cg_to_rear_m": (0.1, 5.0),
+            "friction": (0.05, 2.0),
+            "tyre_b": (0.5, 50.0),
+            "tyre_c": (0.5, 2.5),
+            "cg_height_m": (0.0, 2.0),
+            "gravity_mps2": (1.0, 30.0),
+        }
+        for name, (lo, hi) in limits.items():
+            value = getattr(self, name)
+            if not (isinstance(value, (int, float)) and math.isfinite(value) and lo <= value <= hi):
+                raise ConfigError(f"vehicle.{name} must be a number in [{lo}, {hi}], got {value!r}")
+
+    @property
+    def wheelbase_m(self) -> float:
+        return self.cg_to_front_m + self.cg_to_rear_m
+
+    def static_axle_loads_n(self) -> tuple[float, float]:
+        """Static normal loads (Fzf, Fzr) [N] (paper: Fzf = m g b / L, Fzr = m g a / L)."""
+        weight = self.mass_kg * self.gravity_mps2
+        return weight * self.cg_to_rear_m / self.wheelbase_m, weight * self.cg_to_front_m / self.wheelbase_m
+
+    def scaled(self, **factors: float) -> VehicleParams:
+        """This car with fields multiplied by factors, e.g. ``scaled(friction=1.1, mass_kg=1.05)``."""
+        values = asdict(self)
+        for name, factor in factors.items():
+            if name not in values:
+                raise ConfigError(f"vehicle has no field {name!r}")
+            values[name] = values[name] * factor
+        return replace(self, **values)
+
+
+def pack_params(
+    vehicle: VehicleParams, *, friction_circle: bool = False, load_transfer: bool = False
+) -> np.ndarray:
+    """The float64 parameter vector read by the compiled dynamics.
+
+    With both flags off this is the paper's 3-state model.
+    """
+    p = np.zeros(N_PARAMS)
+    p[P_MASS] = vehicle.mass_kg
+    p[P_YAW_INERTIA] = vehicle.yaw_inertia_kgm2
+    p[P_CG_TO_FRONT] = vehicle.cg_to_front_m
+    p[P_CG_TO_REAR] = vehicle.cg_to_rear_m
+    p[P_FRICTION] = vehicle.friction
+    p[P_TYRE_B] = vehicle.tyre_b
+    p[P_TYRE_C] = vehicle.tyre_c
+    p[P_GRAVITY] = vehicle.gravity_mps2
+    p[P_CG_HEIGHT] = vehicle.cg_height_m
+    p[P_FRICTION_CIRCLE] = 1.0 if friction_circle else 0.0
+    p[P_LOAD_TRANSFER] = 1.0 if load_transfer else 0.0
+    return p
+
+
+@njit(cache=True)
+def pacejka_lateral_force(slip_rad, peak_force_n, tyre_b, tyre_c):
+    """Simplified Pacejka lateral force (paper eq. 4): Fy = -Fpeak sin(C atan(B alpha)) [N]."""
+    return -peak_force_n * math.sin(tyre_c * math.atan(tyre_b * slip_rad))
+
+
+@njit(cache=True)
+def slip_angles(speed_mps, sideslip_rad, yaw_rate_radps, steer_rad, p):
+    """Front and rear slip angles alpha_f, alpha_r [rad] (paper eq. 5-6).
+
+    atan2 equals the paper's atan(vy / vx) while the car moves forward (vx > 0) and stays defined past
+    90 degrees of sideslip, where a spinning plant may go before the episode flags it.
+    """
+    vx = speed_mps * math.cos(sideslip_rad)
+    vy = speed_mps * math.sin(sideslip_rad)
+    alpha_f = math.atan2(vy + p[P_CG_TO_FRONT] * yaw_rate_radps, vx) - steer_rad
+    alpha_r = math.atan2(vy - p[P_CG_TO_REAR] * yaw_rate_radps, vx)
+    return alpha_f, alpha_r
+
+
+@njit(cache=True)
+def tyre_forces(speed_mps, sideslip_rad, yaw_rate_radps, steer_rad, drive_force_n, p):
+    """Tyre forces (Fyf, Fyr, Fxr) [N] acting on the body.
+
+    Paper: static loads, independent rear Fx and Fy. With P_LOAD_TRANSFER the axle loads shift by
+    m * ax * h / L, ax being the body-frame longitudinal acceleration (sum of x forces / m). With
+    P_FRICTION_CIRCLE the rear drive force is capped at mu Fzr and the rear lateral peak shrinks to
+    sqrt((mu Fzr)^2 - Fxr^2) (the coupling used by Hindiyeh & Gerdes 2014).
+    """
+    m = p[P_MASS]
+    a = p[P_CG_TO_FRONT]
+    b = p[P_CG_TO_REAR]
+    mu = p[P_FRICTION]
+    wheelbase = a + b
+    weight = m * p[P_GRAVITY]
+    alpha_f, alpha_r = slip_angles(speed_mps, sideslip_rad, yaw_rate_radps, steer_rad, p)
+    fzf = weight * b / wheelbase
+    fzr = weight * a / wheelbase
+    fxr = drive_force_n
+    passes = _LOAD_TRANSFER_PASSES if p[P_LOAD_TRANSFER] > 0.5 else 1
+    fyf = 0.0
+    fyr = 0.0
+    for _ in range(passes):
+        fxr = drive_force_n
+        rear_peak = mu * fzr
+        if p[P_FRICTION_CIRCLE] > 0.5:
+            cap = 0.999 * rear_peak
+            fxr = min(max(drive_force_n, -cap), cap)
+            rear_peak = math.sqrt(rear_peak * rear_peak - fxr * fxr)
+        fyf = pacejka_lateral_force(alpha_f, mu * fzf, p[P_TYRE_B], p[P_TYRE_C])
+        fyr = pacejka_lateral_force(alpha_r, rear_peak, p[P_TYRE_B], p[P_TYRE_C])
+        if p[P_LOAD_TRANSFER] > 0.5:
+            transfer = (fxr - fyf * math.sin(steer_rad)) * p[P_CG_HEIGHT] / wheelbase
+            fzf = max(weight * b / wheelbase - transfer, 0.0)
+            fzr = max(weight * a / wheelbase + transfer, 0.0)
+    return fyf, fyr, fxr
+
+
+@njit(cache=True)
+def drift_derivatives(speed_mps, sideslip_rad, yaw_rate_radps, steer_rad, drive_force_n, p):
+    """Time derivatives (Vdot, betadot, rdot) of the 3-state drift model (paper eq. 1-3)."""
+    fyf, fyr, fxr = tyre_forces(speed_mps, sideslip_rad, yaw_rate_radps, steer_rad, drive_force_n, p)
+    m = p[P_MASS]
+    speed_dot = (-fyf * math.sin(steer_rad - sideslip_rad) + fyr * math.sin(sideslip_rad)
+                 + fxr * math.cos(sideslip_rad)) / m
+    sideslip_dot = (fyf * math.cos(steer_rad - sideslip_rad) + fyr * math.cos(sideslip_rad)
+                    - fxr * math.sin(sideslip_rad)) / (m * speed_mps) - yaw_rate_radps
+    yaw_rate_dot = (p[P_CG_TO_FRONT] * fyf * math.cos(steer_rad) - p[P_CG_TO_REAR] * fyr) / p[P_YAW_INERTIA]
+    return speed_dot, sideslip_dot, yaw_rate_dot
+
+
+@njit(cache=True)
+def drift_derivatives_vec(state, inputs, p):
+    """:func:`drift_derivatives` on arrays: state [V, beta, r], inputs [delta, Fxr] -> [Vdot, betadot, rdot]."""
+    out = np.empty(3)
+    out[0], out[1], out[2] = drift_derivatives(state[0], state[1], state[2], inputs[0], inputs[1], p)
+    return out
+
+
+@njit(cache=True)
+def pose_derivatives(speed_mps, sideslip_rad, yaw_rate_radps, heading_rad):
+    """Pose kinematics: (xdot, ydot, psidot); the course angle is psi + beta."""
+    course = heading_rad + sideslip_rad
+    return speed_mps * math.cos(course), speed_mps * math.sin(course), yaw_rate_radps

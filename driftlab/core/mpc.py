@@ -269,7 +269,7 @@ class ReferenceQp:
             q = self.gamma_t_q @ (self.phi @ dz + self.lam @ disturbance) - ref_linear_term
             solver.update(q=q, l=np.concatenate([-self.step_limit, self.input_lo - offset]),
                           u=np.concatenate([self.step_limit, self.input_hi - offset]))
-            result = solver.solve()
+            result = solver.solve(raise_error=False)
             ok = result.info.status_val in (1, 2) and result.x is not None and np.all(np.isfinite(result.x))
             du = np.clip(result.x, -self.step_limit, self.step_limit) if ok else np.zeros_like(du)
         steer = float(np.clip(u_prev[0] + du[0], -self.config.steer_limit_rad, self.config.steer_limit_rad))

@@ -1,0 +1,50 @@
+"""Episode wall time and MPC cost per solve (median of several runs).
+
+Run: OMP_NUM_THREADS=1 python benchmarks/bench_episode.py
+"""
+
+import statistics
+import time
+
+import numpy as np
+
+from driftlab.core import mpc
+from driftlab.core.config import EpisodeConfig, Theta
+from driftlab.core.episode import run_episode
+
+_solve = mpc.ReferenceQp.solve
+SOLVE_US: list[float] = []
+OSQP_US: list[float] = []
+
+
+def timed_solve(self, *args, **kwargs):
+    t0 = time.perf_counter()
+    out = _solve(self, *args, **kwargs)
+    us = (time.perf_counter() - t0) * 1e6
+    SOLVE_US.append(us)
+    if out.used_osqp:
+        OSQP_US.append(us)
+    return out
+
+
+def main() -> None:
+    theta = Theta()
+    for plant in ("nominal", "default"):
+        config = EpisodeConfig.for_plant(plant)
+        run_episode(theta, config)  # warm-up: compiled code, cached QPs
+        walls = []
+        for _ in range(7):
+            t0 = time.perf_counter()
+            result = run_episode(theta, config)
+            walls.append((time.perf_counter() - t0) * 1e3)
+        print(f"plant={plant:8s} status={result.status:10s} steps={len(result.trajectory)} "
+              f"episode wall median {statistics.median(walls):.1f} ms (7 runs)")
+    mpc.ReferenceQp.solve = timed_solve
+    run_episode(theta, EpisodeConfig.for_plant("nominal"))
+    solves = np.array(SOLVE_US)
+    print(f"MPC per solve (nominal episode): median {np.median(solves):.1f} us, p95 {np.percentile(solves, 95):.1f} us, "
+          f"OSQP used in {len(OSQP_US)}/{len(solves)} steps (median {np.median(OSQP_US):.0f} us when used)")
+
+
+if __name__ == "__main__":
+    main()

@@ -1,0 +1,71 @@
+"""Closed-loop episodes on the figure 8."""
+
+import math
+
+import numpy as np
+import pytest
+
+from driftlab.core.config import PAPER_THETA, EpisodeConfig, Theta, apply_overrides
+from driftlab.core.episode import failure_penalty, run_episode
+from driftlab.core.planner import Phase
+
+NOMINAL = EpisodeConfig.for_plant("nominal")
+
+
+@pytest.fixture(scope="module")
+def nominal_run():
+    return run_episode(Theta(c_lr=0.02, c_rl=0.02, dV=0.0, k=0.05), NOMINAL)
+
+
+def test_nominal_plant_completes_the_eight(nominal_run):
+    r = nominal_run
+    assert r.status == "completed"
+    assert r.metrics.completed_fraction == 1.0
+    assert r.metrics.mean_abs_e_m < 0.3 and r.metrics.max_abs_e_m < 1.2
+    assert r.metrics.mean_abs_beta_err_rad < 0.01
+    assert len(r.trigger_points) == 2
+    assert 27.0 < r.metrics.duration_s < 32.0
+    assert math.isfinite(r.J) and r.J < 0.0
+
+
+def test_beta_changes_sign_after_each_trigger(nominal_run):
+    r = nominal_run
+    t, beta = r.column("t_s"), r.column("beta_rad")
+    for trig, sign_after in zip(r.trigger_points, (1.0, -1.0), strict=True):
+        before = beta[t < trig["t_s"]][-1]
+        after = beta[(t > trig["t_s"] + 1.5) & (t < trig["t_s"] + 3.0)]
+        assert np.sign(before) == -sign_after
+        assert np.all(np.sign(after) == sign_after)
+    assert all(0.2 < f < 0.8 for f in r.metrics.beta_flip_s)
+
+
+def test_path_stays_on_both_circles(nominal_run):
+    phase = nominal_run.column("phase")
+    assert {int(p) for p in phase} >= {Phase.LEFT_DRIFT, Phase.RIGHT_DRIFT, Phase.LEFT_DRIFT_FINAL}
+    assert np.max(np.abs(nominal_run.column("e_m"))) < 1.2
+
+
+def test_slow_steering_spins_out_with_a_worse_j(nominal_run):
+    slow = run_episode(Theta(), apply_overrides(NOMINAL, {"mpc.steer_rate_radps": 0.6}))
+    assert slow.status == "spun_out"
+    assert slow.J > 3.31 > nominal_run.J
+    assert slow.J == pytest.approx(failure_penalty(slow.metrics.completed_fraction))
+
+
+@pytest.mark.parametrize("theta", [Theta(0.0, 0.0, 0.0, 0.0), PAPER_THETA])
+def test_untuned_and_paper_theta_fail_on_nominal(theta):
+    r = run_episode(theta, NOMINAL)
+    assert r.status != "completed"
+    assert 0.0 < r.metrics.completed_fraction < 0.5
+
+
+def test_failure_penalty_orders_by_progress():
+    assert failure_penalty(0.9) < failure_penalty(0.2)
+    assert failure_penalty(1.0) > math.log(10 + 5 * math.pi + 1.6)
+
+
+def test_a_diverging_config_is_a_result_not_an_exception():
+    config = apply_overrides(NOMINAL, {"plant.friction_scale": 0.6})
+    r = run_episode(Theta(), config)
+    assert r.status in ("spun_out", "left_track", "gripped_up", "stalled", "diverged")
+    assert math.isfinite(r.J)

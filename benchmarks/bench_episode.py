@@ -42,7 +42,7 @@ def main() -> None:
     mpc.ReferenceQp.solve = timed_solve
     run_episode(theta, EpisodeConfig.for_plant("nominal"))
     solves = np.array(SOLVE_US)
-    print(f"MPC per solve (nominal episode): median {np.median(solves):.1f} us, p95 {np.percentile(solves, 95):.1f} us, "
+    print(f"MPC per solve (nominal): median {np.median(solves):.1f} us, p95 {np.percentile(solves, 95):.1f} us, "
           f"OSQP used in {len(OSQP_US)}/{len(solves)} steps (median {np.median(OSQP_US):.0f} us when used)")
 
 

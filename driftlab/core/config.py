@@ -7,13 +7,13 @@ and :func:`config_to_dict` / :func:`config_from_dict` round-trip it through plai
 
 from __future__ import annotations
 
-import math
 from dataclasses import dataclass, field, fields, is_dataclass, replace
 from typing import Any
 
 from driftlab.core.errors import ConfigError
 from driftlab.core.mpc import MpcConfig
 from driftlab.core.plant import PlantConfig
+from driftlab.core.validation import check_ranges
 from driftlab.core.vehicle import VehicleParams
 
 THETA_KEYS = ("c_lr", "c_rl", "dV", "k")
@@ -37,11 +37,7 @@ class Theta:
 
     def __post_init__(self) -> None:
         limits = {"c_lr": (0.0, 0.5), "c_rl": (0.0, 0.5), "dV": (-5.0, 5.0), "k": (-1.0, 1.0)}
-        for name, (lo, hi) in limits.items():
-            value = getattr(self, name)
-            if isinstance(value, bool) or not (isinstance(value, (int, float)) and math.isfinite(value)
-                                               and lo <= value <= hi):
-                raise ConfigError(f"theta.{name} must be a number in [{lo}, {hi}], got {value!r}")
+        check_ranges(self, "theta", limits)
 
     @classmethod
     def from_mapping(cls, values: dict[str, Any]) -> Theta:
@@ -77,7 +73,7 @@ class ScenarioConfig:
     settle_tolerance_rad: float = 0.05
 
     def __post_init__(self) -> None:
-        _check_ranges(self, "scenario", {
+        check_ranges(self, "scenario", {
             "left_radius_m": (5.0, 500.0), "right_radius_m": (5.0, 500.0), "sideslip_rad": (0.05, 1.0),
             "lookahead_m": (0.0, 50.0), "max_time_s": (1.0, 300.0), "settle_tolerance_rad": (0.001, 0.5)})
 
@@ -105,7 +101,7 @@ class FailureLimits:
     gripup_grace_s: float = 2.5
 
     def __post_init__(self) -> None:
-        _check_ranges(self, "failure", {
+        check_ranges(self, "failure", {
             "max_sideslip_rad": (0.2, 1.6), "max_yaw_rate_radps": (0.5, 10.0), "max_lateral_error_m": (0.5, 50.0),
             "min_speed_mps": (0.5, 30.0), "gripup_sideslip_rad": (0.0, 0.5), "gripup_time_s": (0.05, 10.0),
             "gripup_grace_s": (0.0, 10.0)})
@@ -129,14 +125,6 @@ class EpisodeConfig:
         if name == "nominal":
             return cls(plant=PlantConfig.nominal())
         raise ConfigError(f"plant must be 'default' or 'nominal', got {name!r}")
-
-
-def _check_ranges(obj: Any, section: str, limits: dict[str, tuple[float, float]]) -> None:
-    for name, (lo, hi) in limits.items():
-        value = getattr(obj, name)
-        if isinstance(value, bool) or not (isinstance(value, (int, float)) and math.isfinite(value)
-                                           and lo <= value <= hi):
-            raise ConfigError(f"{section}.{name} must be a number in [{lo}, {hi}], got {value!r}")
 
 
 def _coerce(section: str, name: str, current: Any, raw: Any) -> Any:

@@ -18,13 +18,13 @@ above 8 m/s). ``benchmarks/bench_plant.py`` prints the error against a 0.5 ms re
 
 from __future__ import annotations
 
-import math
 from dataclasses import dataclass, replace
 
 import numpy as np
 from numba import njit
 
 from driftlab.core.errors import ConfigError
+from driftlab.core.validation import check_ranges
 from driftlab.core.vehicle import VehicleParams, drift_derivatives, pack_params, pose_derivatives
 
 # Plant state layout.
@@ -76,11 +76,7 @@ class PlantConfig:
             "steer_lag_s": (0.0, 0.5), "steer_rate_radps": (0.1, 100.0), "drive_lag_s": (0.0, 1.0),
             "drive_rate_nps": (100.0, 1e7), "substep_s": (1e-4, 0.01),
         }
-        for name, (lo, hi) in limits.items():
-            value = getattr(self, name)
-            if isinstance(value, bool) or not (isinstance(value, (int, float)) and math.isfinite(value)
-                                               and lo <= value <= hi):
-                raise ConfigError(f"plant.{name} must be a number in [{lo}, {hi}], got {value!r}")
+        check_ranges(self, "plant", limits)
         for name in ("friction_circle", "load_transfer"):
             if not isinstance(getattr(self, name), bool):
                 raise ConfigError(f"plant.{name} must be true or false, got {getattr(self, name)!r}")

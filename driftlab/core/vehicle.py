@@ -19,6 +19,7 @@ import numpy as np
 from numba import njit
 
 from driftlab.core.errors import ConfigError
+from driftlab.core.validation import check_ranges
 
 # Layout of the packed parameter vector the compiled functions read (named, never bare numbers).
 P_MASS = 0
@@ -77,10 +78,7 @@ class VehicleParams:
             "cg_height_m": (0.0, 2.0),
             "gravity_mps2": (1.0, 30.0),
         }
-        for name, (lo, hi) in limits.items():
-            value = getattr(self, name)
-            if not (isinstance(value, (int, float)) and math.isfinite(value) and lo <= value <= hi):
-                raise ConfigError(f"vehicle.{name} must be a number in [{lo}, {hi}], got {value!r}")
+        check_ranges(self, "vehicle", limits)
 
     @property
     def wheelbase_m(self) -> float:

@@ -149,6 +149,3 @@ def _model_step(state: np.ndarray, inputs: np.ndarray, params: np.ndarray, dt_s:
     k3 = drift_derivatives_vec(state + 0.5 * dt_s * k2, inputs, params)
     k4 = drift_derivatives_vec(state + dt_s * k3, inputs, params)
     return state + dt_s / 6.0 * (k1 + 2 * k2 + 2 * k3 + k4)
-
-
-__all__ = ["ControllerModel", "DriftController", "build_controller_model", "lookahead_error_m", "N_X"]

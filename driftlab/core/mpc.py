@@ -18,7 +18,6 @@ controller model's one-step prediction, and enters the prediction (Maeder, Borre
 
 from __future__ import annotations
 
-import math
 from dataclasses import dataclass, fields
 
 import numpy as np
@@ -28,6 +27,7 @@ import scipy.sparse as sp
 
 from driftlab.core.equilibrium import Equilibrium, jacobians
 from driftlab.core.errors import ConfigError
+from driftlab.core.validation import check_ranges
 
 KN = 1e-3  # the QP's drive-force unit is kN
 N_X = 3
@@ -82,16 +82,10 @@ class MpcConfig:
             "drive_rate_nps": (100.0, 1e6), "disturbance_gain": (0.0, 1.0), "osqp_eps": (1e-10, 1e-2),
             "model_steer_lag_s": (0.0, 0.5), "model_drive_lag_s": (0.0, 1.0),
         }
-        for f in fields(self):
-            value = getattr(self, f.name)
-            if f.name == "discretization":
-                if value not in ("euler", "zoh"):
-                    raise ConfigError(f"mpc.discretization must be 'euler' or 'zoh', got {value!r}")
-                continue
-            lo, hi = ranges.get(f.name, (0.0, 1e7))
-            if isinstance(value, bool) or not (isinstance(value, (int, float)) and math.isfinite(value)
-                                               and lo <= value <= hi):
-                raise ConfigError(f"mpc.{f.name} must be a number in [{lo}, {hi}], got {value!r}")
+        if self.discretization not in ("euler", "zoh"):
+            raise ConfigError(f"mpc.discretization must be 'euler' or 'zoh', got {self.discretization!r}")
+        weights = {f.name: (0.0, 1e7) for f in fields(self) if f.name.startswith(("q_", "r_"))}
+        check_ranges(self, "mpc", {**weights, **ranges})
         if not isinstance(self.horizon, int):
             raise ConfigError(f"mpc.horizon must be an integer in [1, 100], got {self.horizon!r}")
 

@@ -45,11 +45,12 @@ def _key_values(items: list[str], what: str) -> dict[str, str]:
 
 
 def _config(args: argparse.Namespace) -> EpisodeConfig:
-    return apply_overrides(EpisodeConfig.for_plant(args.plant), _key_values(args.set or [], "--set"))
+    preset = EpisodeConfig.preset(args.plant or "default", getattr(args, "controller", "default"))
+    return apply_overrides(preset, _key_values(args.set or [], "--set"))
 
 
 def _cmd_equilibrium(args: argparse.Namespace) -> int:
-    config = apply_overrides(EpisodeConfig(), _key_values(args.set or [], "--set"))
+    config = _config(args)
     try:
         eq = drift_equilibrium(args.radius, args.beta, pack_params(config.vehicle))
     except NoEquilibriumError as exc:
@@ -57,9 +58,8 @@ def _cmd_equilibrium(args: argparse.Namespace) -> int:
         return 2
     out: dict[str, Any] = eq.as_dict()
     if args.plant:
-        plant_config = EpisodeConfig.for_plant(args.plant).plant if not args.set else config.plant
         try:
-            plant_eq = drift_equilibrium(args.radius, args.beta, plant_config.packed_params(config.vehicle))
+            plant_eq = drift_equilibrium(args.radius, args.beta, config.plant.packed_params(config.vehicle))
             out["plant"] = plant_eq.as_dict()
             out["plant"]["mismatch"] = {"dV": plant_eq.speed_mps - eq.speed_mps,
                                         "ddelta": plant_eq.steer_rad - eq.steer_rad,
@@ -88,7 +88,8 @@ def _cmd_episode(args: argparse.Namespace) -> int:
 
         scenario = config.scenario
         plot_episode(result, FigureEight(scenario.left_radius_m, scenario.right_radius_m), args.plot,
-                     title=f"{args.plant} plant, theta {theta.as_dict()}\n{result.status}, J = {result.J:.3f}")
+                     title=f"{args.plant} plant, {args.controller} controller\ntheta {theta.as_dict()}\n"
+                           f"{result.status}, J = {result.J:.3f}")
     return 0
 
 
@@ -104,6 +105,8 @@ def build_parser() -> argparse.ArgumentParser:
     ep = sub.add_parser("episode", help="run one 30 s figure-8 episode and print its metrics as JSON")
     ep.add_argument("--theta", help="c_lr=..,c_rl=..,dV=..,k=.. (defaults: 0.02, 0.02, 0, 0.05)")
     ep.add_argument("--plant", choices=("default", "nominal"), default="default")
+    ep.add_argument("--controller", choices=("default", "paper"), default="default",
+                    help="default: DriftLab's MPC with path states and actuator lags; paper: the paper's MPC")
     ep.add_argument("--set", action="append", metavar="KEY=VALUE", help="config override, e.g. mpc.q_sideslip=400")
     ep.add_argument("--csv", help="write the trajectory to this CSV file")
     ep.add_argument("--plot", help="write the paper's figures to this PNG file")

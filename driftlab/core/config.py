@@ -118,13 +118,16 @@ class EpisodeConfig:
     failure: FailureLimits = field(default_factory=FailureLimits)
 
     @classmethod
-    def for_plant(cls, name: str) -> EpisodeConfig:
-        """Preset by plant name: "default" (mismatched) or "nominal" (equals the controller's model)."""
-        if name == "default":
-            return cls()
-        if name == "nominal":
-            return cls(plant=PlantConfig.nominal())
-        raise ConfigError(f"plant must be 'default' or 'nominal', got {name!r}")
+    def preset(cls, plant: str = "default", controller: str = "default") -> EpisodeConfig:
+        """Preset by name. plant: "default" (mismatched) or "nominal" (equals the controller's model);
+        controller: "default" (DriftLab's extended MPC) or "paper" (the paper's formulation)."""
+        plants = {"default": PlantConfig, "nominal": PlantConfig.nominal}
+        controllers = {"default": MpcConfig, "paper": MpcConfig.paper}
+        if plant not in plants:
+            raise ConfigError(f"plant must be 'default' or 'nominal', got {plant!r}")
+        if controller not in controllers:
+            raise ConfigError(f"controller must be 'default' or 'paper', got {controller!r}")
+        return cls(plant=plants[plant](), mpc=controllers[controller]())
 
 
 def _coerce(section: str, name: str, current: Any, raw: Any) -> Any:

@@ -109,10 +109,10 @@ class DriftController:
         [delta rad, Fxr N] (used where the controller models actuator lag)."""
         self.direction = direction
         disturbance = self._update_disturbance(state)
-        z_now = to_scaled(state, self.last_mpc_inputs)
-        if self.mpc.models_actuator_lag:
-            z_now = np.concatenate([to_scaled(state, actuators), z_now[N_X:]])
-        solution = self.model.qp(direction).solve(z_now, self.reference(direction), disturbance)
+        qp = self.model.qp(direction)
+        z_now = qp.pack_state(state, np.array([lateral_error_m, course_error_rad]),
+                              to_scaled(state, actuators)[N_X:], to_scaled(state, self.last_mpc_inputs)[N_X:])
+        solution = qp.solve(z_now, self.reference(direction), disturbance)
         self.last_mpc_inputs = np.array([solution.steer_rad, solution.drive_force_n])
         e_la = lookahead_error_m(lateral_error_m, course_error_rad, self.lookahead_m)
         limit = self.mpc.steer_limit_rad
@@ -134,7 +134,7 @@ def steady_state_target(qp: ReferenceQp, disturbance: np.ndarray) -> np.ndarray:
     Unknowns dV, d_delta, d_Fxr with x_s = x_eq + [dV, 0, dV / R]; solves A (x_s - x_eq) + B (u_s - u_eq)
     + d = 0 (3 equations, 3 unknowns). Returns z_s (Fxr in kN).
     """
-    z_eq = qp.z_lin[:N_X + 2]  # [V, beta, r, delta, Fxr kN]
+    z_eq = to_scaled(qp.equilibrium.state, qp.equilibrium.inputs)
     radius = z_eq[0] / z_eq[2]
     a_c, b_c = qp.a_cont, qp.b_cont
     lhs = np.column_stack([a_c[:, 0] + a_c[:, 2] / radius, b_c[:, 0], b_c[:, 1]])

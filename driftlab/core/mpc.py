@@ -9,6 +9,7 @@ delta, Fxr and both increments.
 Solving: the QP is condensed to the 2*Nc increments once per reference. Each step first forms the
 unconstrained minimizer with a precomputed gain; when it satisfies every limit it *is* the QP's solution
 (the constraints are inactive, the QP is strictly convex). Only otherwise OSQP (set up once, warm-started,
+# polishing off: OSQP 1.x prints an unguarded line on stdout per polish, osqp/osqp#785)
 only q, l, u updated) solves the constrained QP.
 
 Offset-free extension (not in the paper; ``disturbance_gain`` > 0): a constant additive disturbance d on
@@ -18,6 +19,7 @@ controller model's one-step prediction, and enters the prediction (Maeder, Borre
 
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass, fields
 
 import numpy as np
@@ -37,7 +39,12 @@ N_Z = N_X + N_U
 
 @dataclass(frozen=True)
 class MpcConfig:
-    """Controller settings. Defaults are REFERENCE.md section 7's weights for the scaled state.
+    """Controller settings. The defaults are DriftLab's formulation; :meth:`paper` is the paper's.
+
+    Default ("extended"): the paper's linear MPC plus what the mismatched default plant needs: lateral and
+    course errors as model states (path_states), first-order actuator lags in the model, exact (ZOH)
+    discretization, and weights tuned by random search on the default plant (benchmarks/tune_weights.py).
+    Paper: 3-state model linearized at the target, Euler, REFERENCE.md section 7's weights.
 
     Attributes:
         dt_s: sampling time [s].
@@ -53,27 +60,40 @@ class MpcConfig:
         model_steer_lag_s, model_drive_lag_s: actuator time constants the controller's model assumes [s];
             both 0 is the paper's model (inputs act at once).
         osqp_eps: OSQP absolute and relative tolerance.
+        path_states: add e [m] and dpsi [rad] to the model (False: the paper).
+        q_lateral_error, q_course_error: weights on e and dpsi when path_states is on.
     """
 
     dt_s: float = 0.05
     horizon: int = 20
-    q_speed: float = 1.0
-    q_sideslip: float = 417.0
-    q_yaw_rate: float = 26.0
-    q_steer: float = 5.5
-    q_drive_kn: float = 0.2
-    r_steer_step: float = 56.0
-    r_drive_step_kn: float = 0.024
+    q_speed: float = 4.2
+    q_sideslip: float = 1800.0
+    q_yaw_rate: float = 17.8
+    q_steer: float = 16.6
+    q_drive_kn: float = 0.72
+    r_steer_step: float = 5.9
+    r_drive_step_kn: float = 0.037
     steer_limit_rad: float = 0.6
     drive_min_n: float = -6000.0
     drive_max_n: float = 8000.0
-    steer_rate_radps: float = 3.0
+    steer_rate_radps: float = 4.1
     drive_rate_nps: float = 20000.0
-    discretization: str = "euler"
+    discretization: str = "zoh"
     disturbance_gain: float = 0.0
-    model_steer_lag_s: float = 0.0
-    model_drive_lag_s: float = 0.0
-    osqp_eps: float = 1e-6
+    model_steer_lag_s: float = 0.03
+    model_drive_lag_s: float = 0.05
+    osqp_eps: float = 1e-5
+    path_states: bool = True
+    q_lateral_error: float = 0.05
+    q_course_error: float = 6.6
+
+    @classmethod
+    def paper(cls) -> MpcConfig:
+        """The paper's formulation with the weights that complete the nominal 8 (REFERENCE.md section 7)."""
+        return cls(q_speed=1.0, q_sideslip=417.0, q_yaw_rate=26.0, q_steer=5.5, q_drive_kn=0.2,
+                   r_steer_step=56.0, r_drive_step_kn=0.024, steer_rate_radps=3.0, discretization="euler",
+                   model_steer_lag_s=0.0, model_drive_lag_s=0.0, path_states=False, q_lateral_error=0.0,
+                   q_course_error=0.0)
 
     def __post_init__(self) -> None:
         ranges = {
@@ -86,6 +106,8 @@ class MpcConfig:
             raise ConfigError(f"mpc.discretization must be 'euler' or 'zoh', got {self.discretization!r}")
         weights = {f.name: (0.0, 1e7) for f in fields(self) if f.name.startswith(("q_", "r_"))}
         check_ranges(self, "mpc", {**weights, **ranges})
+        if not isinstance(self.path_states, bool):
+            raise ConfigError(f"mpc.path_states must be true or false, got {self.path_states!r}")
         if not isinstance(self.horizon, int):
             raise ConfigError(f"mpc.horizon must be an integer in [1, 100], got {self.horizon!r}")
 
@@ -94,8 +116,20 @@ class MpcConfig:
         return self.model_steer_lag_s > 0.0 or self.model_drive_lag_s > 0.0
 
     @property
+    def n_states(self) -> int:
+        """States of the QP's vehicle model: [V, beta, r] (the paper), or [V, beta, r, e, dpsi]."""
+        return N_X + 2 if self.path_states else N_X
+
+    @property
     def state_weights(self) -> np.ndarray:
-        return np.array([self.q_speed, self.q_sideslip, self.q_yaw_rate, self.q_steer, self.q_drive_kn])
+        """Q on the model states ([V, beta, r] or [V, beta, r, e, dpsi])."""
+        path = [self.q_lateral_error, self.q_course_error] if self.path_states else []
+        return np.array([self.q_speed, self.q_sideslip, self.q_yaw_rate, *path])
+
+    @property
+    def actuator_weights(self) -> np.ndarray:
+        """Q on [delta, Fxr kN]."""
+        return np.array([self.q_steer, self.q_drive_kn])
 
     @property
     def input_weights(self) -> np.ndarray:
@@ -107,15 +141,41 @@ def to_scaled(state: np.ndarray, inputs: np.ndarray) -> np.ndarray:
     return np.array([state[0], state[1], state[2], inputs[0], inputs[1] * KN])
 
 
+def _with_path_errors(a_c: np.ndarray, b_c: np.ndarray, equilibrium: Equilibrium) -> tuple[np.ndarray, np.ndarray]:
+    """Adds the lateral error e and course error dpsi to the linearized model (not in the paper).
+
+    With the conventions of :mod:`driftlab.core.track` (e > 0 right of the driving direction, dpsi = path
+    heading - course), on a circle of radius R turned in direction s = sign(r_eq):
+        e_dot = V sin(dpsi),   dpsi_dot = s V cos(dpsi) / (R + s e) - r - beta_dot,
+    linearized at e = dpsi = 0 where s V / R = r_eq.
+    """
+    speed = equilibrium.speed_mps
+    turn = math.copysign(1.0, equilibrium.yaw_rate_radps)
+    radius = speed / abs(equilibrium.yaw_rate_radps)
+    n = N_X + 2
+    a_path = np.zeros((n, n))
+    a_path[:N_X, :N_X] = a_c
+    a_path[3, 4] = speed
+    a_path[4, :N_X] = -a_c[1]
+    a_path[4, 0] += turn / radius
+    a_path[4, 2] -= 1.0
+    a_path[4, 3] = -speed / radius**2
+    b_path = np.zeros((n, N_U))
+    b_path[:N_X] = b_c
+    b_path[4] = -b_c[1]
+    return a_path, b_path
+
+
 def _with_actuator_lag(a_c: np.ndarray, b_c: np.ndarray, config: MpcConfig) -> tuple[np.ndarray, np.ndarray]:
-    """Continuous model with first-order actuators: states [V, beta, r, delta_a, Fxr_a], inputs the commands."""
+    """Continuous model with first-order actuators: states [x, delta_a, Fxr_a], inputs the commands."""
     lags = np.array([max(config.model_steer_lag_s, 1e-4), max(config.model_drive_lag_s, 1e-4)])
-    a_sys = np.zeros((N_X + N_U, N_X + N_U))
-    a_sys[:N_X, :N_X] = a_c
-    a_sys[:N_X, N_X:] = b_c
-    a_sys[N_X:, N_X:] = np.diag(-1.0 / lags)
-    b_sys = np.zeros((N_X + N_U, N_U))
-    b_sys[N_X:, :] = np.diag(1.0 / lags)
+    n_x = a_c.shape[0]
+    a_sys = np.zeros((n_x + N_U, n_x + N_U))
+    a_sys[:n_x, :n_x] = a_c
+    a_sys[:n_x, n_x:] = b_c
+    a_sys[n_x:, n_x:] = np.diag(-1.0 / lags)
+    b_sys = np.zeros((n_x + N_U, N_U))
+    b_sys[n_x:, :] = np.diag(1.0 / lags)
     return a_sys, b_sys
 
 
@@ -154,14 +214,15 @@ class ReferenceQp:
         b_c[:, 1] /= KN  # per kN
         self.a_cont, self.b_cont = a_c, b_c
         self.models_lag = config.models_actuator_lag
-        a_sys, b_sys = (_with_actuator_lag(a_c, b_c, config) if self.models_lag else (a_c, b_c))
-        n_sys = a_sys.shape[0]  # 3, or 5 with actuator states [delta_actual, Fxr_actual kN]
+        self.path_states = config.path_states
+        a_sys, b_sys = _with_path_errors(a_c, b_c, equilibrium) if self.path_states else (a_c, b_c)
+        a_sys, b_sys = _with_actuator_lag(a_sys, b_sys, config) if self.models_lag else (a_sys, b_sys)
+        n_sys = a_sys.shape[0]  # model states (3 or 5) plus 2 actuator states [delta_a, Fxr_a kN] if modelled
         ad, bd, gd = discretize(a_sys, b_sys, config.dt_s, config.discretization)
         gd = gd[:, :N_X]  # the disturbance acts on (Vdot, betadot, rdot) only
         self.ad, self.bd, self.gd = ad, bd, gd
-        z_eq = to_scaled(equilibrium.state, equilibrium.inputs)
         self.n_z = n_z = n_sys + N_U
-        self.z_lin = np.concatenate([z_eq, z_eq[N_X:]]) if self.models_lag else z_eq
+        self.z_lin = self.augmented_reference(to_scaled(equilibrium.state, equilibrium.inputs))
         n_h = config.horizon
         aa = np.zeros((n_z, n_z))
         aa[:n_sys, :n_sys] = ad
@@ -184,9 +245,9 @@ class ReferenceQp:
             lam[k * n_z:(k + 1) * n_z] = lam_acc
             for j in range(k + 1):
                 gamma[k * n_z:(k + 1) * n_z, j * N_U:(j + 1) * N_U] = a_pow_b[k - j]
-        # Q weighs [V, beta, r, delta, Fxr]: the actuator states when modelled, else the held commands.
-        weights = np.concatenate([config.state_weights, np.zeros(N_U)]) if self.models_lag \
-            else config.state_weights
+        # Q weighs [delta, Fxr] on the actuator states when modelled, else on the held commands.
+        lag_part = [config.actuator_weights, np.zeros(N_U)] if self.models_lag else [config.actuator_weights]
+        weights = np.concatenate([config.state_weights, *lag_part])
         q_bar = np.kron(np.eye(n_h), np.diag(weights))
         r_bar = np.kron(np.eye(n_h), np.diag(config.input_weights))
         hessian = gamma.T @ q_bar @ gamma + r_bar
@@ -203,6 +264,7 @@ class ReferenceQp:
         # Constraints on the increments: bounds on each du and on u_{-1} + cumulative sums.
         cumsum = np.kron(np.tril(np.ones((n_h, n_h))), np.eye(N_U))
         self.cumsum = cumsum
+        self.repeat = np.kron(np.ones((n_h, 1)), np.eye(N_U))  # u -> [u, u, ..., u]
         self.constraint_matrix = np.vstack([np.eye(n_h * N_U), cumsum])
         step_limit = np.array([config.steer_rate_radps * config.dt_s, config.drive_rate_nps * config.dt_s * KN])
         self.step_limit = np.tile(step_limit, n_h)
@@ -219,15 +281,26 @@ class ReferenceQp:
                 sp.csc_matrix(np.triu(self.hessian)), np.zeros(self.hessian.shape[0]),
                 sp.csc_matrix(self.constraint_matrix),
                 np.concatenate([-self.step_limit, self.input_lo]), np.concatenate([self.step_limit, self.input_hi]),
-                eps_abs=self.config.osqp_eps, eps_rel=self.config.osqp_eps, polishing=True, verbose=False,
+                eps_abs=self.config.osqp_eps, eps_rel=self.config.osqp_eps, polishing=False, verbose=False,
                 warm_starting=True, max_iter=4000,
             )
             self._solver = solver
         return self._solver
 
     def augmented_reference(self, z_ref: np.ndarray) -> np.ndarray:
-        """The 5-entry reference [V, beta, r, delta, Fxr kN] in this QP's state layout."""
-        return np.concatenate([z_ref, z_ref[N_X:]]) if self.models_lag else z_ref
+        """The 5-entry reference [V, beta, r, delta, Fxr kN] in this QP's state layout (path errors 0)."""
+        return self.pack_state(z_ref[:N_X], np.zeros(2), z_ref[N_X:], z_ref[N_X:])
+
+    def pack_state(self, state: np.ndarray, path_errors: np.ndarray, actuators_scaled: np.ndarray,
+                   previous_commands_scaled: np.ndarray) -> np.ndarray:
+        """z = [V, beta, r, (e, dpsi,) (delta_a, Fxr_a kN,) delta_prev, Fxr_prev kN] for this QP."""
+        parts = [state]
+        if self.path_states:
+            parts.append(path_errors)
+        if self.models_lag:
+            parts.append(actuators_scaled)
+        parts.append(previous_commands_scaled)
+        return np.concatenate(parts)
 
     def _reference_terms(self, z_ref: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         key = z_ref.tobytes()
@@ -241,8 +314,7 @@ class ReferenceQp:
         """Optimal increments.
 
         Args:
-            z_now: augmented state: [V, beta, r, (delta_actual, Fxr_actual kN,) delta_prev, Fxr_prev kN], the
-                last two being the commands of the previous step.
+            z_now: the QP's state (:meth:`pack_state`), the last two entries being the previous commands.
             z_ref: reference [V, beta, r, delta, Fxr kN].
             disturbance: estimated additive disturbance on (Vdot, betadot, rdot).
         """
@@ -250,16 +322,16 @@ class ReferenceQp:
         ref_gain_term, ref_linear_term = self._reference_terms(z_ref)
         du = ref_gain_term - self.gain_state @ dz - self.gain_disturbance @ disturbance
         u_prev = z_now[-N_U:]
-        cumulative = np.tile(u_prev, self.config.horizon) + self.cumsum @ du
+        offset = self.repeat @ u_prev
+        cumulative = offset + self.cumsum @ du
         tol = 1e-9
-        within = (np.all(np.abs(du) <= self.step_limit + tol) and np.all(cumulative >= self.input_lo - tol)
-                  and np.all(cumulative <= self.input_hi + tol))
+        within = ((np.abs(du) - self.step_limit).max() <= tol and (self.input_lo - cumulative).max() <= tol
+                  and (cumulative - self.input_hi).max() <= tol)
         used_osqp = False
         ok = True
         if not within:
             used_osqp = True
             solver = self._osqp()
-            offset = np.tile(u_prev, self.config.horizon)
             q = self.gamma_t_q @ (self.phi @ dz + self.lam @ disturbance) - ref_linear_term
             solver.update(q=q, l=np.concatenate([-self.step_limit, self.input_lo - offset]),
                           u=np.concatenate([self.step_limit, self.input_hi - offset]))

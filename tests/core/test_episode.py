@@ -9,7 +9,7 @@ from driftlab.core.config import PAPER_THETA, EpisodeConfig, Theta, apply_overri
 from driftlab.core.episode import failure_penalty, run_episode
 from driftlab.core.planner import Phase
 
-NOMINAL = EpisodeConfig.for_plant("nominal")
+NOMINAL = EpisodeConfig.preset(plant="nominal", controller="paper")
 
 
 @pytest.fixture(scope="module")
@@ -69,3 +69,23 @@ def test_a_diverging_config_is_a_result_not_an_exception():
     r = run_episode(Theta(), config)
     assert r.status in ("spun_out", "left_track", "gripped_up", "stalled", "diverged")
     assert math.isfinite(r.J)
+
+
+# Found by a random search over theta on the default plant (benchmarks/mismatch_sweep.py); BO finds better.
+DEFAULT_PLANT_THETA = Theta(c_lr=0.0225, c_rl=0.0218, dV=-0.064, k=0.057)
+
+
+def test_default_controller_drifts_the_eight_on_the_mismatched_plant():
+    r = run_episode(DEFAULT_PLANT_THETA, EpisodeConfig())
+    assert r.status == "completed"
+    assert r.metrics.mean_abs_e_m <= 0.5 and r.metrics.max_abs_e_m <= 2.0
+    beta = r.column("beta_rad")
+    t = r.column("t_s")
+    for trig, sign_after in zip(r.trigger_points, (1.0, -1.0), strict=True):
+        after = beta[(t > trig["t_s"] + 1.5) & (t < trig["t_s"] + 3.0)]
+        assert np.all(np.sign(after) == sign_after)
+
+
+def test_paper_controller_fails_on_the_mismatched_plant():
+    r = run_episode(DEFAULT_PLANT_THETA, EpisodeConfig.preset(controller="paper"))
+    assert r.status != "completed"

@@ -1,5 +1,7 @@
 """The condensed MPC QP: exact against an independent solve, constraints respected."""
 
+from dataclasses import replace
+
 import numpy as np
 import pytest
 from scipy.optimize import Bounds, LinearConstraint, minimize
@@ -14,16 +16,19 @@ LEFT = drift_equilibrium(44.0, -0.4, P)
 
 
 def _independent_solution(qp: ReferenceQp, z_now, z_ref):
-    """Minimize the uncondensed cost by simulating the linear model directly (SLSQP, tight tolerance)."""
+    """Minimize the uncondensed cost by simulating the linear model directly (trust-constr, tight tolerance)."""
     cfg = qp.config
     n_h = cfg.horizon
-    weights = np.diag(cfg.state_weights)
+    n_x = qp.ad.shape[0]  # model states, plus actuator states when the lag is modelled
+    held = [np.zeros(2)] if qp.models_lag else []
+    weights = np.diag(np.concatenate([cfg.state_weights, cfg.actuator_weights, *held]))
     r_w = np.diag(cfg.input_weights)
+    z_ref = qp.augmented_reference(z_ref)
 
     def cost(du_flat):
         du = du_flat.reshape(n_h, 2)
-        x = z_now[:3] - qp.z_lin[:3]
-        u = z_now[3:] - qp.z_lin[3:]
+        x = z_now[:n_x] - qp.z_lin[:n_x]
+        u = z_now[n_x:] - qp.z_lin[n_x:]
         total = 0.0
         for k in range(n_h):
             u = u + du[k]
@@ -38,7 +43,7 @@ def _independent_solution(qp: ReferenceQp, z_now, z_ref):
     grad0 = np.array([(cost(eye[i]) - cost(-eye[i])) / 2.0 for i in range(n)])
     hess = np.array([[(cost(eye[i] + eye[j]) - cost(eye[i] - eye[j]) - cost(-eye[i] + eye[j])
                        + cost(-eye[i] - eye[j])) / 4.0 for j in range(n)] for i in range(n)])
-    u_prev = np.tile(z_now[3:], n_h)
+    u_prev = np.tile(z_now[n_x:], n_h)
     constraints = [LinearConstraint(qp.cumsum, qp.input_lo - u_prev, qp.input_hi - u_prev)]
     res = minimize(lambda d: 0.5 * d @ hess @ d + grad0 @ d, np.zeros(n), jac=lambda d: hess @ d + grad0,
                    hess=lambda d: hess, method="trust-constr", constraints=constraints,
@@ -47,12 +52,16 @@ def _independent_solution(qp: ReferenceQp, z_now, z_ref):
     return res.x, cost
 
 
-@pytest.mark.parametrize("discretization", ["euler", "zoh"])
-def test_constrained_solution_matches_independent_solve(discretization):
-    config = MpcConfig(discretization=discretization, osqp_eps=1e-9)
+@pytest.mark.parametrize("config", [
+    replace(MpcConfig.paper(), osqp_eps=1e-9),
+    replace(MpcConfig.paper(), osqp_eps=1e-9, discretization="zoh"),
+    replace(MpcConfig(), osqp_eps=1e-9),  # path states and actuator lags
+], ids=["paper-euler", "paper-zoh", "default"])
+def test_constrained_solution_matches_independent_solve(config):
     qp = ReferenceQp(config, RIGHT, P)
     # Just after a left-to-right switch: the car is in the left drift, the reference is the right one.
-    z_now = to_scaled(LEFT.state, LEFT.inputs)
+    z_left = to_scaled(LEFT.state, LEFT.inputs)
+    z_now = qp.pack_state(z_left[:3], np.array([0.4, -0.05]), z_left[3:], z_left[3:])
     z_ref = to_scaled(RIGHT.state, RIGHT.inputs)
     sol = qp.solve(z_now, z_ref, np.zeros(3))
     assert sol.used_osqp and sol.ok
@@ -61,15 +70,20 @@ def test_constrained_solution_matches_independent_solve(discretization):
     np.testing.assert_allclose(sol.increments, expected, atol=2e-4)
 
 
+def _packed(qp, eq, path_errors=(0.0, 0.0)):
+    z = to_scaled(eq.state, eq.inputs)
+    return qp.pack_state(z[:3], np.array(path_errors), z[3:], z[3:])
+
+
 def test_solution_respects_every_limit():
     config = MpcConfig()
     qp = ReferenceQp(config, RIGHT, P)
-    z_now = to_scaled(LEFT.state, LEFT.inputs)
+    z_now = _packed(qp, LEFT, (0.5, 0.02))
     sol = qp.solve(z_now, to_scaled(RIGHT.state, RIGHT.inputs), np.zeros(3))
     du = sol.increments
     tol = 1e-6
     assert np.all(np.abs(du) <= qp.step_limit + tol)
-    cumulative = np.tile(z_now[3:], config.horizon) + qp.cumsum @ du
+    cumulative = np.tile(z_now[-2:], config.horizon) + qp.cumsum @ du
     assert np.all(cumulative <= qp.input_hi + tol) and np.all(cumulative >= qp.input_lo - tol)
     assert abs(sol.steer_rad - LEFT.steer_rad) <= config.steer_rate_radps * config.dt_s + tol
 
@@ -78,7 +92,8 @@ def test_unconstrained_shortcut_equals_the_qp_solution():
     config = MpcConfig(osqp_eps=1e-10)
     qp = ReferenceQp(config, LEFT, P)
     z_ref = to_scaled(LEFT.state, LEFT.inputs)
-    z_now = z_ref + np.array([0.05, 0.002, -0.003, 0.0, 0.0])
+    z_now = _packed(qp, LEFT, (0.1, -0.01))
+    z_now[:3] += np.array([0.05, 0.002, -0.003])
     fast = qp.solve(z_now, z_ref, np.zeros(3))
     assert not fast.used_osqp
     expected, cost = _independent_solution(qp, z_now, z_ref)
@@ -88,6 +103,6 @@ def test_unconstrained_shortcut_equals_the_qp_solution():
 def test_at_the_reference_the_mpc_holds_the_equilibrium_inputs():
     qp = ReferenceQp(MpcConfig(), LEFT, P)
     z = to_scaled(LEFT.state, LEFT.inputs)
-    sol = qp.solve(z, z, np.zeros(3))
+    sol = qp.solve(_packed(qp, LEFT), z, np.zeros(3))
     assert sol.steer_rad == pytest.approx(LEFT.steer_rad, abs=1e-12)
     assert sol.drive_force_n == pytest.approx(LEFT.drive_force_n, abs=1e-8)

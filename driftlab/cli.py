@@ -7,6 +7,7 @@ import csv
 import json
 import math
 import sys
+import time
 from typing import Any
 
 from driftlab.core.config import EpisodeConfig, Theta, apply_overrides
@@ -93,6 +94,75 @@ def _cmd_episode(args: argparse.Namespace) -> int:
     return 0
 
 
+def _tuning_spec(args: argparse.Namespace):
+    from driftlab.core.tuning import TuningSpec
+
+    config = apply_overrides(EpisodeConfig(), _key_values(args.set or [], "--set"))
+    bounds = {}
+    for item in args.bound or []:
+        name, _, pair = item.partition("=")
+        lo, _, hi = pair.partition(":")
+        bounds[name.strip()] = [lo, hi]
+    return TuningSpec(iterations=args.iterations, seed_points=args.seed_points, active_set=args.active_set,
+                      seed=args.seed, bounds=bounds, config=config)
+
+
+def _cmd_tune(args: argparse.Namespace) -> int:
+    from driftlab.db import storage
+    from driftlab.worker.executor import LocalProcessExecutor
+    from driftlab.worker.job_loop import Progress, run_job
+
+    spec = _tuning_spec(args)
+    factory = storage.open_database(storage.database_url(args.db))
+    with storage.transaction(factory) as session:
+        job = storage.find_job(session, name=args.name) if args.name else None
+        if job is None:
+            name = args.name or storage.unique_job_name(session, "tune")
+            job = storage.create_job(session, name=name, spec=spec.to_dict(), seed=spec.seed)
+            sys.stderr.write(f"job {job.name} (id {job.id}): {spec.iterations} iterations\n")
+        else:
+            done = storage.count_evaluations(session, job_id=job.id)
+            sys.stderr.write(f"resuming job {job.name} (id {job.id}) at {done} of {job.spec['iterations']}\n")
+        job_id, name = job.id, job.name
+
+    def progress(p: Progress) -> None:
+        best = f"{p.best_J:.3f}" if p.best_J is not None else "-"
+        eta = f"{p.eta_s:.0f} s" if p.eta_s is not None else "-"
+        sys.stderr.write(f"\r[{p.n_done}/{p.iterations}] best J {best}  last {p.last.status} "
+                         f"J {p.last.J:.3f}  ETA {eta}    ")
+        sys.stderr.flush()
+
+    executor = LocalProcessExecutor(args.workers)
+    started = time.perf_counter()
+    try:
+        status = run_job(factory, job_id, executor, workers=args.workers, on_progress=progress)
+    finally:
+        executor.shutdown()
+    with storage.transaction(factory) as session:
+        best = storage.best_evaluation(session, job_id=job_id)
+        out = {"job": name, "id": job_id, "status": status, "wall_s": round(time.perf_counter() - started, 2),
+               "n_done": storage.count_evaluations(session, job_id=job_id),
+               "best": None if best is None else {"index": best.index, "theta": best.theta, "J": best.J,
+                                                   "status": best.status}}
+    sys.stderr.write("\n")
+    print(json.dumps(out))
+    return 0 if status != "failed" else 1
+
+
+def _cmd_report(args: argparse.Namespace) -> int:
+    from driftlab.report import write_report
+
+    path = write_report(db_url=_db_url(args.db), name=args.name, out_dir=args.out, baseline_samples=args.baselines)
+    print(json.dumps({"report": str(path)}))
+    return 0
+
+
+def _db_url(db: str | None) -> str:
+    from driftlab.db.storage import database_url
+
+    return database_url(db)
+
+
 def build_parser() -> argparse.ArgumentParser:
     parser = _Parser(prog="driftlab", description="Learning-based inertia drift (Zhou et al. 2025).")
     sub = parser.add_subparsers(dest="command", required=True, parser_class=_Parser)
@@ -111,6 +181,25 @@ def build_parser() -> argparse.ArgumentParser:
     ep.add_argument("--csv", help="write the trajectory to this CSV file")
     ep.add_argument("--plot", help="write the paper's figures to this PNG file")
     ep.set_defaults(func=_cmd_episode)
+    tu = sub.add_parser("tune", help="run (or resume) a Bayesian-optimization tuning job headless")
+    tu.add_argument("--iterations", type=int, default=500)
+    tu.add_argument("--seed-points", type=int, default=20)
+    tu.add_argument("--active-set", type=int, default=400)
+    tu.add_argument("--seed", type=int, default=0)
+    tu.add_argument("--db", help="SQLite file or SQLAlchemy URL (default: ./driftlab.db or DRIFTLAB_DATABASE_URL)")
+    tu.add_argument("--name", help="job name; an existing name resumes that job")
+    tu.add_argument("--set", action="append", metavar="KEY=VALUE", help="config override, e.g. plant.steer_lag_s=0.02")
+    tu.add_argument("--bound", action="append", metavar="NAME=LO:HI", help="theta bound, e.g. k=0:0.1")
+    tu.add_argument("--workers", type=int, default=1, choices=range(1, 65), metavar="N",
+                    help="episodes evaluated at once (1..64)")
+    tu.set_defaults(func=_cmd_tune)
+    rp = sub.add_parser("report", help="write the paper's results for a tuning job")
+    rp.add_argument("--name", required=True)
+    rp.add_argument("--db")
+    rp.add_argument("--out", required=True, help="output directory")
+    rp.add_argument("--baselines", type=int, help="random samples for the random-search baseline "
+                    "(default: as many as the job's evaluations)")
+    rp.set_defaults(func=_cmd_report)
     return parser
 
 

@@ -54,3 +54,20 @@ def plot_episode(result: EpisodeResult, track: FigureEight, path: str | Path, ti
     fig.tight_layout()
     fig.savefig(path, dpi=110)
     plt.close(fig)
+
+
+def plot_convergence(values: np.ndarray, failed: np.ndarray, path: str | Path, title: str = "") -> None:
+    """J per iteration (failed evaluations marked, at their penalty) and the best completed J so far."""
+    fig, ax = plt.subplots(figsize=(9, 4.5))
+    index = np.arange(len(values))
+    ax.plot(index[~failed], values[~failed], ".", color="tab:blue", ms=4, label="completed")
+    ax.plot(index[failed], values[failed], "x", color="tab:red", ms=4, label="failed (penalty)")
+    best = np.minimum.accumulate(np.where(failed, np.inf, values))
+    ax.plot(index, np.where(np.isfinite(best), best, np.nan), "-", color="k", lw=1.5, label="best so far")
+    ax.set_xlabel("iteration")
+    ax.set_ylabel("J")
+    ax.set_title(title)
+    ax.legend()
+    fig.tight_layout()
+    fig.savefig(path, dpi=110)
+    plt.close(fig)

@@ -1,0 +1,100 @@
+"""A tuning job's specification: budget, optimizer settings, bounds on theta and the episode config.
+
+One validated document, stored as the job's configuration and accepted alike by `driftlab tune` and
+``POST /api/jobs``.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, field
+from typing import Any
+
+from driftlab.core.config import THETA_KEYS, EpisodeConfig, apply_overrides, config_from_dict, config_to_dict
+from driftlab.core.errors import ConfigError
+
+# Around the band where the default controller completes the 8 on the default plant (benchmarks/mismatch_sweep.py:
+# c outside [0.005, 0.04] or k above 0.12 fail nearly always).
+DEFAULT_BOUNDS: dict[str, tuple[float, float]] = {
+    "c_lr": (0.005, 0.04), "c_rl": (0.005, 0.04), "dV": (-0.3, 0.3), "k": (0.0, 0.12)}
+# What a bound may span: theta's own validity range.
+BOUND_LIMITS: dict[str, tuple[float, float]] = {"c_lr": (0.0, 0.5), "c_rl": (0.0, 0.5), "dV": (-5.0, 5.0),
+                                                "k": (-1.0, 1.0)}
+MAX_ITERATIONS = 5000
+
+
+def _check_int(name: str, value: Any, lo: int, hi: int) -> int:
+    if isinstance(value, bool) or not isinstance(value, int) or not lo <= value <= hi:
+        raise ConfigError(f"{name} must be an integer in [{lo}, {hi}], got {value!r}")
+    return value
+
+
+def validate_bounds(bounds: dict[str, Any]) -> dict[str, tuple[float, float]]:
+    """Bounds for a subset of theta's keys (others take DEFAULT_BOUNDS)."""
+    if not isinstance(bounds, dict):
+        raise ConfigError("bounds must be an object {name: [lo, hi]}")
+    out = dict(DEFAULT_BOUNDS)
+    for name, pair in bounds.items():
+        if name not in THETA_KEYS:
+            raise ConfigError(f"bounds.{name} is not a theta key; allowed: {', '.join(THETA_KEYS)}")
+        if not isinstance(pair, (list, tuple)) or len(pair) != 2:
+            raise ConfigError(f"bounds.{name} must be [lo, hi]")
+        try:
+            lo, hi = float(pair[0]), float(pair[1])
+        except (TypeError, ValueError):
+            raise ConfigError(f"bounds.{name} must be two numbers, got {pair!r}") from None
+        lim_lo, lim_hi = BOUND_LIMITS[name]
+        if not (math.isfinite(lo) and math.isfinite(hi) and lim_lo <= lo < hi <= lim_hi):
+            raise ConfigError(f"bounds.{name} must satisfy {lim_lo} <= lo < hi <= {lim_hi}, got [{lo}, {hi}]")
+        out[name] = (lo, hi)
+    return out
+
+
+@dataclass(frozen=True)
+class TuningSpec:
+    """What a tuning job runs.
+
+    Attributes:
+        iterations: episodes to evaluate in total (1..5000).
+        seed_points: space-filling proposals before the GP (1..1000).
+        active_set: most observations the GP is fit on (10..5000).
+        seed: optimizer seed.
+        bounds: theta name -> (lo, hi).
+        config: the episode configuration (plant, controller, scenario ...).
+    """
+
+    iterations: int = 500
+    seed_points: int = 20
+    active_set: int = 400
+    seed: int = 0
+    bounds: dict[str, tuple[float, float]] = field(default_factory=lambda: dict(DEFAULT_BOUNDS))
+    config: EpisodeConfig = field(default_factory=EpisodeConfig)
+
+    def __post_init__(self) -> None:
+        _check_int("iterations", self.iterations, 1, MAX_ITERATIONS)
+        _check_int("seed_points", self.seed_points, 1, 1000)
+        _check_int("active_set", self.active_set, 10, 5000)
+        _check_int("seed", self.seed, 0, 2**31 - 1)
+        object.__setattr__(self, "bounds", validate_bounds(dict(self.bounds)))
+
+    def to_dict(self) -> dict[str, Any]:
+        return {"iterations": self.iterations, "seed_points": self.seed_points, "active_set": self.active_set,
+                "seed": self.seed, "bounds": {k: list(v) for k, v in self.bounds.items()},
+                "config": config_to_dict(self.config)}
+
+    @classmethod
+    def from_dict(cls, data: dict[str, Any]) -> TuningSpec:
+        """From a stored or posted document. ``config`` may be nested sections or flat dotted keys."""
+        allowed = {"iterations", "seed_points", "active_set", "seed", "bounds", "config"}
+        unknown = set(data) - allowed
+        if unknown:
+            raise ConfigError(f"unknown field {sorted(unknown)[0]!r}; allowed: {', '.join(sorted(allowed))}")
+        raw_config = data.get("config") or {}
+        if not isinstance(raw_config, dict):
+            raise ConfigError("config must be an object")
+        if all(isinstance(v, dict) for v in raw_config.values()):
+            config = config_from_dict(raw_config)
+        else:
+            config = apply_overrides(EpisodeConfig(), raw_config)
+        kwargs = {k: data[k] for k in ("iterations", "seed_points", "active_set", "seed") if k in data}
+        return cls(**kwargs, bounds=data.get("bounds") or {}, config=config)

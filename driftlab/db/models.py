@@ -1,0 +1,76 @@
+"""SQLAlchemy 2.x tables: jobs, their evaluations, and each evaluation's compressed trajectory."""
+
+from __future__ import annotations
+
+from datetime import UTC, datetime
+from typing import Any
+
+from sqlalchemy import JSON, Float, ForeignKey, Integer, LargeBinary, String, UniqueConstraint
+from sqlalchemy.orm import DeclarativeBase, Mapped, mapped_column, relationship
+
+SCHEMA_VERSION = 1
+
+
+def utcnow() -> datetime:
+    return datetime.now(UTC)
+
+
+class Base(DeclarativeBase):
+    pass
+
+
+class Job(Base):
+    __tablename__ = "jobs"
+
+    id: Mapped[int] = mapped_column(primary_key=True)
+    name: Mapped[str] = mapped_column(String(200), unique=True)
+    spec: Mapped[dict[str, Any]] = mapped_column(JSON)  # TuningSpec.to_dict()
+    seed: Mapped[int] = mapped_column(Integer)
+    status: Mapped[str] = mapped_column(String(20), default="queued")  # queued running paused finished failed
+    error: Mapped[str | None] = mapped_column(String(2000), default=None)
+    created_at: Mapped[datetime] = mapped_column(default=utcnow)
+    updated_at: Mapped[datetime] = mapped_column(default=utcnow, onupdate=utcnow)
+    started_at: Mapped[datetime | None] = mapped_column(default=None)
+
+    evaluations: Mapped[list[Evaluation]] = relationship(back_populates="job", order_by="Evaluation.index")
+
+
+class Evaluation(Base):
+    __tablename__ = "evaluations"
+    __table_args__ = (UniqueConstraint("job_id", "index"),)
+
+    id: Mapped[int] = mapped_column(primary_key=True)
+    job_id: Mapped[int] = mapped_column(ForeignKey("jobs.id"), index=True)
+    index: Mapped[int] = mapped_column(Integer)  # 0-based, in order of completion
+    theta: Mapped[dict[str, float]] = mapped_column(JSON)
+    J: Mapped[float] = mapped_column(Float)  # the paper's J when completed, the failure penalty otherwise
+    status: Mapped[str] = mapped_column(String(20))
+    metrics: Mapped[dict[str, Any]] = mapped_column(JSON)
+    trigger_points: Mapped[list[dict[str, float]]] = mapped_column(JSON)
+    wall_ms: Mapped[float] = mapped_column(Float)
+    created_at: Mapped[datetime] = mapped_column(default=utcnow)
+
+    job: Mapped[Job] = relationship(back_populates="evaluations")
+    trajectory: Mapped[Trajectory] = relationship(back_populates="evaluation", cascade="all, delete-orphan")
+
+    @property
+    def completed(self) -> bool:
+        return self.status == "completed"
+
+
+class Trajectory(Base):
+    __tablename__ = "trajectories"
+
+    evaluation_id: Mapped[int] = mapped_column(ForeignKey("evaluations.id"), primary_key=True)
+    columns: Mapped[list[str]] = mapped_column(JSON)
+    rows: Mapped[int] = mapped_column(Integer)
+    data: Mapped[bytes] = mapped_column(LargeBinary)  # zlib-compressed float64, row-major
+
+    evaluation: Mapped[Evaluation] = relationship(back_populates="trajectory")
+
+
+class Meta(Base):
+    __tablename__ = "meta"
+
+    key: Mapped[str] = mapped_column(String(50), primary_key=True)
+    value: Mapped[str] = mapped_column(String(200))

@@ -1,0 +1,159 @@
+"""Storage functions (keyword-only, no HTTP): jobs, evaluations, trajectories.
+
+SQLite by default (``driftlab.db`` in the working directory, or a ``--db`` file, or any SQLAlchemy URL in
+``DRIFTLAB_DATABASE_URL``), opened in WAL mode with a busy timeout so readers never see "database is
+locked" while a worker commits.
+"""
+
+from __future__ import annotations
+
+import os
+import zlib
+from collections.abc import Iterator
+from contextlib import contextmanager
+from typing import Any
+
+import numpy as np
+from sqlalchemy import Engine, create_engine, event, func, select
+from sqlalchemy.orm import Session, sessionmaker
+
+from driftlab.db.models import SCHEMA_VERSION, Base, Evaluation, Job, Meta, Trajectory, utcnow
+
+DEFAULT_DB_FILE = "driftlab.db"
+_BUSY_TIMEOUT_MS = 30_000
+__all__ = ["utcnow"]  # re-exported for callers that stamp times
+
+
+class NotFound(LookupError):
+    """No such job or evaluation."""
+
+
+def database_url(db_file: str | None = None) -> str:
+    """--db FILE wins, then DRIFTLAB_DATABASE_URL, then ./driftlab.db."""
+    if db_file:
+        return db_file if "://" in db_file else f"sqlite:///{os.path.abspath(db_file)}"
+    return os.environ.get("DRIFTLAB_DATABASE_URL") or f"sqlite:///{os.path.abspath(DEFAULT_DB_FILE)}"
+
+
+def open_database(url: str) -> sessionmaker[Session]:
+    """Engine and session factory; creates the schema if missing."""
+    engine = create_engine(url, connect_args={"timeout": _BUSY_TIMEOUT_MS / 1000} if url.startswith("sqlite") else {})
+    if url.startswith("sqlite"):
+        event.listen(engine, "connect", _sqlite_pragmas)
+    Base.metadata.create_all(engine)
+    factory = sessionmaker(engine, expire_on_commit=False)
+    with factory.begin() as session:
+        if session.get(Meta, "schema_version") is None:
+            session.add(Meta(key="schema_version", value=str(SCHEMA_VERSION)))
+    return factory
+
+
+def _sqlite_pragmas(dbapi_connection, _record) -> None:
+    cursor = dbapi_connection.cursor()
+    cursor.execute("PRAGMA journal_mode=WAL")
+    cursor.execute(f"PRAGMA busy_timeout={_BUSY_TIMEOUT_MS}")
+    cursor.execute("PRAGMA synchronous=NORMAL")
+    cursor.execute("PRAGMA foreign_keys=ON")
+    cursor.close()
+
+
+def engine_of(factory: sessionmaker[Session]) -> Engine:
+    return factory.kw["bind"]
+
+
+@contextmanager
+def transaction(factory: sessionmaker[Session]) -> Iterator[Session]:
+    with factory.begin() as session:
+        yield session
+
+
+# -- jobs --------------------------------------------------------------------------------------------------
+def create_job(session: Session, *, name: str, spec: dict[str, Any], seed: int) -> Job:
+    job = Job(name=name, spec=spec, seed=seed, status="queued")
+    session.add(job)
+    session.flush()
+    return job
+
+
+def get_job(session: Session, *, job_id: int) -> Job:
+    job = session.get(Job, job_id)
+    if job is None:
+        raise NotFound(f"no job with id {job_id}")
+    return job
+
+
+def find_job(session: Session, *, name: str) -> Job | None:
+    return session.scalar(select(Job).where(Job.name == name))
+
+
+def list_jobs(session: Session) -> list[Job]:
+    return list(session.scalars(select(Job).order_by(Job.id)))
+
+
+def set_job_status(session: Session, *, job_id: int, status: str, error: str | None = None) -> Job:
+    job = get_job(session, job_id=job_id)
+    job.status = status
+    job.error = error
+    return job
+
+
+def count_evaluations(session: Session, *, job_id: int) -> int:
+    return session.scalar(select(func.count()).select_from(Evaluation).where(Evaluation.job_id == job_id)) or 0
+
+
+def unique_job_name(session: Session, base: str) -> str:
+    name, n = base, 1
+    while find_job(session, name=name) is not None:
+        n += 1
+        name = f"{base}-{n}"
+    return name
+
+
+# -- evaluations -------------------------------------------------------------------------------------------
+def add_evaluation(session: Session, *, job_id: int, theta: dict[str, float], J: float, status: str,
+                   metrics: dict[str, Any], trigger_points: list[dict[str, float]], wall_ms: float,
+                   columns: list[str], trajectory: np.ndarray) -> Evaluation:
+    """Appends the next evaluation of a job (its index is the count so far, so numbering survives resumes)."""
+    index = count_evaluations(session, job_id=job_id)
+    evaluation = Evaluation(job_id=job_id, index=index, theta=theta, J=J, status=status, metrics=metrics,
+                            trigger_points=trigger_points, wall_ms=wall_ms)
+    data = np.ascontiguousarray(trajectory, dtype=np.float64)
+    evaluation.trajectory = Trajectory(columns=list(columns), rows=int(data.shape[0]),
+                                       data=zlib.compress(data.tobytes(), 6))
+    session.add(evaluation)
+    session.flush()
+    return evaluation
+
+
+def evaluations(session: Session, *, job_id: int, after: int = -1, limit: int | None = None) -> list[Evaluation]:
+    """Evaluations with index > after, in order."""
+    query = (select(Evaluation).where(Evaluation.job_id == job_id, Evaluation.index > after)
+             .order_by(Evaluation.index))
+    if limit is not None:
+        query = query.limit(limit)
+    return list(session.scalars(query))
+
+
+def get_evaluation(session: Session, *, evaluation_id: int) -> Evaluation:
+    evaluation = session.get(Evaluation, evaluation_id)
+    if evaluation is None:
+        raise NotFound(f"no evaluation with id {evaluation_id}")
+    return evaluation
+
+
+def best_evaluation(session: Session, *, job_id: int) -> Evaluation | None:
+    """The completed evaluation with the lowest J (failed ones only if none completed)."""
+    for status_filter in (Evaluation.status == "completed", Evaluation.status != "completed"):
+        best = session.scalar(select(Evaluation).where(Evaluation.job_id == job_id, status_filter)
+                              .order_by(Evaluation.J, Evaluation.index).limit(1))
+        if best is not None:
+            return best
+    return None
+
+
+def trajectory_array(session: Session, *, evaluation_id: int) -> tuple[list[str], np.ndarray]:
+    traj = session.get(Trajectory, evaluation_id)
+    if traj is None:
+        raise NotFound(f"no trajectory for evaluation {evaluation_id}")
+    data = np.frombuffer(zlib.decompress(traj.data), dtype=np.float64).reshape(traj.rows, len(traj.columns))
+    return traj.columns, data

@@ -1,0 +1,70 @@
+"""Where episodes run: one small interface, a local process pool today.
+
+A distributed engine (Dask's ``Client.submit`` returns compatible futures) can take the place of
+:class:`LocalProcessExecutor` by implementing :class:`EpisodeExecutor`.
+"""
+
+from __future__ import annotations
+
+import multiprocessing
+import os
+from concurrent.futures import Future, ProcessPoolExecutor
+from dataclasses import dataclass
+from typing import Any, Protocol
+
+import numpy as np
+
+
+@dataclass
+class EpisodeOutcome:
+    """What a worker process sends back: everything storage needs, as plain data."""
+
+    theta: dict[str, float]
+    status: str
+    J: float
+    metrics: dict[str, Any]
+    trigger_points: list[dict[str, float]]
+    wall_ms: float
+    columns: list[str]
+    trajectory: np.ndarray
+
+    @property
+    def completed(self) -> bool:
+        return self.status == "completed"
+
+
+class EpisodeExecutor(Protocol):
+    def submit(self, theta: dict[str, float], config_doc: dict[str, Any]) -> Future[EpisodeOutcome]: ...
+
+    def shutdown(self) -> None: ...
+
+
+def evaluate_episode(theta: dict[str, float], config_doc: dict[str, Any]) -> EpisodeOutcome:
+    """Runs in the worker process."""
+    from driftlab.core.config import Theta, config_from_dict
+    from driftlab.core.episode import COLUMNS, run_episode
+
+    result = run_episode(Theta.from_mapping(theta), config_from_dict(config_doc))
+    return EpisodeOutcome(theta=dict(theta), status=result.status, J=float(result.J),
+                          metrics=result.metrics.as_dict(), trigger_points=result.trigger_points,
+                          wall_ms=float(result.wall_ms), columns=list(COLUMNS), trajectory=result.trajectory)
+
+
+def _init_worker() -> None:
+    # BLAS oversubscription on 2 cores costs up to 8x.
+    os.environ["OMP_NUM_THREADS"] = "1"
+
+
+class LocalProcessExecutor:
+    """Episodes in separate processes (never in the caller's thread or event loop)."""
+
+    def __init__(self, workers: int = 1) -> None:
+        os.environ.setdefault("OMP_NUM_THREADS", "1")
+        self.pool = ProcessPoolExecutor(max_workers=workers, mp_context=multiprocessing.get_context("spawn"),
+                                        initializer=_init_worker)
+
+    def submit(self, theta: dict[str, float], config_doc: dict[str, Any]) -> Future[EpisodeOutcome]:
+        return self.pool.submit(evaluate_episode, theta, config_doc)
+
+    def shutdown(self) -> None:
+        self.pool.shutdown(wait=True, cancel_futures=True)

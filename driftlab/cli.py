@@ -157,6 +157,16 @@ def _cmd_report(args: argparse.Namespace) -> int:
     return 0
 
 
+def _cmd_serve(args: argparse.Namespace) -> int:
+    import uvicorn
+
+    from driftlab.server.app import create_app
+
+    app = create_app(_db_url(args.db), workers=args.workers)
+    uvicorn.run(app, host=args.host, port=args.port, log_level="info")
+    return 0
+
+
 def _db_url(db: str | None) -> str:
     from driftlab.db.storage import database_url
 
@@ -193,6 +203,13 @@ def build_parser() -> argparse.ArgumentParser:
     tu.add_argument("--workers", type=int, default=1, choices=range(1, 65), metavar="N",
                     help="episodes evaluated at once (1..64)")
     tu.set_defaults(func=_cmd_tune)
+    sv = sub.add_parser("serve", help="the dashboard and REST API (http://127.0.0.1:8000)")
+    sv.add_argument("--host", default="127.0.0.1", help="bind address (default 127.0.0.1: this machine only)")
+    sv.add_argument("--port", type=int, default=8000)
+    sv.add_argument("--db", help="SQLite file or SQLAlchemy URL (default: ./driftlab.db or DRIFTLAB_DATABASE_URL)")
+    sv.add_argument("--workers", type=int, default=2, choices=range(1, 65), metavar="N",
+                    help="episode processes (1..64)")
+    sv.set_defaults(func=_cmd_serve)
     rp = sub.add_parser("report", help="write the paper's results for a tuning job")
     rp.add_argument("--name", required=True)
     rp.add_argument("--db")

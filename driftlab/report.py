@@ -11,9 +11,9 @@ import numpy as np
 from driftlab.core.config import PAPER_THETA, Theta
 from driftlab.core.episode import run_episode
 from driftlab.core.equilibrium import drift_equilibrium
-from driftlab.core.vehicle import pack_params
 from driftlab.core.track import FigureEight
 from driftlab.core.tuning import TuningSpec
+from driftlab.core.vehicle import pack_params
 from driftlab.db import storage
 from driftlab.plotting import plot_convergence, plot_episode
 

@@ -1,0 +1,179 @@
+"""The REST API (thin routes over :mod:`driftlab.db.storage`) and the job worker's lifecycle."""
+
+from __future__ import annotations
+
+import csv
+import io
+import json
+import os
+import secrets
+from contextlib import asynccontextmanager
+from datetime import UTC
+from typing import Any
+
+from fastapi import Depends, FastAPI, Header, HTTPException, Query, Request
+from fastapi.exceptions import RequestValidationError
+from fastapi.responses import HTMLResponse, JSONResponse, Response
+
+from driftlab.core.errors import ConfigError
+from driftlab.core.tuning import TuningSpec
+from driftlab.db import storage
+from driftlab.db.models import Evaluation, Job
+from driftlab.server.schemas import JobCreate
+from driftlab.server.worker import JobWorker
+
+MAX_PAGE = 1000
+
+
+def _require_token(authorization: str | None = Header(default=None)) -> None:
+    token = os.environ.get("DRIFTLAB_TOKEN")
+    if token and not (authorization and secrets.compare_digest(authorization, f"Bearer {token}")):
+        raise HTTPException(401, "this endpoint needs 'Authorization: Bearer <DRIFTLAB_TOKEN>'")
+
+
+def _evaluation_dict(e: Evaluation) -> dict[str, Any]:
+    return {"id": e.id, "job_id": e.job_id, "index": e.index, "theta": e.theta, "J": e.J, "status": e.status,
+            "completed": e.completed, "metrics": e.metrics, "trigger_points": e.trigger_points,
+            "wall_ms": e.wall_ms, "created_at": e.created_at.replace(tzinfo=UTC).isoformat()}
+
+
+def _job_dict(session, job: Job) -> dict[str, Any]:
+    n_done = storage.count_evaluations(session, job_id=job.id)
+    iterations = job.spec["iterations"]
+    best = storage.best_evaluation(session, job_id=job.id)
+    eta = None
+    if job.status == "running" and n_done > 0 and job.started_at is not None:
+        from driftlab.db.models import utcnow
+
+        started = job.started_at.replace(tzinfo=UTC) if job.started_at.tzinfo is None else job.started_at
+        elapsed = (utcnow() - started).total_seconds()
+        eta = elapsed / n_done * (iterations - n_done)
+    return {"id": job.id, "name": job.name, "status": job.status, "seed": job.seed, "n_done": n_done,
+            "iterations": iterations, "progress": n_done / iterations, "eta_s": eta, "error": job.error,
+            "best": None if best is None else {"evaluation_id": best.id, "index": best.index, "theta": best.theta,
+                                               "J": best.J, "status": best.status},
+            "spec": job.spec, "created_at": job.created_at.replace(tzinfo=UTC).isoformat()}
+
+
+def create_app(db_url: str, *, workers: int = 2, start_worker: bool = True) -> FastAPI:
+    factory = storage.open_database(db_url)
+    worker = JobWorker(factory, workers=workers)
+
+    @asynccontextmanager
+    async def lifespan(_app: FastAPI):
+        if start_worker:
+            worker.start()
+        yield
+        if start_worker:
+            worker.stop()
+
+    app = FastAPI(title="DriftLab", version="0.1.0", lifespan=lifespan,
+                  description="Learning-based inertia drift: tuning jobs, evaluations, trajectories.")
+    app.state.factory = factory
+    app.state.worker = worker
+
+    @app.exception_handler(RequestValidationError)
+    async def _validation(_request: Request, exc: RequestValidationError):
+        details = [{"field": ".".join(str(p) for p in err["loc"] if p != "body"), "message": err["msg"]}
+                   for err in exc.errors()]
+        summary = "; ".join(f"{d['field']}: {d['message']}" for d in details)
+        return JSONResponse({"detail": summary, "errors": details}, status_code=422)
+
+    @app.exception_handler(ConfigError)
+    async def _config_error(_request: Request, exc: ConfigError):
+        return JSONResponse({"detail": str(exc)}, status_code=422)
+
+    @app.exception_handler(storage.NotFound)
+    async def _not_found(_request: Request, exc: storage.NotFound):
+        return JSONResponse({"detail": str(exc)}, status_code=404)
+
+    @app.get("/", response_class=HTMLResponse, include_in_schema=False)
+    def landing() -> str:
+        return ("<html><head><title>DriftLab</title></head><body><h1>DriftLab</h1><ul>"
+                "<li><a href='/docs'>REST API docs</a></li><li><a href='/api/jobs'>jobs (JSON)</a></li>"
+                "</ul></body></html>")
+
+    @app.get("/api/health")
+    def health() -> dict[str, str]:
+        return {"status": "ok"}
+
+    @app.post("/api/jobs", status_code=201, dependencies=[Depends(_require_token)])
+    def create_job(body: JobCreate) -> dict[str, Any]:
+        doc = body.model_dump(exclude_none=True, exclude={"name"})
+        if "bounds" in doc:
+            doc["bounds"] = {k: list(v) for k, v in doc["bounds"].items()}
+        spec = TuningSpec.from_dict(doc)  # ConfigError -> 422 naming the field
+        with storage.transaction(factory) as session:
+            if body.name and storage.find_job(session, name=body.name) is not None:
+                raise HTTPException(409, f"name: a job named {body.name!r} exists")
+            name = body.name or storage.unique_job_name(session, "job")
+            job = storage.create_job(session, name=name, spec=spec.to_dict(), seed=spec.seed)
+            out = _job_dict(session, job)
+        worker.wake()
+        return out
+
+    @app.get("/api/jobs")
+    def list_jobs() -> list[dict[str, Any]]:
+        with storage.transaction(factory) as session:
+            return [_job_dict(session, j) for j in storage.list_jobs(session)]
+
+    @app.get("/api/jobs/{job_id}")
+    def get_job(job_id: int) -> dict[str, Any]:
+        with storage.transaction(factory) as session:
+            return _job_dict(session, storage.get_job(session, job_id=job_id))
+
+    def _transition(job_id: int, allowed: tuple[str, ...], target: str) -> dict[str, Any]:
+        with storage.transaction(factory) as session:
+            job = storage.get_job(session, job_id=job_id)
+            if job.status not in allowed:
+                raise HTTPException(409, f"job {job_id} is {job.status}; this needs one of {', '.join(allowed)}")
+            job.status = target
+            out = _job_dict(session, job)
+        worker.wake()
+        return out
+
+    @app.post("/api/jobs/{job_id}/pause", dependencies=[Depends(_require_token)])
+    def pause(job_id: int) -> dict[str, Any]:
+        return _transition(job_id, ("queued", "running"), "paused")
+
+    @app.post("/api/jobs/{job_id}/resume", dependencies=[Depends(_require_token)])
+    def resume(job_id: int) -> dict[str, Any]:
+        return _transition(job_id, ("paused", "failed"), "queued")
+
+    @app.get("/api/jobs/{job_id}/evaluations")
+    def list_evaluations(job_id: int, after: int = Query(-1, ge=-1),
+                         limit: int = Query(MAX_PAGE, ge=1, le=MAX_PAGE)) -> list[dict[str, Any]]:
+        with storage.transaction(factory) as session:
+            storage.get_job(session, job_id=job_id)
+            return [_evaluation_dict(e) for e in storage.evaluations(session, job_id=job_id, after=after, limit=limit)]
+
+    @app.get("/api/jobs/{job_id}/best")
+    def best(job_id: int) -> dict[str, Any]:
+        with storage.transaction(factory) as session:
+            storage.get_job(session, job_id=job_id)
+            e = storage.best_evaluation(session, job_id=job_id)
+            if e is None:
+                raise HTTPException(404, f"job {job_id} has no evaluations yet")
+            return _evaluation_dict(e)
+
+    @app.get("/api/evaluations/{evaluation_id}")
+    def get_evaluation(evaluation_id: int) -> dict[str, Any]:
+        with storage.transaction(factory) as session:
+            return _evaluation_dict(storage.get_evaluation(session, evaluation_id=evaluation_id))
+
+    @app.get("/api/evaluations/{evaluation_id}/trajectory")
+    def trajectory(evaluation_id: int, format: str = Query("csv", pattern="^(csv|json)$")) -> Response:  # noqa: A002
+        with storage.transaction(factory) as session:
+            columns, data = storage.trajectory_array(session, evaluation_id=evaluation_id)
+        filename = f"evaluation-{evaluation_id}.{format}"
+        headers = {"Content-Disposition": f'attachment; filename="{filename}"'}
+        if format == "json":
+            body = json.dumps({"columns": columns, "rows": data.tolist()})
+            return Response(body, media_type="application/json", headers=headers)
+        buffer = io.StringIO()
+        writer = csv.writer(buffer)
+        writer.writerow(columns)
+        writer.writerows(data.tolist())
+        return Response(buffer.getvalue(), media_type="text/csv", headers=headers)
+
+    return app

@@ -1,0 +1,174 @@
+"""The REST API against a real server process and a real SQLite file."""
+
+import csv
+import io
+import os
+import socket
+import subprocess
+import sys
+import time
+
+import httpx
+import pytest
+
+
+def _free_port() -> int:
+    with socket.socket() as s:
+        s.bind(("127.0.0.1", 0))
+        return s.getsockname()[1]
+
+
+def _start(db_path, port, env_extra=None):
+    env = {**os.environ, "OMP_NUM_THREADS": "1", **(env_extra or {})}
+    proc = subprocess.Popen([sys.executable, "-m", "driftlab.cli", "serve", "--port", str(port), "--db", str(db_path)],
+                            env=env, stdout=subprocess.DEVNULL, stderr=subprocess.PIPE)
+    url = f"http://127.0.0.1:{port}"
+    for _ in range(150):
+        try:
+            if httpx.get(f"{url}/api/health", timeout=1).json() == {"status": "ok"}:
+                return proc, url
+        except httpx.HTTPError:
+            time.sleep(0.1)
+    proc.kill()
+    raise RuntimeError(proc.stderr.read().decode())
+
+
+@pytest.fixture(scope="module")
+def server(tmp_path_factory):
+    db = tmp_path_factory.mktemp("api") / "driftlab.db"
+    proc, url = _start(db, _free_port())
+    yield url, db
+    proc.terminate()
+    proc.wait(timeout=30)
+
+
+def _wait_status(url, job_id, statuses, timeout_s=120):
+    deadline = time.time() + timeout_s
+    while time.time() < deadline:
+        job = httpx.get(f"{url}/api/jobs/{job_id}").json()
+        if job["status"] in statuses:
+            return job
+        time.sleep(0.2)
+    raise AssertionError(f"job {job_id} stuck in {job['status']}")
+
+
+def test_a_small_job_runs_to_the_end(server):
+    url, db = server
+    r = httpx.post(f"{url}/api/jobs", json={"name": "small", "iterations": 12, "seed_points": 6})
+    assert r.status_code == 201, r.text
+    job = r.json()
+    assert job["status"] == "queued" and job["iterations"] == 12
+    done = _wait_status(url, job["id"], {"finished"})
+    assert done["n_done"] == 12 and done["progress"] == 1.0
+    evals = httpx.get(f"{url}/api/jobs/{job['id']}/evaluations").json()
+    assert [e["index"] for e in evals] == list(range(12))
+    assert all(set(e["theta"]) == {"c_lr", "c_rl", "dV", "k"} for e in evals)
+    later = httpx.get(f"{url}/api/jobs/{job['id']}/evaluations", params={"after": 8}).json()
+    assert [e["index"] for e in later] == [9, 10, 11]
+    best = httpx.get(f"{url}/api/jobs/{job['id']}/best").json()
+    completed = [e["J"] for e in evals if e["completed"]]
+    if completed:
+        assert best["J"] == min(completed)
+    assert done["best"]["evaluation_id"] == best["id"]
+    assert db.exists() and db.stat().st_size > 0
+
+
+def test_trajectory_downloads_parse(server):
+    url, _ = server
+    job = next(j for j in httpx.get(f"{url}/api/jobs").json() if j["name"] == "small")
+    evaluation = httpx.get(f"{url}/api/jobs/{job['id']}/best").json()
+    r = httpx.get(f"{url}/api/evaluations/{evaluation['id']}/trajectory", params={"format": "csv"})
+    assert r.status_code == 200 and "attachment" in r.headers["content-disposition"]
+    rows = list(csv.reader(io.StringIO(r.text)))
+    header, body = rows[0], rows[1:]
+    assert "beta_rad" in header and "t_s" in header
+    assert len(body) == round(evaluation["metrics"]["duration_s"] / 0.05) + 1 or len(body) > 10
+    t = [float(row[header.index("t_s")]) for row in body]
+    assert t == sorted(t) and t[0] == 0.0
+    js = httpx.get(f"{url}/api/evaluations/{evaluation['id']}/trajectory", params={"format": "json"}).json()
+    assert js["columns"] == header and len(js["rows"]) == len(body)
+
+
+def test_pause_and_resume(server):
+    url, _ = server
+    job = httpx.post(f"{url}/api/jobs", json={"iterations": 400, "seed_points": 5}).json()
+    time.sleep(1.0)
+    paused = httpx.post(f"{url}/api/jobs/{job['id']}/pause")
+    assert paused.status_code == 200
+    job_now = _wait_status(url, job["id"], {"paused"})
+    time.sleep(1.5)  # evaluations in flight are stored, then nothing more
+    n_paused = httpx.get(f"{url}/api/jobs/{job['id']}").json()["n_done"]
+    time.sleep(1.0)
+    assert httpx.get(f"{url}/api/jobs/{job['id']}").json()["n_done"] == n_paused
+    assert n_paused >= job_now["n_done"]
+    assert httpx.post(f"{url}/api/jobs/{job['id']}/pause").status_code == 409
+    assert httpx.post(f"{url}/api/jobs/{job['id']}/resume").status_code == 200
+    deadline = time.time() + 60
+    while httpx.get(f"{url}/api/jobs/{job['id']}").json()["n_done"] <= n_paused and time.time() < deadline:
+        time.sleep(0.2)
+    assert httpx.get(f"{url}/api/jobs/{job['id']}").json()["n_done"] > n_paused
+    httpx.post(f"{url}/api/jobs/{job['id']}/pause")
+    _wait_status(url, job["id"], {"paused"})
+    evals = httpx.get(f"{url}/api/jobs/{job['id']}/evaluations").json()
+    assert [e["index"] for e in evals] == list(range(len(evals)))
+
+
+@pytest.mark.parametrize(("body", "field"), [
+    ({"iterations": "many"}, "iterations"),
+    ({"iterations": 0}, "iterations"),
+    ({"iterations": 10**6}, "iterations"),
+    ({"iterations": 5, "bounds": {"k": [0.1, 0.05]}}, "bounds.k"),
+    ({"iterations": 5, "bounds": {"speed": [0, 1]}}, "bounds.speed"),
+    ({"iterations": 5, "config": {"plant.no_such_key": 1}}, "plant.no_such_key"),
+    ({"iterations": 5, "config": {"plant.friction_scale": 9.0}}, "plant.friction_scale"),
+    ({"iterations": 5, "colour": "red"}, "colour"),
+])
+def test_bad_requests_name_the_field_and_store_nothing(server, body, field):
+    url, _ = server
+    before = httpx.get(f"{url}/api/jobs").json()
+    r = httpx.post(f"{url}/api/jobs", json=body)
+    assert r.status_code == 422, r.text
+    assert field in r.json()["detail"]
+    assert len(httpx.get(f"{url}/api/jobs").json()) == len(before)
+
+
+def test_unknown_ids_are_404(server):
+    url, _ = server
+    assert httpx.get(f"{url}/api/jobs/999999").status_code == 404
+    assert httpx.post(f"{url}/api/jobs/999999/pause").status_code == 404
+    assert httpx.get(f"{url}/api/evaluations/999999").status_code == 404
+    assert httpx.get(f"{url}/api/evaluations/999999/trajectory").status_code == 404
+
+
+def test_a_killed_server_resumes_its_job_without_repeats(tmp_path):
+    db = tmp_path / "crash.db"
+    proc, url = _start(db, _free_port())
+    job = httpx.post(f"{url}/api/jobs", json={"iterations": 30, "seed_points": 5}).json()
+    deadline = time.time() + 60
+    while httpx.get(f"{url}/api/jobs/{job['id']}").json()["n_done"] < 6 and time.time() < deadline:
+        time.sleep(0.1)
+    proc.kill()  # no clean shutdown
+    proc.wait()
+    proc, url = _start(db, _free_port())
+    try:
+        done = _wait_status(url, job["id"], {"finished"})
+        assert done["n_done"] == 30
+        evals = httpx.get(f"{url}/api/jobs/{job['id']}/evaluations").json()
+        assert [e["index"] for e in evals] == list(range(30))
+        thetas = [tuple(sorted(e["theta"].items())) for e in evals]
+        assert len(set(thetas)) == 30
+    finally:
+        proc.terminate()
+        proc.wait(timeout=30)
+
+
+def test_token_guards_mutating_endpoints(tmp_path):
+    proc, url = _start(tmp_path / "tok.db", _free_port(), {"DRIFTLAB_TOKEN": "s3cret"})
+    try:
+        assert httpx.post(f"{url}/api/jobs", json={"iterations": 1}).status_code == 401
+        ok = httpx.post(f"{url}/api/jobs", json={"iterations": 1}, headers={"Authorization": "Bearer s3cret"})
+        assert ok.status_code == 201
+        assert httpx.get(f"{url}/api/jobs").status_code == 200
+    finally:
+        proc.terminate()
+        proc.wait(timeout=30)

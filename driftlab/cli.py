@@ -128,8 +128,11 @@ def _cmd_tune(args: argparse.Namespace) -> int:
     def progress(p: Progress) -> None:
         best = f"{p.best_J:.3f}" if p.best_J is not None else "-"
         eta = f"{p.eta_s:.0f} s" if p.eta_s is not None else "-"
-        sys.stderr.write(f"\r[{p.n_done}/{p.iterations}] best J {best}  last {p.last.status} "
-                         f"J {p.last.J:.3f}  ETA {eta}    ")
+        line = f"[{p.n_done}/{p.iterations}] best J {best}  last {p.last.status} J {p.last.J:.3f}  ETA {eta}"
+        if sys.stderr.isatty():
+            sys.stderr.write(f"\r{line}    ")
+        elif p.n_done % 25 == 0 or p.n_done == p.iterations:  # logs: a line now and then, not a blob
+            sys.stderr.write(line + "\n")
         sys.stderr.flush()
 
     executor = LocalProcessExecutor(args.workers)

@@ -42,6 +42,7 @@ _LOCAL_STARTS = 2
 _HYPER_FIT_POINTS = 200  # hyperparameters from at most this many points; the GP then conditions on all
 _EI_XI = 0.0
 _MIN_SUCCESS_PROBABILITY = 0.5
+_FAILURE_CLEARANCE = 0.015  # unit-cube distance over which a failure suppresses proposals
 
 
 class BayesianOptimizer:
@@ -224,8 +225,18 @@ class BayesianOptimizer:
             # constraint, Gelbart, Snoek & Adams 2014): where the regressor has no data its EI is large, and
             # a soft weight alone lets it keep probing the failing region.
             p_success = classifier.predict_proba(x)[:, 1]
-            ei = ei * p_success * (p_success >= _MIN_SUCCESS_PROBABILITY)
+            ei = ei * p_success * (p_success >= _MIN_SUCCESS_PROBABILITY) * self._failure_clearance(x)
         return ei
+
+    def _failure_clearance(self, x: np.ndarray) -> np.ndarray:
+        """1 - exp(-(d / r)^2), d the distance to the nearest failed point: where the failure boundary runs
+        close past the optimum, the classifier still says "likely success" right next to a failure, and EI
+        would propose the same failing point again and again."""
+        failed = np.array([xi for xi, yi in zip(self.x, self.y, strict=True) if yi is None])
+        if len(failed) == 0:
+            return np.ones(len(x))
+        d2 = np.min(((x[:, None, :] - failed[None, :, :]) ** 2).sum(axis=2), axis=1)
+        return 1.0 - np.exp(-d2 / _FAILURE_CLEARANCE**2)
 
     def _maximize(self, gp, classifier, best: float, x_best: np.ndarray) -> np.ndarray:
         rng = self._rng()

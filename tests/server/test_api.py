@@ -172,3 +172,25 @@ def test_token_guards_mutating_endpoints(tmp_path):
     finally:
         proc.terminate()
         proc.wait(timeout=30)
+
+
+def test_concurrent_reads_while_a_job_writes(server):
+    from concurrent.futures import ThreadPoolExecutor
+
+    url, _ = server
+    job = httpx.post(f"{url}/api/jobs", json={"iterations": 40, "seed_points": 5}).json()
+    deadline = time.time() + 60
+    while httpx.get(f"{url}/api/jobs/{job['id']}").json()["n_done"] < 2 and time.time() < deadline:
+        time.sleep(0.1)
+    first = httpx.get(f"{url}/api/jobs/{job['id']}/evaluations").json()[0]
+
+    def read(i):
+        with httpx.Client(timeout=30) as client:
+            paths = [f"/api/jobs/{job['id']}/evaluations", f"/api/evaluations/{first['id']}/trajectory",
+                     f"/api/jobs/{job['id']}", f"/api/jobs/{job['id']}/evaluations?after={i % 5}"]
+            return [client.get(url + p).status_code for p in paths]
+
+    with ThreadPoolExecutor(8) as pool:
+        codes = [c for batch in pool.map(read, range(40)) for c in batch]
+    assert codes.count(200) == len(codes) == 160
+    httpx.post(f"{url}/api/jobs/{job['id']}/pause")

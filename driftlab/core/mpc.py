@@ -43,7 +43,8 @@ class MpcConfig:
 
     Default ("extended"): the paper's linear MPC plus what the mismatched default plant needs: lateral and
     course errors as model states (path_states), first-order actuator lags in the model, exact (ZOH)
-    discretization, and weights tuned by random search on the default plant (benchmarks/tune_weights.py).
+    discretization, and weights from a random search on the default plant (benchmarks/tune_weights.py; the
+    defaults are its best set, rounded).
     Paper: 3-state model linearized at the target, Euler, REFERENCE.md section 7's weights.
 
     Attributes:

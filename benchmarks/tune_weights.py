@@ -1,0 +1,47 @@
+"""Random search over the default controller's weights on the default plant (how MpcConfig's defaults were
+found): each weight set runs 4 theta; sets are ranked by completions, then by the sum of J.
+
+Run: OMP_NUM_THREADS=1 python benchmarks/tune_weights.py [N_SETS=400]   (two processes, ~1 min per 400)
+"""
+
+import json
+import os
+import sys
+from multiprocessing import Pool
+
+import numpy as np
+
+from driftlab.core.config import EpisodeConfig, Theta, apply_overrides
+from driftlab.core.episode import run_episode
+
+THETAS = [Theta(0.02, 0.02, 0.0, 0.05), Theta(0.01, 0.03, 0.0, 0.02), Theta(0.03, 0.015, 0.1, 0.0),
+          Theta(0.025, 0.025, -0.1, 0.08)]
+
+
+def sample(rng: np.random.Generator) -> dict:
+    return {"mpc.q_sideslip": 10 ** rng.uniform(1.5, 3.5), "mpc.q_yaw_rate": 10 ** rng.uniform(0, 2.5),
+            "mpc.q_steer": 10 ** rng.uniform(-1, 2), "mpc.q_drive_kn": 10 ** rng.uniform(-2, 0.5),
+            "mpc.r_steer_step": 10 ** rng.uniform(0, 3), "mpc.r_drive_step_kn": 10 ** rng.uniform(-3, 0),
+            "mpc.steer_rate_radps": rng.uniform(2, 8), "mpc.q_speed": 10 ** rng.uniform(-0.5, 1),
+            "mpc.q_lateral_error": 10 ** rng.uniform(-1.5, 1.5), "mpc.q_course_error": 10 ** rng.uniform(-1.5, 2)}
+
+
+def evaluate(i: int):
+    weights = sample(np.random.default_rng(5000 + i))
+    config = apply_overrides(EpisodeConfig(), weights)
+    results = [run_episode(t, config) for t in THETAS]
+    return sum(r.completed for r in results), sum(r.J for r in results), weights
+
+
+def main() -> None:
+    os.environ["OMP_NUM_THREADS"] = "1"
+    n = int(sys.argv[1]) if len(sys.argv) > 1 else 400
+    with Pool(2) as pool:
+        out = pool.map(evaluate, range(n))
+    out.sort(key=lambda o: (-o[0], o[1]))
+    for completed, total_j, weights in out[:5]:
+        print(completed, round(total_j, 3), json.dumps({k: round(v, 3) for k, v in weights.items()}))
+
+
+if __name__ == "__main__":
+    main()

@@ -227,7 +227,7 @@ def main(argv: list[str] | None = None) -> int:
     args = build_parser().parse_args(argv)
     try:
         return args.func(args)
-    except ConfigError as exc:
+    except (ConfigError, LookupError) as exc:  # bad input, or no such job / evaluation
         sys.stderr.write(f"driftlab: error: {exc}\n")
         return 2
 

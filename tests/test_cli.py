@@ -51,3 +51,24 @@ def test_bad_arguments_exit_2_naming_the_field(args, field):
     out = _run(*args)
     assert out.returncode == 2
     assert field in out.stderr
+
+
+def test_tune_resumes_by_name_and_report_writes_the_tables(tmp_path):
+    db = str(tmp_path / "t.db")
+    first = _run("tune", "--iterations", "4", "--seed-points", "3", "--db", db, "--name", "smoke")
+    assert first.returncode == 0, first.stderr
+    out = json.loads(first.stdout)
+    assert out["status"] == "finished" and out["n_done"] == 4
+    again = _run("tune", "--iterations", "4", "--db", db, "--name", "smoke")
+    assert "resuming job smoke" in again.stderr and json.loads(again.stdout)["n_done"] == 4
+    rep = _run("report", "--name", "smoke", "--db", db, "--out", str(tmp_path / "rep"), "--baselines", "2")
+    assert rep.returncode == 0, rep.stderr
+    text = (tmp_path / "rep" / "report.md").read_text()
+    assert "paper Table I" in text and "best of 2 random" in text and "untuned" in text
+    assert (tmp_path / "rep" / "convergence.png").stat().st_size > 0
+    assert (tmp_path / "rep" / "best_episode.png").stat().st_size > 0
+
+
+def test_tune_rejects_a_bad_bound_naming_it(tmp_path):
+    r = _run("tune", "--iterations", "2", "--db", str(tmp_path / "t.db"), "--bound", "k=0.2:0.1")
+    assert r.returncode == 2 and "bounds.k" in r.stderr

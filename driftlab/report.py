@@ -2,8 +2,6 @@
 
 from __future__ import annotations
 
-import os
-from concurrent.futures import ProcessPoolExecutor
 from pathlib import Path
 
 import numpy as np
@@ -16,17 +14,10 @@ from driftlab.core.tuning import TuningSpec
 from driftlab.core.vehicle import pack_params
 from driftlab.db import storage
 from driftlab.plotting import plot_convergence, plot_episode
+from driftlab.worker.executor import LocalProcessExecutor
 
 # The paper's Table I (left-hand drift at R = 44 m, beta = -0.4; REFERENCE.md section 2).
 PAPER_TABLE_I = {"V": 19.1, "beta": -0.4, "r": 0.434, "delta": -0.270, "Fxr": 4324.0}
-
-
-def _score(args: tuple[dict[str, float], dict]) -> tuple[dict[str, float], str, float]:
-    from driftlab.core.config import config_from_dict
-
-    theta, config_doc = args
-    r = run_episode(Theta.from_mapping(theta), config_from_dict(config_doc))
-    return theta, r.status, r.J
 
 
 def write_report(*, db_url: str, name: str, out_dir: str, baseline_samples: int | None = None) -> Path:
@@ -55,12 +46,14 @@ def write_report(*, db_url: str, name: str, out_dir: str, baseline_samples: int 
     rng = np.random.default_rng(spec.seed + 12345)
     samples = [{k: float(rng.uniform(lo, hi)) for k, (lo, hi) in spec.bounds.items()} for _ in range(n_random)]
     config_doc = spec.to_dict()["config"]
-    os.environ.setdefault("OMP_NUM_THREADS", "1")
-    with ProcessPoolExecutor(max_workers=2) as pool:
-        scored = list(pool.map(_score, [(s, config_doc) for s in samples], chunksize=8))
+    executor = LocalProcessExecutor(workers=2)
+    try:
+        futures = [executor.submit(theta, config_doc) for theta in
+                   (Theta().as_dict(), PAPER_THETA.as_dict(), *samples)]
+        untuned, paper, *scored = [(o.theta, o.status, o.J) for o in (f.result() for f in futures)]
+    finally:
+        executor.shutdown()
     random_best = min(scored, key=lambda s: s[2])
-    untuned = _score((Theta().as_dict(), config_doc))
-    paper = _score((PAPER_THETA.as_dict(), config_doc))
 
     eq = drift_equilibrium(config.scenario.left_radius_m, -abs(config.scenario.sideslip_rad),
                            pack_params(config.vehicle)).as_dict()

@@ -14,7 +14,7 @@ from functools import lru_cache
 import numpy as np
 
 from driftlab.core.equilibrium import Equilibrium, drift_equilibrium
-from driftlab.core.mpc import N_X, DisturbanceEstimator, MpcConfig, MpcSolution, ReferenceQp, to_scaled
+from driftlab.core.mpc import DisturbanceEstimator, MpcConfig, MpcSolution, ReferenceQp, scale_inputs, to_scaled
 from driftlab.core.track import LEFT
 from driftlab.core.vehicle import VehicleParams, drift_derivatives_vec, pack_params
 
@@ -110,8 +110,8 @@ class DriftController:
         self.direction = direction
         disturbance = self._update_disturbance(state)
         qp = self.model.qp(direction)
-        z_now = qp.pack_state(state, np.array([lateral_error_m, course_error_rad]),
-                              to_scaled(state, actuators)[N_X:], to_scaled(state, self.last_mpc_inputs)[N_X:])
+        z_now = qp.pack_state(state, np.array([lateral_error_m, course_error_rad]), scale_inputs(actuators),
+                              scale_inputs(self.last_mpc_inputs))
         solution = qp.solve(z_now, self.reference(direction), disturbance)
         self.last_mpc_inputs = np.array([solution.steer_rad, solution.drive_force_n])
         e_la = lookahead_error_m(lateral_error_m, course_error_rad, self.lookahead_m)

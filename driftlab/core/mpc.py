@@ -9,8 +9,8 @@ delta, Fxr and both increments.
 Solving: the QP is condensed to the 2*Nc increments once per reference. Each step first forms the
 unconstrained minimizer with a precomputed gain; when it satisfies every limit it *is* the QP's solution
 (the constraints are inactive, the QP is strictly convex). Only otherwise OSQP (set up once, warm-started,
-# polishing off: OSQP 1.x prints an unguarded line on stdout per polish, osqp/osqp#785)
-only q, l, u updated) solves the constrained QP.
+only q, l, u updated) solves the constrained QP. OSQP's polishing is off: OSQP 1.x prints an unguarded line
+on stdout per polish (osqp/osqp#785), which would corrupt the CLI's JSON.
 
 Offset-free extension (not in the paper; ``disturbance_gain`` > 0): a constant additive disturbance d on
 (Vdot, betadot, rdot) is estimated each step from the difference between the measured state and the
@@ -117,11 +117,6 @@ class MpcConfig:
         return self.model_steer_lag_s > 0.0 or self.model_drive_lag_s > 0.0
 
     @property
-    def n_states(self) -> int:
-        """States of the QP's vehicle model: [V, beta, r] (the paper), or [V, beta, r, e, dpsi]."""
-        return N_X + 2 if self.path_states else N_X
-
-    @property
     def state_weights(self) -> np.ndarray:
         """Q on the model states ([V, beta, r] or [V, beta, r, e, dpsi])."""
         path = [self.q_lateral_error, self.q_course_error] if self.path_states else []
@@ -140,6 +135,11 @@ class MpcConfig:
 def to_scaled(state: np.ndarray, inputs: np.ndarray) -> np.ndarray:
     """z = [V, beta, r, delta, Fxr kN] from state [V, beta, r] and inputs [delta, Fxr N]."""
     return np.array([state[0], state[1], state[2], inputs[0], inputs[1] * KN])
+
+
+def scale_inputs(inputs: np.ndarray) -> np.ndarray:
+    """[delta, Fxr kN] from [delta, Fxr N]."""
+    return np.array([inputs[0], inputs[1] * KN])
 
 
 def _with_path_errors(a_c: np.ndarray, b_c: np.ndarray, equilibrium: Equilibrium) -> tuple[np.ndarray, np.ndarray]:

@@ -17,11 +17,10 @@ import numpy as np
 from sqlalchemy import Engine, create_engine, event, func, select
 from sqlalchemy.orm import Session, sessionmaker
 
-from driftlab.db.models import SCHEMA_VERSION, Base, Evaluation, Job, Meta, Trajectory, utcnow
+from driftlab.db.models import SCHEMA_VERSION, Base, Evaluation, Job, Meta, Trajectory
 
 DEFAULT_DB_FILE = "driftlab.db"
 _BUSY_TIMEOUT_MS = 30_000
-__all__ = ["utcnow"]  # re-exported for callers that stamp times
 
 
 class NotFound(LookupError):
@@ -132,6 +131,16 @@ def evaluations(session: Session, *, job_id: int, after: int = -1, limit: int | 
     if limit is not None:
         query = query.limit(limit)
     return list(session.scalars(query))
+
+
+def seconds_per_evaluation(session: Session, *, job_id: int, window: int = 20) -> float | None:
+    """Mean time between the job's last ``window`` evaluations (None with fewer than two): an ETA that a
+    pause, a resume or a crash does not distort."""
+    stamps = list(session.scalars(select(Evaluation.created_at).where(Evaluation.job_id == job_id)
+                                  .order_by(Evaluation.index.desc()).limit(window)))
+    if len(stamps) < 2:
+        return None
+    return (stamps[0] - stamps[-1]).total_seconds() / (len(stamps) - 1)
 
 
 def get_evaluation(session: Session, *, evaluation_id: int) -> Evaluation:

@@ -41,13 +41,8 @@ def _job_dict(session, job: Job) -> dict[str, Any]:
     n_done = storage.count_evaluations(session, job_id=job.id)
     iterations = job.spec["iterations"]
     best = storage.best_evaluation(session, job_id=job.id)
-    eta = None
-    if job.status == "running" and n_done > 0 and job.started_at is not None:
-        from driftlab.db.models import utcnow
-
-        started = job.started_at.replace(tzinfo=UTC) if job.started_at.tzinfo is None else job.started_at
-        elapsed = (utcnow() - started).total_seconds()
-        eta = elapsed / n_done * (iterations - n_done)
+    rate = storage.seconds_per_evaluation(session, job_id=job.id) if job.status == "running" else None
+    eta = None if rate is None else rate * (iterations - n_done)
     return {"id": job.id, "name": job.name, "status": job.status, "seed": job.seed, "n_done": n_done,
             "iterations": iterations, "progress": n_done / iterations, "eta_s": eta, "error": job.error,
             "best": None if best is None else {"evaluation_id": best.id, "index": best.index, "theta": best.theta,

@@ -16,6 +16,7 @@ from sqlalchemy.orm import Session, sessionmaker
 from driftlab.core.optimizer import BayesianOptimizer
 from driftlab.core.tuning import TuningSpec
 from driftlab.db import storage
+from driftlab.db.models import utcnow
 from driftlab.worker.executor import EpisodeExecutor, EpisodeOutcome
 
 
@@ -55,7 +56,7 @@ def run_job(factory: sessionmaker[Session], job_id: int, executor: EpisodeExecut
         history = [(e.theta, e.J if e.completed else None) for e in stored]
         best = min((e.J for e in stored if e.completed), default=None)
         job.status = "running"
-        job.started_at = job.started_at or storage.utcnow()
+        job.started_at = job.started_at or utcnow()
     optimizer = restore_optimizer(spec, history)
     config_doc = spec.to_dict()["config"]
     n_done = len(history)

@@ -20,9 +20,27 @@ from driftlab.core.tuning import TuningSpec
 from driftlab.db import storage
 from driftlab.db.models import Evaluation, Job
 from driftlab.server.schemas import JobCreate
+from driftlab.server.view import RecordingCache, add_view_routes
 from driftlab.server.worker import JobWorker
+from driftlab.web.dashboard import Dashboard
+from driftlab.worker.executor import LocalProcessExecutor
 
 MAX_PAGE = 1000
+LANDING_PAGE = """<!doctype html><html><head><meta charset="utf-8"><title>DriftLab</title>
+<style>body{font:16px/1.5 system-ui,sans-serif;max-width:44em;margin:3em auto;padding:0 1em;color:#222}
+a{color:#1c5fd1}code{background:#f2f2f2;padding:0 .3em}</style></head><body>
+<h1>DriftLab</h1>
+<p>Learning-based inertia drift: a car drifts a figure 8 under linear MPC while Bayesian optimization learns
+where to flick and how to steer.</p>
+<ul>
+<li><a href="/viser/"><b>Open the 3D view</b></a>: the car driving the newest evaluation of a job, the convergence
+plot, rewatching any episode, what-if sliders.</li>
+<li><a href="/docs">REST API docs</a>: start, pause and resume tuning jobs; download trajectories.</li>
+<li><a href="/api/jobs">Jobs (JSON)</a></li>
+</ul>
+<p>Start a job: <code>curl -X POST localhost:8000/api/jobs -H 'content-type: application/json'
+-d '{"iterations": 100}'</code></p>
+</body></html>"""
 
 
 def _require_token(authorization: str | None = Header(default=None)) -> None:
@@ -50,22 +68,41 @@ def _job_dict(session, job: Job) -> dict[str, Any]:
             "spec": job.spec, "created_at": job.created_at.replace(tzinfo=UTC).isoformat()}
 
 
+def _start_view(app: FastAPI, factory) -> None:
+    """The 3D view and its what-if worker (a process of its own, so a what-if never waits behind a job)."""
+    executor = LocalProcessExecutor(1)
+    executor.warm_up()
+    app.state.what_if_executor = executor
+    app.state.dashboard = Dashboard(factory, run_episode=executor.submit)
+
+
+def _stop_view(app: FastAPI) -> None:
+    app.state.dashboard.stop()
+    app.state.recordings.recorder.stop()
+    app.state.what_if_executor.shutdown()
+
+
 def create_app(db_url: str, *, workers: int = 2, start_worker: bool = True) -> FastAPI:
     factory = storage.open_database(db_url)
     worker = JobWorker(factory, workers=workers)
 
     @asynccontextmanager
-    async def lifespan(_app: FastAPI):
+    async def lifespan(app: FastAPI):
+        _start_view(app, factory)
         if start_worker:
             worker.start()
         yield
         if start_worker:
             worker.stop()
+        _stop_view(app)
 
     app = FastAPI(title="DriftLab", version="0.1.0", lifespan=lifespan,
                   description="Learning-based inertia drift: tuning jobs, evaluations, trajectories.")
     app.state.factory = factory
     app.state.worker = worker
+    app.state.recordings = RecordingCache(factory)
+    add_view_routes(app, lambda: app.state.dashboard.port if hasattr(app.state, "dashboard") else None,
+                    app.state.recordings)
 
     @app.exception_handler(RequestValidationError)
     async def _validation(_request: Request, exc: RequestValidationError):
@@ -84,9 +121,7 @@ def create_app(db_url: str, *, workers: int = 2, start_worker: bool = True) -> F
 
     @app.get("/", response_class=HTMLResponse, include_in_schema=False)
     def landing() -> str:
-        return ("<html><head><title>DriftLab</title></head><body><h1>DriftLab</h1><ul>"
-                "<li><a href='/docs'>REST API docs</a></li><li><a href='/api/jobs'>jobs (JSON)</a></li>"
-                "</ul></body></html>")
+        return LANDING_PAGE
 
     @app.get("/api/health")
     def health() -> dict[str, str]:

@@ -60,11 +60,18 @@ class LocalProcessExecutor:
 
     def __init__(self, workers: int = 1) -> None:
         os.environ.setdefault("OMP_NUM_THREADS", "1")
+        self.workers = workers
         self.pool = ProcessPoolExecutor(max_workers=workers, mp_context=multiprocessing.get_context("spawn"),
                                         initializer=_init_worker)
 
     def submit(self, theta: dict[str, float], config_doc: dict[str, Any]) -> Future[EpisodeOutcome]:
         return self.pool.submit(evaluate_episode, theta, config_doc)
+
+    def warm_up(self) -> Future[EpisodeOutcome]:
+        """Start the workers and load the compiled dynamics now, so the first real episode is not slow."""
+        futures = [self.pool.submit(evaluate_episode, {}, {"scenario": {"max_time_s": 1.0}})
+                   for _ in range(self.workers)]
+        return futures[-1]
 
     def shutdown(self) -> None:
         self.pool.shutdown(wait=True, cancel_futures=True)

@@ -2,35 +2,14 @@
 
 import csv
 import io
-import os
-import socket
-import subprocess
-import sys
 import time
 
 import httpx
 import pytest
 
-
-def _free_port() -> int:
-    with socket.socket() as s:
-        s.bind(("127.0.0.1", 0))
-        return s.getsockname()[1]
-
-
-def _start(db_path, port, env_extra=None):
-    env = {**os.environ, "OMP_NUM_THREADS": "1", **(env_extra or {})}
-    proc = subprocess.Popen([sys.executable, "-m", "driftlab.cli", "serve", "--port", str(port), "--db", str(db_path)],
-                            env=env, stdout=subprocess.DEVNULL, stderr=subprocess.PIPE)
-    url = f"http://127.0.0.1:{port}"
-    for _ in range(150):
-        try:
-            if httpx.get(f"{url}/api/health", timeout=1).json() == {"status": "ok"}:
-                return proc, url
-        except httpx.HTTPError:
-            time.sleep(0.1)
-    proc.kill()
-    raise RuntimeError(proc.stderr.read().decode())
+from tests.server_process import free_port as _free_port
+from tests.server_process import start_server as _start
+from tests.server_process import wait_status as _wait_status
 
 
 @pytest.fixture(scope="module")
@@ -40,16 +19,6 @@ def server(tmp_path_factory):
     yield url, db
     proc.terminate()
     proc.wait(timeout=30)
-
-
-def _wait_status(url, job_id, statuses, timeout_s=120):
-    deadline = time.time() + timeout_s
-    while time.time() < deadline:
-        job = httpx.get(f"{url}/api/jobs/{job_id}").json()
-        if job["status"] in statuses:
-            return job
-        time.sleep(0.2)
-    raise AssertionError(f"job {job_id} stuck in {job['status']}")
 
 
 def test_a_small_job_runs_to_the_end(server):

@@ -1,0 +1,129 @@
+"""The 3D view on the API's port: viser's client page at ``/viser/``, its websocket relayed to the viser
+server on a loopback port, and episode recordings as downloads.
+
+viser 1.1 rejects a websocket without its subprotocol (``viser-v<version>``), so the relay accepts with the
+browser's subprotocol and passes the same one upstream.
+"""
+
+from __future__ import annotations
+
+import asyncio
+import gzip
+from collections import OrderedDict
+from collections.abc import Callable
+from pathlib import Path
+
+import viser
+import websockets
+from fastapi import FastAPI, Request, WebSocket, WebSocketDisconnect
+from fastapi.responses import HTMLResponse, RedirectResponse, Response
+from sqlalchemy.orm import Session, sessionmaker
+
+from driftlab.db import storage
+from driftlab.web.recording import EpisodeRecorder
+from driftlab.web.sources import frames_of_evaluation, track_of_spec
+
+CLIENT_PAGE = Path(viser.__file__).parent / "client" / "build" / "index.html"
+MAX_MESSAGE_BYTES = 50 * 1024 * 1024  # viser's own limit
+
+
+class RecordingCache:
+    """Recordings by (evaluation id, kind): a stored evaluation never changes, so neither does its recording."""
+
+    def __init__(self, factory: sessionmaker[Session], size: int = 16) -> None:
+        self.factory = factory
+        self.recorder = EpisodeRecorder()
+        self.size = size
+        self._cache: OrderedDict[tuple[int, str], bytes] = OrderedDict()
+
+    def get(self, evaluation_id: int, kind: str) -> bytes:
+        key = (evaluation_id, kind)
+        if key not in self._cache:
+            frames = frames_of_evaluation(self.factory, evaluation_id)
+            with storage.transaction(self.factory) as session:
+                job_id = storage.get_evaluation(session, evaluation_id=evaluation_id).job_id
+                track = track_of_spec(storage.get_job(session, job_id=job_id).spec)
+            if kind == "viser":
+                data = self.recorder.viser_file(frames, track)
+            else:
+                data = self.recorder.html(frames, track).encode()
+            self._cache[key] = data
+            while len(self._cache) > self.size:
+                self._cache.popitem(last=False)
+        self._cache.move_to_end(key)
+        return self._cache[key]
+
+
+def add_view_routes(app: FastAPI, upstream_port: Callable[[], int | None], recordings: RecordingCache) -> None:
+    page = CLIENT_PAGE.read_bytes()
+    page_gzip = gzip.compress(page)
+
+    @app.get("/viser", include_in_schema=False)
+    def view_redirect(request: Request) -> RedirectResponse:
+        query = f"?{request.url.query}" if request.url.query else ""
+        return RedirectResponse(f"/viser/{query}")
+
+    @app.get("/viser/", include_in_schema=False)
+    def view_page(request: Request) -> Response:
+        if "gzip" in request.headers.get("accept-encoding", ""):
+            return Response(page_gzip, media_type="text/html", headers={"Content-Encoding": "gzip"})
+        return HTMLResponse(page)
+
+    @app.websocket("/viser")
+    async def view_socket(websocket: WebSocket) -> None:
+        await relay(websocket, upstream_port())
+
+    @app.get("/api/evaluations/{evaluation_id}/recording.viser", tags=["view"])
+    def recording(evaluation_id: int) -> Response:
+        """The episode as a viser recording: open it with ``/viser/?playbackPath=<this URL>``."""
+        return Response(recordings.get(evaluation_id, "viser"), media_type="application/octet-stream",
+                        headers={"Content-Disposition": f'attachment; filename="evaluation-{evaluation_id}.viser"'})
+
+    @app.get("/api/evaluations/{evaluation_id}/replay.html", tags=["view"])
+    def replay(evaluation_id: int) -> Response:
+        """A standalone HTML page that replays the episode with no server."""
+        return Response(recordings.get(evaluation_id, "html"), media_type="text/html",
+                        headers={"Content-Disposition": f'attachment; filename="evaluation-{evaluation_id}.html"'})
+
+
+async def relay(websocket: WebSocket, port: int | None) -> None:
+    offered = websocket.scope.get("subprotocols") or []
+    subprotocol = next((p for p in offered if p.startswith("viser-v")), None)
+    if subprotocol is None or port is None:
+        await websocket.close(code=1002 if subprotocol is None else 1013)
+        return
+    async with websockets.connect(f"ws://127.0.0.1:{port}", subprotocols=[subprotocol],
+                                  max_size=MAX_MESSAGE_BYTES, compression=None) as upstream:
+        await websocket.accept(subprotocol=subprotocol)
+        tasks = [asyncio.create_task(_browser_to_viser(websocket, upstream)),
+                 asyncio.create_task(_viser_to_browser(upstream, websocket))]
+        _, pending = await asyncio.wait(tasks, return_when=asyncio.FIRST_COMPLETED)
+        for task in pending:
+            task.cancel()
+    try:
+        await websocket.close()
+    except (RuntimeError, WebSocketDisconnect):  # already closed by the browser
+        pass
+
+
+async def _browser_to_viser(websocket: WebSocket, upstream) -> None:
+    try:
+        while True:
+            message = await websocket.receive()
+            if message["type"] == "websocket.disconnect":
+                return
+            data = message.get("bytes")
+            await upstream.send(data if data is not None else message.get("text", ""))
+    except (WebSocketDisconnect, websockets.ConnectionClosed):
+        return
+
+
+async def _viser_to_browser(upstream, websocket: WebSocket) -> None:
+    try:
+        async for data in upstream:
+            if isinstance(data, bytes):
+                await websocket.send_bytes(data)
+            else:
+                await websocket.send_text(data)
+    except (WebSocketDisconnect, websockets.ConnectionClosed, RuntimeError):
+        return

@@ -1,0 +1,180 @@
+"""The viser app behind ``/viser/``: one :class:`ClientSession` per browser tab, a poller that reads new
+evaluations from storage, and the what-if runner that sends single episodes to a worker process.
+
+The dashboard draws what it is given: stored trajectories, or episodes a worker ran. It runs no physics.
+"""
+
+from __future__ import annotations
+
+import threading
+import time
+from collections import OrderedDict
+from collections.abc import Callable
+from concurrent.futures import Future
+from typing import Any
+
+import viser
+from sqlalchemy.orm import Session, sessionmaker
+
+from driftlab.core.config import apply_overrides, config_from_dict, config_to_dict
+from driftlab.core.errors import ConfigError
+from driftlab.db import storage
+from driftlab.web.frames import EpisodeFrames
+from driftlab.web.session import ClientSession
+from driftlab.web.sources import JobHistory, frames_of_evaluation, frames_of_outcome
+
+# run_episode(theta, config_doc) -> Future of an EpisodeOutcome (see driftlab.worker.executor).
+EpisodeRunner = Callable[[dict[str, float], dict[str, Any]], Future]
+
+
+class WhatIfRunner:
+    """Runs one episode per tab at a time; while one runs, only the newest request of that tab is kept."""
+
+    def __init__(self, run_episode: EpisodeRunner | None) -> None:
+        self.run_episode = run_episode
+        self._lock = threading.Lock()
+        self._busy: set[int] = set()
+        self._waiting: dict[int, tuple[ClientSession, dict, dict, dict]] = {}
+
+    def request(self, session: ClientSession, theta: dict[str, float], config_doc: dict[str, Any],
+                plant_overrides: dict[str, float]) -> None:
+        if self.run_episode is None:
+            session.on_what_if_result(None, "what-if needs a worker (the server was started without one)", 0.0)
+            return
+        key = session.client.client_id
+        with self._lock:
+            if key in self._busy:
+                self._waiting[key] = (session, theta, config_doc, plant_overrides)
+                return
+            self._busy.add(key)
+        self._submit(session, theta, config_doc, plant_overrides)
+
+    def _submit(self, session: ClientSession, theta: dict, config_doc: dict, overrides: dict) -> None:
+        try:
+            config = apply_overrides(config_from_dict(config_doc), overrides)
+            future = self.run_episode(theta, config_to_dict(config))
+        except (ConfigError, ValueError) as exc:
+            session.on_what_if_result(None, str(exc), 0.0)
+            self._next(session)
+            return
+        future.add_done_callback(lambda f: self._done(session, f))
+
+    def _done(self, session: ClientSession, future: Future) -> None:
+        try:
+            outcome = future.result()
+            session.on_what_if_result(frames_of_outcome(outcome), None, outcome.wall_ms)
+        except Exception as exc:  # a dead worker process is a message in the panel, not a dead view
+            session.on_what_if_result(None, f"{type(exc).__name__}: {exc}", 0.0)
+        finally:
+            self._next(session)
+
+    def _next(self, session: ClientSession) -> None:
+        key = session.client.client_id
+        with self._lock:
+            waiting = self._waiting.pop(key, None)
+            if waiting is None:
+                self._busy.discard(key)
+                return
+        self._submit(*waiting)
+
+
+class Dashboard:
+    def __init__(self, factory: sessionmaker[Session], *, run_episode: EpisodeRunner | None = None,
+                 host: str = "127.0.0.1", port: int = 0, poll_s: float = 0.5) -> None:
+        self.factory = factory
+        self.poll_s = poll_s
+        self.what_if = WhatIfRunner(run_episode)
+        self.sessions: dict[int, ClientSession] = {}
+        self._histories: dict[int, JobHistory] = {}
+        self._jobs: list[tuple[int, str, str]] = []
+        self._frames_cache: OrderedDict[int, EpisodeFrames] = OrderedDict()
+        self._lock = threading.RLock()
+        self._stop = threading.Event()
+        self.server = viser.ViserServer(host=host, port=port, label="DriftLab", verbose=False)
+        self.server.on_client_connect(self._on_connect)
+        self.server.on_client_disconnect(self._on_disconnect)
+        self._poller = threading.Thread(target=self._poll_loop, name="driftlab-view-poller", daemon=True)
+        self._poller.start()
+
+    @property
+    def port(self) -> int:
+        return self.server.get_port()
+
+    def stop(self) -> None:
+        self._stop.set()
+        for session in list(self.sessions.values()):
+            session.close()
+        self.server.stop()
+
+    # ----- data for sessions -------------------------------------------------------------------------------
+    def history(self, job_id: int) -> JobHistory:
+        with self._lock:
+            if job_id not in self._histories:
+                history = JobHistory(job_id)
+                history.refresh(self.factory)
+                self._histories[job_id] = history
+            return self._histories[job_id]
+
+    def frames(self, evaluation_id: int) -> EpisodeFrames:
+        """A stored episode, from a small cache (tabs following one job load the same episodes)."""
+        with self._lock:
+            if evaluation_id in self._frames_cache:
+                self._frames_cache.move_to_end(evaluation_id)
+                return self._frames_cache[evaluation_id]
+        frames = frames_of_evaluation(self.factory, evaluation_id)
+        with self._lock:
+            self._frames_cache[evaluation_id] = frames
+            while len(self._frames_cache) > 32:
+                self._frames_cache.popitem(last=False)
+        return frames
+
+    # ----- clients -----------------------------------------------------------------------------------------
+    def _on_connect(self, client: viser.ClientHandle) -> None:
+        session = ClientSession(client, self)
+        with self._lock:
+            self.sessions[client.client_id] = session
+            jobs = list(self._jobs)
+        session.set_job_options(jobs if jobs else self._read_jobs())
+
+    def _on_disconnect(self, client: viser.ClientHandle) -> None:
+        with self._lock:
+            session = self.sessions.pop(client.client_id, None)
+        if session is not None:
+            session.close()
+
+    # ----- polling storage -----------------------------------------------------------------------------------
+    def _read_jobs(self) -> list[tuple[int, str, str]]:
+        with storage.transaction(self.factory) as session:
+            return [(j.id, j.name, j.status) for j in storage.list_jobs(session)]
+
+    def _poll_loop(self) -> None:
+        while not self._stop.wait(self.poll_s):
+            try:
+                self.poll_once()
+            except Exception as exc:  # storage busy or a tab closing mid-update: try again next round
+                print(f"driftlab view: poll failed: {type(exc).__name__}: {exc}", flush=True)
+
+    def poll_once(self) -> None:
+        jobs = self._read_jobs()
+        with self._lock:
+            jobs_changed = jobs != self._jobs
+            self._jobs = jobs
+            sessions = list(self.sessions.values())
+            watched = {s.history.job_id for s in sessions if s.history is not None}
+        changed = [self.history(job_id) for job_id in watched if self.history(job_id).refresh(self.factory)]
+        for session in sessions:
+            if jobs_changed:
+                session.set_job_options(jobs)
+            for history in changed:
+                session.on_history(history)
+
+
+def wait_for_port(dashboard: Dashboard, timeout_s: float = 10.0) -> int:
+    """viser binds in a background thread; its port is known once it listens."""
+    deadline = time.monotonic() + timeout_s
+    while time.monotonic() < deadline:
+        port = dashboard.port
+        if port:
+            return port
+        time.sleep(0.02)
+    raise RuntimeError("the viser server did not start listening")

@@ -1,0 +1,79 @@
+"""Stored episodes prepared for drawing: columns by name and frame lookup by time.
+
+Only look-ups and colour maps live here; every number drawn comes from a trajectory the worker computed.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+from typing import Any
+
+import numpy as np
+
+from driftlab.core.planner import Phase
+
+# Sideslip colour map: beta < 0 (the drifts on the left, counter-clockwise circle) blue, grip grey,
+# beta > 0 (the right, clockwise circle) red; saturated at |beta| = 0.4 rad, the paper's drift sideslip.
+_SIDESLIP_ANCHORS_RAD = np.array([-0.4, 0.0, 0.4])
+_SIDESLIP_COLORS_RGB = np.array([[20, 90, 230], [150, 150, 150], [225, 30, 30]], dtype=float)
+
+
+def sideslip_colors(sideslip_rad: np.ndarray) -> np.ndarray:
+    """RGB in [0, 255] (uint8) for each sideslip angle."""
+    beta = np.asarray(sideslip_rad, dtype=float)
+    channels = [np.interp(beta, _SIDESLIP_ANCHORS_RAD, _SIDESLIP_COLORS_RGB[:, i]) for i in range(3)]
+    return np.stack(channels, axis=-1).astype(np.uint8)
+
+
+@dataclass(frozen=True)
+class EpisodeFrames:
+    """One episode's trajectory rows (at the controller rate) with what the view labels it with."""
+
+    columns: tuple[str, ...]
+    rows: np.ndarray
+    trigger_points: tuple[dict[str, Any], ...] = ()
+    evaluation_id: int | None = None
+    index: int | None = None
+    theta: dict[str, float] = field(default_factory=dict)
+    status: str = ""
+    J: float = float("nan")
+
+    def __post_init__(self) -> None:
+        if self.rows.ndim != 2 or self.rows.shape[1] != len(self.columns):
+            raise ValueError(f"rows must be (n, {len(self.columns)}), got {self.rows.shape}")
+
+    def column(self, name: str) -> np.ndarray:
+        return self.rows[:, self.columns.index(name)]
+
+    @property
+    def n_frames(self) -> int:
+        return self.rows.shape[0]
+
+    @property
+    def duration_s(self) -> float:
+        return float(self.column("t_s")[-1]) if self.n_frames else 0.0
+
+    def index_at(self, t_s: float) -> int:
+        """The last row at or before ``t_s`` (clamped to the episode)."""
+        if self.n_frames == 0:
+            raise ValueError("an empty trajectory has no frames")
+        i = int(np.searchsorted(self.column("t_s"), t_s, side="right")) - 1
+        return min(max(i, 0), self.n_frames - 1)
+
+    def pose_at(self, i: int) -> tuple[float, float, float, float]:
+        """(x [m], y [m], psi [rad], applied steering [rad]) of row i."""
+        row = self.rows[i]
+        c = self.columns.index
+        return (float(row[c("x_m")]), float(row[c("y_m")]), float(row[c("psi_rad")]), float(row[c("delta_rad")]))
+
+    def tracked_circle_at(self, i: int) -> int:
+        """The circle tracked in row i: LEFT (+1) or RIGHT (-1), from the planner's phase."""
+        return Phase(int(self.rows[i, self.columns.index("phase")])).direction
+
+    def triggers_before(self, t_s: float) -> list[dict[str, Any]]:
+        return [p for p in self.trigger_points if p["t_s"] <= t_s]
+
+    def caption(self) -> str:
+        theta = ", ".join(f"{k} {v:+.4f}" for k, v in self.theta.items())
+        which = f"#{self.index}" if self.index is not None else "what-if"
+        return f"{which} {self.status} J {self.J:.3f} | {theta}"

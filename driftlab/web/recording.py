@@ -1,0 +1,58 @@
+"""Episodes as viser recordings: a ``.viser`` file for ``/viser/?playbackPath=`` and a standalone HTML replay.
+
+Recorded on a private viser server (port 0, loopback) so that live viewers never see a recording being
+made. A 30 s episode at 30 frames per second records in a fraction of a second.
+"""
+
+from __future__ import annotations
+
+import threading
+
+import viser
+
+from driftlab.core.track import FigureEight
+from driftlab.web.frames import EpisodeFrames
+from driftlab.web.player import EpisodePlayer
+from driftlab.web.scene import set_overview_camera
+
+RECORDING_FPS = 30.0
+
+
+class EpisodeRecorder:
+    def __init__(self, fps: float = RECORDING_FPS) -> None:
+        self.fps = fps
+        self._server: viser.ViserServer | None = None
+        self._lock = threading.Lock()
+
+    def _fresh_scene(self) -> viser.SceneApi:
+        if self._server is None:
+            self._server = viser.ViserServer(host="127.0.0.1", port=0, verbose=False)
+            set_overview_camera(self._server.initial_camera)
+        self._server.scene.reset()
+        return self._server.scene
+
+    def _record(self, frames: EpisodeFrames, track: FigureEight) -> viser.infra.StateSerializer:
+        scene = self._fresh_scene()
+        scene.set_up_direction("+z")
+        player = EpisodePlayer(scene, track)
+        serializer = self._server.get_scene_serializer()
+        player.load(frames)
+        step_s = 1.0 / self.fps
+        n_steps = int(frames.duration_s * self.fps) + 1
+        for k in range(n_steps + 1):
+            player.seek(min(k * step_s, frames.duration_s))
+            serializer.insert_sleep(step_s)
+        return serializer
+
+    def viser_file(self, frames: EpisodeFrames, track: FigureEight) -> bytes:
+        with self._lock:
+            return self._record(frames, track).serialize()
+
+    def html(self, frames: EpisodeFrames, track: FigureEight) -> str:
+        with self._lock:
+            return self._record(frames, track).as_html()
+
+    def stop(self) -> None:
+        if self._server is not None:
+            self._server.stop()
+            self._server = None

@@ -1,0 +1,175 @@
+"""What the 3D scene is made of: the figure-8, the car, its trail and the trigger markers.
+
+Every function takes a viser ``SceneApi`` (a server's shared scene, one client's scene, or a recording
+server's), so the live view and the ``.viser`` recordings draw the same things. World frame: x, y on the
+ground as in :mod:`driftlab.core.track`, z up, metres.
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Iterable
+
+import numpy as np
+import viser
+
+from driftlab.core.track import LEFT, RIGHT, Circle, FigureEight
+from driftlab.web.frames import EpisodeFrames, sideslip_colors
+
+TRACK_Z_M = 0.02  # lines just above the ground plane, so they never z-fight with it
+ROAD_HALF_WIDTH_M = 3.0
+_CIRCLE_SEGMENTS = 240  # smooth at any zoom: 1.15 m chords on a 44 m circle
+
+
+def yaw_wxyz(yaw_rad: float) -> tuple[float, float, float, float]:
+    """Quaternion (w, x, y, z) of a rotation by ``yaw_rad`` about +z."""
+    return (math.cos(0.5 * yaw_rad), 0.0, 0.0, math.sin(0.5 * yaw_rad))
+
+
+def _polyline_segments(points_xy: np.ndarray, z_m: float) -> np.ndarray:
+    """(n, 2) points -> (n - 1, 2, 3) line segments joining consecutive points."""
+    xyz = np.column_stack([points_xy, np.full(len(points_xy), z_m)])
+    return np.stack([xyz[:-1], xyz[1:]], axis=1)
+
+
+def circle_points(circle: Circle, radius_offset_m: float = 0.0, n: int = _CIRCLE_SEGMENTS) -> np.ndarray:
+    """(n + 1, 2) closed polyline of a circle, optionally offset outwards."""
+    phi = np.linspace(0.0, 2.0 * math.pi, n + 1)
+    radius = circle.radius_m + radius_offset_m
+    return np.column_stack([circle.center_x_m + radius * np.cos(phi), circle.center_y_m + radius * np.sin(phi)])
+
+
+def set_overview_camera(camera) -> None:
+    """Point a camera (a client's, or a server's initial camera) at the whole 8 from above one side."""
+    # From -x: the left circle (y > 0) is on the left of the screen, as a driver at P0 would name it.
+    camera.position = (-105.0, -25.0, 85.0)
+    camera.look_at = (0.0, -25.0, 0.0)  # aimed right of the 8's centre so the 8 sits left of the control panel
+
+
+def draw_track(scene: viser.SceneApi, track: FigureEight) -> dict[int, viser.LineSegmentsHandle]:
+    """Ground, both circles with road edges, P0; returns the highlight of each circle (LEFT/RIGHT), hidden."""
+    extent_x = 2.0 * max(track.left_radius_m, track.right_radius_m) + 40.0
+    extent_y = 2.0 * (track.left_radius_m + track.right_radius_m) + 40.0
+    scene.add_grid("/ground", width=extent_x, height=extent_y, plane="xy", cell_size=5.0, section_size=25.0,
+                   plane_color=(236, 238, 232), plane_opacity=1.0, position=(0.0, 0.5 * (track.left_radius_m
+                   - track.right_radius_m), 0.0), fade_distance=600.0)
+    highlights = {}
+    for direction, name in ((LEFT, "left"), (RIGHT, "right")):
+        circle = track.circle(direction)
+        scene.add_line_segments(f"/track/{name}/centre", _polyline_segments(circle_points(circle), TRACK_Z_M),
+                                colors=(90, 90, 90), thickness=0.15)
+        for side, offset in (("outer", ROAD_HALF_WIDTH_M), ("inner", -ROAD_HALF_WIDTH_M)):
+            scene.add_line_segments(f"/track/{name}/{side}",
+                                    _polyline_segments(circle_points(circle, offset), TRACK_Z_M),
+                                    colors=(160, 160, 150), thickness=0.08)
+        highlights[direction] = scene.add_line_segments(
+            f"/track/{name}/tracked", _polyline_segments(circle_points(circle), 2.0 * TRACK_Z_M),
+            colors=(255, 214, 140), thickness=2.5, visible=False)
+    scene.add_cylinder("/track/p0/post", radius=0.25, height=3.0, color=(20, 20, 20), position=(0.0, 0.0, 1.5))
+    scene.add_label("/track/p0/label", "P0", position=(0.0, 0.0, 3.5), font_screen_scale=1.2)
+    return highlights
+
+
+class CarModel:
+    """A body and four wheels; the front wheels turn with the applied steering angle."""
+
+    WHEEL_RADIUS_M = 0.33
+    TRACK_HALF_WIDTH_M = 0.80
+
+    def __init__(self, scene: viser.SceneApi, name: str, *, cg_to_front_m: float = 1.39,
+                 cg_to_rear_m: float = 1.0, color=(220, 40, 40), opacity: float | None = None) -> None:
+        self.root = scene.add_frame(f"/{name}", show_axes=False)
+        length = cg_to_front_m + cg_to_rear_m + 1.9  # overhangs of a saloon
+        body_centre_x = 0.5 * (cg_to_front_m - cg_to_rear_m)
+        scene.add_box(f"/{name}/body", color=color, dimensions=(length, 1.8, 0.6), opacity=opacity,
+                      position=(body_centre_x, 0.0, 0.6))
+        scene.add_box(f"/{name}/cabin", color=(40, 40, 50), dimensions=(0.5 * length, 1.55, 0.5), opacity=opacity,
+                      position=(body_centre_x - 0.2, 0.0, 1.1))
+        axle_turn = (math.cos(math.pi / 4), math.sin(math.pi / 4), 0.0, 0.0)  # cylinder axis z -> car's y
+        self.front_wheels = []
+        for label, x_m, y_m in (("fl", cg_to_front_m, self.TRACK_HALF_WIDTH_M),
+                                ("fr", cg_to_front_m, -self.TRACK_HALF_WIDTH_M),
+                                ("rl", -cg_to_rear_m, self.TRACK_HALF_WIDTH_M),
+                                ("rr", -cg_to_rear_m, -self.TRACK_HALF_WIDTH_M)):
+            hub = scene.add_frame(f"/{name}/{label}", show_axes=False, position=(x_m, y_m, self.WHEEL_RADIUS_M))
+            scene.add_cylinder(f"/{name}/{label}/tyre", radius=self.WHEEL_RADIUS_M, height=0.25,
+                               color=(25, 25, 25), wxyz=axle_turn, opacity=opacity)
+            if label.startswith("f"):
+                self.front_wheels.append(hub)
+
+    def set_pose(self, x_m: float, y_m: float, psi_rad: float, steer_rad: float) -> None:
+        self.root.position = (x_m, y_m, 0.0)
+        self.root.wxyz = yaw_wxyz(psi_rad)
+        for hub in self.front_wheels:
+            hub.wxyz = yaw_wxyz(steer_rad)
+
+    @property
+    def visible(self) -> bool:
+        return self.root.visible
+
+    @visible.setter
+    def visible(self, value: bool) -> None:
+        self.root.visible = value
+
+
+class Trail:
+    """The path driven so far, coloured by sideslip, sent in chunks so a frame never resends the whole path."""
+
+    def __init__(self, scene: viser.SceneApi, name: str, *, chunk_rows: int = 15, thickness_m: float = 0.8) -> None:
+        self.scene = scene
+        self.name = name
+        self.chunk_rows = chunk_rows
+        self.thickness_m = thickness_m
+        self._chunks: list[viser.LineSegmentsHandle] = []
+        self._drawn_until = 0
+
+    def clear(self) -> None:
+        for handle in self._chunks:
+            handle.remove()
+        self._chunks.clear()
+        self._drawn_until = 0
+
+    def advance(self, frames: EpisodeFrames, i: int, *, force: bool = False) -> None:
+        """Draw rows up to i; a chunk goes out once ``chunk_rows`` rows are waiting (or when forced)."""
+        if i < self._drawn_until:
+            self.clear()
+        if i - self._drawn_until < (1 if force else self.chunk_rows):
+            return
+        lo = max(self._drawn_until - 1, 0)
+        xy = np.column_stack([frames.column("x_m")[lo:i + 1], frames.column("y_m")[lo:i + 1]])
+        if len(xy) >= 2:
+            segments = _polyline_segments(xy, 3.0 * TRACK_Z_M)
+            colors = sideslip_colors(frames.column("beta_rad")[lo:i])
+            self._chunks.append(self.scene.add_line_segments(
+                f"/{self.name}/{len(self._chunks)}", segments, colors=np.repeat(colors[:, None, :], 2, axis=1),
+                thickness=self.thickness_m))
+        self._drawn_until = i
+
+
+class TriggerMarkers:
+    """A post and a label where the planner switched sides, added as playback passes them."""
+
+    def __init__(self, scene: viser.SceneApi, name: str = "triggers") -> None:
+        self.scene = scene
+        self.name = name
+        self._shown: list[tuple[viser.SceneNodeHandle, ...]] = []
+
+    def clear(self) -> None:
+        for handles in self._shown:
+            for handle in handles:
+                handle.remove()
+        self._shown.clear()
+
+    def show(self, points: Iterable[dict]) -> None:
+        """Show ``points`` (the trigger events passed so far, in order); only new ones are sent."""
+        points = list(points)
+        if len(points) < len(self._shown):
+            self.clear()
+        for k in range(len(self._shown), len(points)):
+            p = points[k]
+            base = f"/{self.name}/{k}"
+            post = self.scene.add_cylinder(f"{base}/post", radius=0.35, height=4.0, color=(255, 190, 0),
+                                           position=(p["x_m"], p["y_m"], 2.0))
+            label = self.scene.add_label(f"{base}/label", f"trigger {k + 1}  t {p['t_s']:.2f} s",
+                                         position=(p["x_m"], p["y_m"], 9.0))
+            self._shown.append((post, label))

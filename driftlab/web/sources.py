@@ -1,0 +1,87 @@
+"""Where the view's data comes from: stored evaluations (by job) and episodes the worker just ran."""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+from typing import Any
+
+import numpy as np
+from sqlalchemy.orm import Session, sessionmaker
+
+from driftlab.core.track import FigureEight
+from driftlab.db import storage
+from driftlab.db.models import Evaluation
+from driftlab.web.frames import EpisodeFrames
+
+
+def frames_of_evaluation(factory: sessionmaker[Session], evaluation_id: int) -> EpisodeFrames:
+    """A stored evaluation with its trajectory (raises storage.NotFound)."""
+    with storage.transaction(factory) as session:
+        e = storage.get_evaluation(session, evaluation_id=evaluation_id)
+        columns, rows = storage.trajectory_array(session, evaluation_id=evaluation_id)
+        return EpisodeFrames(tuple(columns), rows, tuple(e.trigger_points or ()), evaluation_id=e.id,
+                             index=e.index, theta=dict(e.theta), status=e.status, J=float(e.J))
+
+
+def frames_of_outcome(outcome: Any) -> EpisodeFrames:
+    """An episode the worker ran (an ``EpisodeOutcome``), not stored."""
+    return EpisodeFrames(tuple(outcome.columns), np.asarray(outcome.trajectory), tuple(outcome.trigger_points),
+                         theta=dict(outcome.theta), status=outcome.status, J=float(outcome.J))
+
+
+def track_of_spec(spec: dict[str, Any]) -> FigureEight:
+    scenario = spec.get("config", {}).get("scenario", {})
+    return FigureEight(scenario.get("left_radius_m", 44.0), scenario.get("right_radius_m", 44.0))
+
+
+@dataclass
+class JobHistory:
+    """The evaluations of one job as columns, grown by :meth:`refresh` (only new rows are read)."""
+
+    job_id: int
+    name: str = ""
+    status: str = ""
+    iterations: int = 0
+    spec: dict[str, Any] = field(default_factory=dict)
+    ids: list[int] = field(default_factory=list)
+    values: list[float] = field(default_factory=list)
+    completed: list[bool] = field(default_factory=list)
+    thetas: list[dict[str, float]] = field(default_factory=list)
+
+    def refresh(self, factory: sessionmaker[Session]) -> bool:
+        """Read job status and evaluations newer than the last one held; True if anything changed."""
+        with storage.transaction(factory) as session:
+            job = storage.get_job(session, job_id=self.job_id)
+            rows: list[Evaluation] = storage.evaluations(session, job_id=self.job_id, after=len(self.ids) - 1)
+            changed = bool(rows) or job.status != self.status
+            self.name, self.status, self.iterations, self.spec = job.name, job.status, job.spec["iterations"], job.spec
+            for e in rows:
+                self.ids.append(e.id)
+                self.values.append(float(e.J))
+                self.completed.append(bool(e.completed))
+                self.thetas.append(dict(e.theta))
+        return changed
+
+    @property
+    def n_done(self) -> int:
+        return len(self.ids)
+
+    def best_position(self) -> int | None:
+        """Position (= evaluation index) of the lowest J among completed evaluations."""
+        done = [i for i, ok in enumerate(self.completed) if ok]
+        return min(done, key=lambda i: self.values[i]) if done else None
+
+    def convergence(self) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+        """(index, J of completed or NaN, best-so-far J or NaN, failed marker or NaN).
+
+        Failed evaluations store a penalty, not a drift cost; they are marked at the top edge of the completed
+        values so they do not squash the scale.
+        """
+        index = np.arange(self.n_done, dtype=float)
+        values = np.array(self.values, dtype=float)
+        ok = np.array(self.completed, dtype=bool)
+        j_done = np.where(ok, values, np.nan)
+        best = np.fmin.accumulate(j_done) if len(j_done) else j_done
+        top = np.nanmax(j_done) if ok.any() else 0.0
+        failed = np.where(ok, np.nan, top)
+        return index, j_done, best, failed

@@ -1,0 +1,160 @@
+"""The 3D view in a real headless Chromium (Debian's package) against a real server and SQLite file."""
+
+import io
+import os
+import re
+import shutil
+import time
+
+import httpx
+import pytest
+from matplotlib import image as mpimg
+from playwright.sync_api import sync_playwright
+
+from tests.server_process import free_port, start_server
+
+CHROMIUM = os.environ.get("DRIFTLAB_CHROMIUM") or shutil.which("chromium") or "/usr/bin/chromium"
+# Software WebGL without a GPU (REFERENCE.md section 5); no background connections on a closed network.
+CHROMIUM_ARGS = ["--headless=new", "--no-sandbox", "--disable-gpu", "--use-angle=swiftshader",
+                 "--enable-unsafe-swiftshader", "--disable-background-networking", "--disable-component-update",
+                 "--disable-sync", "--no-first-run", "--disable-dev-shm-usage"]
+SCREENSHOT_DIR = os.environ.get("DRIFTLAB_SCREENSHOTS")  # set to keep the screenshots
+
+
+@pytest.fixture(scope="module")
+def server(tmp_path_factory):
+    db = tmp_path_factory.mktemp("view") / "driftlab.db"
+    proc, url = start_server(db, free_port())
+    yield url
+    proc.terminate()
+    proc.wait(timeout=30)
+
+
+@pytest.fixture(scope="module")
+def browser():
+    if not os.path.exists(CHROMIUM):
+        pytest.fail(f"no chromium at {CHROMIUM}: install Debian's package (apt-get install chromium) "
+                    "or set DRIFTLAB_CHROMIUM")
+    with sync_playwright() as p:
+        b = p.chromium.launch(executable_path=CHROMIUM, args=CHROMIUM_ARGS, headless=True)
+        yield b
+        b.close()
+
+
+class ConsoleLog:
+    """Console lines of a page; Playwright delivers them only while it runs, hence page.wait_for_timeout."""
+
+    def __init__(self, page):
+        self.page = page
+        self.lines: list[str] = []
+        page.on("console", lambda message: self.lines.append(message.text))
+
+    def wait_for(self, text, timeout_s=60.0):
+        deadline = time.time() + timeout_s
+        while time.time() < deadline:
+            if any(text in line for line in self.lines):
+                return next(line for line in self.lines if text in line)
+            self.page.wait_for_timeout(100)
+        raise AssertionError(f"console never printed {text!r}; it printed: {self.lines[-20:]}")
+
+
+def _open(browser, url, height=1000):
+    page = browser.new_page(viewport={"width": 1400, "height": height})
+    log = ConsoleLog(page)
+    page.goto(url)
+    return page, log
+
+
+def _screenshot_pixels(page, name):
+    png = page.screenshot()
+    if SCREENSHOT_DIR:
+        os.makedirs(SCREENSHOT_DIR, exist_ok=True)
+        with open(os.path.join(SCREENSHOT_DIR, name), "wb") as f:
+            f.write(png)
+    return mpimg.imread(io.BytesIO(png))[..., :3]
+
+
+def _wait_for_evaluations(url, job_id, n, timeout_s=120):
+    deadline = time.time() + timeout_s
+    while time.time() < deadline:
+        if httpx.get(f"{url}/api/jobs/{job_id}").json()["n_done"] >= n:
+            return
+        time.sleep(0.2)
+    raise AssertionError(f"job {job_id} has fewer than {n} evaluations after {timeout_s} s")
+
+
+@pytest.fixture(scope="module")
+def job(server):
+    r = httpx.post(f"{server}/api/jobs", json={"name": "view", "iterations": 16, "seed_points": 8})
+    assert r.status_code == 201, r.text
+    return r.json()
+
+
+def test_live_view_connects_and_shows_evaluations(server, browser, job):
+    page, log = _open(browser, f"{server}/viser/")
+    connected = log.wait_for("Connected!")
+    assert connected.endswith("/viser")  # the websocket went through the API's port, not viser's own
+    _wait_for_evaluations(server, job["id"], 3)
+    page.get_by_text("Live (follows the job)").wait_for(timeout=60_000)
+    status = page.get_by_text(re.compile(r"^view: (queued|running|finished), \d+ / 16 evaluations")).first
+    status.wait_for(timeout=60_000)
+    page.wait_for_timeout(2000)  # a couple of seconds of driving: trail and car on screen
+    pixels = _screenshot_pixels(page, "live.png")
+    scene = pixels[:, : int(pixels.shape[1] * 0.6)]  # the 3D canvas, left of the control panel
+    assert scene.std() > 0.05, "the 3D view looks blank"
+    # The trail is drawn in saturated blue or red (sideslip colours); grey ground and track are not.
+    saturation = scene.max(axis=-1) - scene.min(axis=-1)
+    assert (saturation > 0.4).mean() > 1e-4, "no sideslip-coloured trail in the view"
+    page.close()
+
+
+def test_two_tabs_at_once_each_get_their_own_view(server, browser, job):
+    pages = [_open(browser, f"{server}/viser/") for _ in range(2)]
+    for page, log in pages:
+        log.wait_for("Connected!")
+        page.get_by_text("Live (follows the job)").wait_for(timeout=60_000)
+    # Pausing one tab leaves the other playing.
+    pages[0][0].get_by_role("button", name="Pause").click()
+    pages[0][0].get_by_role("button", name="Play", exact=True).wait_for(timeout=10_000)
+    assert pages[1][0].get_by_role("button", name="Pause").is_visible()
+    for page, _ in pages:
+        page.close()
+
+
+def test_what_if_slider_replays_a_new_episode(server, browser, job):
+    _wait_for_evaluations(server, job["id"], 16)
+    page, log = _open(browser, f"{server}/viser/")
+    log.wait_for("Connected!")
+    page.get_by_text("Live (follows the job)").wait_for(timeout=60_000)
+    page.get_by_text("What-if", exact=True).click()
+    k_slider = page.get_by_role("slider").nth(5)  # playback speed, time, then c_lr, c_rl, dV, k
+    assert k_slider.get_attribute("aria-valuemax") == "0.12"
+    k_slider.focus()
+    k_slider.press("ArrowRight")
+    result = page.get_by_text("after the slider")
+    result.wait_for(timeout=60_000)
+    text = result.inner_text()
+    latency_ms = float(re.search(r"first frame (\d+) ms", text).group(1))
+    assert 0 < latency_ms < 5000, text
+    page.get_by_text("What-if", exact=False).first.wait_for()
+    _screenshot_pixels(page, "what_if.png")
+    page.close()
+
+
+def test_recording_plays_back_from_storage(server, browser, job):
+    best = httpx.get(f"{server}/api/jobs/{job['id']}/best").json()
+    recording = httpx.get(f"{server}/api/evaluations/{best['id']}/recording.viser")
+    assert recording.status_code == 200 and len(recording.content) > 10_000
+    html = httpx.get(f"{server}/api/evaluations/{best['id']}/replay.html")
+    assert html.status_code == 200 and "__VISER_EMBED_DATA__" in html.text
+    page, log = _open(browser, f"{server}/viser/?playbackPath=/api/evaluations/{best['id']}/recording.viser")
+    log.wait_for("File loaded!")
+    page.wait_for_timeout(5000)  # the player fades the scene in over the first seconds
+    pixels = _screenshot_pixels(page, "rewatch_recording.png")
+    assert pixels.std() > 0.05, "the recording's view looks blank"
+    page.close()
+
+
+def test_landing_page_links_the_view(server):
+    page = httpx.get(f"{server}/").text
+    assert 'href="/viser/"' in page and 'href="/docs"' in page

@@ -102,7 +102,8 @@ def create_app(db_url: str, *, workers: int = 2, start_worker: bool = True) -> F
     app.state.worker = worker
     app.state.recordings = RecordingCache(factory)
     add_view_routes(app, lambda: app.state.dashboard.port if hasattr(app.state, "dashboard") else None,
-                    app.state.recordings)
+                    app.state.recordings,
+                    lambda: len(app.state.dashboard.sessions) if hasattr(app.state, "dashboard") else 0)
 
     @app.exception_handler(RequestValidationError)
     async def _validation(_request: Request, exc: RequestValidationError):

@@ -54,9 +54,15 @@ class RecordingCache:
         return self._cache[key]
 
 
-def add_view_routes(app: FastAPI, upstream_port: Callable[[], int | None], recordings: RecordingCache) -> None:
+def add_view_routes(app: FastAPI, upstream_port: Callable[[], int | None], recordings: RecordingCache,
+                    n_clients: Callable[[], int]) -> None:
     page = CLIENT_PAGE.read_bytes()
     page_gzip = gzip.compress(page)
+
+    @app.get("/api/view", tags=["view"])
+    def view_status() -> dict[str, int | None]:
+        """The 3D view: open browser tabs, and the loopback port of the viser server behind ``/viser``."""
+        return {"clients": n_clients(), "viser_port": upstream_port()}
 
     @app.get("/viser", include_in_schema=False)
     def view_redirect(request: Request) -> RedirectResponse:

@@ -32,7 +32,8 @@ class JobWorker:
         with storage.transaction(self.factory) as session:
             for job in session.scalars(select(Job).where(Job.status == "running")):
                 job.status = "queued"
-        self._executor = LocalProcessExecutor(self.workers)
+        # Below the what-if worker and the web server in priority: a slider must not wait behind a job.
+        self._executor = LocalProcessExecutor(self.workers, niceness=10)
         self._thread = threading.Thread(target=self._loop, name="driftlab-worker", daemon=True)
         self._thread.start()
 

@@ -133,8 +133,7 @@ class Dashboard:
         session = ClientSession(client, self)
         with self._lock:
             self.sessions[client.client_id] = session
-            jobs = list(self._jobs)
-        session.set_job_options(jobs if jobs else self._read_jobs())
+        session.set_job_options(self._read_jobs())
 
     def _on_disconnect(self, client: viser.ClientHandle) -> None:
         with self._lock:
@@ -155,6 +154,8 @@ class Dashboard:
                 print(f"driftlab view: poll failed: {type(exc).__name__}: {exc}", flush=True)
 
     def poll_once(self) -> None:
+        if not self.sessions:  # nobody watching: no storage reads
+            return
         jobs = self._read_jobs()
         with self._lock:
             jobs_changed = jobs != self._jobs

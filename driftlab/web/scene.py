@@ -75,6 +75,7 @@ class CarModel:
 
     WHEEL_RADIUS_M = 0.33
     TRACK_HALF_WIDTH_M = 0.80
+    STEER_RESEND_RAD = 0.005  # the steering is nearly constant while a drift is held: resend only on change
 
     def __init__(self, scene: viser.SceneApi, name: str, *, cg_to_front_m: float = 1.39,
                  cg_to_rear_m: float = 1.0, color=(220, 40, 40), opacity: float | None = None) -> None:
@@ -96,12 +97,18 @@ class CarModel:
                                color=(25, 25, 25), wxyz=axle_turn, opacity=opacity)
             if label.startswith("f"):
                 self.front_wheels.append(hub)
+        self._pose: tuple[float, float, float] | None = None
+        self._steer_rad = 0.0
 
     def set_pose(self, x_m: float, y_m: float, psi_rad: float, steer_rad: float) -> None:
-        self.root.position = (x_m, y_m, 0.0)
-        self.root.wxyz = yaw_wxyz(psi_rad)
-        for hub in self.front_wheels:
-            hub.wxyz = yaw_wxyz(steer_rad)
+        if self._pose != (x_m, y_m, psi_rad):
+            self.root.position = (x_m, y_m, 0.0)
+            self.root.wxyz = yaw_wxyz(psi_rad)
+            self._pose = (x_m, y_m, psi_rad)
+        if abs(steer_rad - self._steer_rad) >= self.STEER_RESEND_RAD:
+            for hub in self.front_wheels:
+                hub.wxyz = yaw_wxyz(steer_rad)
+            self._steer_rad = steer_rad
 
     @property
     def visible(self) -> bool:

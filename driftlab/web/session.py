@@ -338,7 +338,8 @@ class ClientSession:
                 next_tick = time.perf_counter()  # fell behind: drop frames rather than burst
             tick += 1
             try:
-                self._tick(period, tick % TEXT_EVERY_FRAMES == 0)
+                with self.client.atomic():  # one frame's messages reach the browser together
+                    self._tick(period, tick % TEXT_EVERY_FRAMES == 0)
             except Exception:  # a closed connection mid-frame ends the loop, never the server
                 if self._closed.is_set():
                     return

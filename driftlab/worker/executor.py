@@ -50,19 +50,22 @@ def evaluate_episode(theta: dict[str, float], config_doc: dict[str, Any]) -> Epi
                           wall_ms=float(result.wall_ms), columns=list(COLUMNS), trajectory=result.trajectory)
 
 
-def _init_worker() -> None:
+def _init_worker(niceness: int) -> None:
     # BLAS oversubscription on 2 cores costs up to 8x.
     os.environ["OMP_NUM_THREADS"] = "1"
+    if niceness:
+        os.nice(niceness)
 
 
 class LocalProcessExecutor:
     """Episodes in separate processes (never in the caller's thread or event loop)."""
 
-    def __init__(self, workers: int = 1) -> None:
+    def __init__(self, workers: int = 1, *, niceness: int = 0) -> None:
+        """``niceness`` > 0 lowers the workers' CPU priority (batch work that must not slow interactive work)."""
         os.environ.setdefault("OMP_NUM_THREADS", "1")
         self.workers = workers
         self.pool = ProcessPoolExecutor(max_workers=workers, mp_context=multiprocessing.get_context("spawn"),
-                                        initializer=_init_worker)
+                                        initializer=_init_worker, initargs=(niceness,))
 
     def submit(self, theta: dict[str, float], config_doc: dict[str, Any]) -> Future[EpisodeOutcome]:
         return self.pool.submit(evaluate_episode, theta, config_doc)

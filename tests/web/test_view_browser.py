@@ -113,6 +113,7 @@ def test_two_tabs_at_once_each_get_their_own_view(server, browser, job):
     for page, log in pages:
         log.wait_for("Connected!")
         page.get_by_text("Live (follows the job)").wait_for(timeout=60_000)
+    assert httpx.get(f"{server}/api/view").json()["clients"] == 2
     # Pausing one tab leaves the other playing.
     pages[0][0].get_by_role("button", name="Pause").click()
     pages[0][0].get_by_role("button", name="Play", exact=True).wait_for(timeout=10_000)

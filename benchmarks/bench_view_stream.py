@@ -1,0 +1,83 @@
+"""CPU cost of streaming the 3D view: one car at 30 Hz to one browser tab.
+
+Starts ``driftlab serve`` on a small finished job (the view replays its newest episode at 1x, forever),
+then measures the server process's CPU time (user + system, from /proc) over windows of WINDOW_S seconds:
+with no client, with one client through the API port's relay (what browsers use), and with one client
+straight to viser's own loopback port (the relay's share is the difference). The client is a real headless
+Chromium (viser creates a client's session only after the page reports its camera). Prints the median of
+RUNS windows, in percent of one core.
+
+    OMP_NUM_THREADS=1 python benchmarks/bench_view_stream.py
+"""
+
+from __future__ import annotations
+
+import os
+import statistics
+import subprocess
+import sys
+import tempfile
+import time
+from pathlib import Path
+
+import httpx
+from playwright.sync_api import sync_playwright
+
+sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
+from tests.server_process import free_port, start_server  # noqa: E402
+from tests.web.test_view_browser import CHROMIUM, CHROMIUM_ARGS  # noqa: E402
+
+RUNS = 5
+WINDOW_S = 10.0
+
+
+def cpu_seconds(pid: int) -> float:
+    fields = Path(f"/proc/{pid}/stat").read_text().rsplit(")", 1)[1].split()
+    return (int(fields[11]) + int(fields[12])) / os.sysconf("SC_CLK_TCK")  # utime + stime
+
+
+def measure(pid: int) -> float:
+    start_cpu, start = cpu_seconds(pid), time.monotonic()
+    time.sleep(WINDOW_S)
+    return 100.0 * (cpu_seconds(pid) - start_cpu) / (time.monotonic() - start)
+
+
+def measure_with_browser(pid: int, browser, page_url: str) -> float:
+    """CPU % of the server process while one browser tab shows the live view (the tab's own CPU not counted)."""
+    page = browser.new_page(viewport={"width": 800, "height": 600})
+    page.goto(page_url)
+    page.get_by_text("Live (follows the job)").wait_for(timeout=60_000)
+    page.wait_for_timeout(2000)  # scene received, first episode playing
+    cpu = measure(pid)
+    page.close()
+    time.sleep(1.0)
+    return cpu
+
+
+def main() -> None:
+    tmp = Path(tempfile.mkdtemp())
+    db = tmp / "bench.db"
+    subprocess.run([sys.executable, "-m", "driftlab.cli", "tune", "--iterations", "8", "--seed-points", "8",
+                    "--db", str(db), "--name", "bench"], check=True, capture_output=True)
+    proc, url = start_server(db, free_port())
+    try:
+        viser_port = httpx.get(f"{url}/api/view").json()["viser_port"]
+        idle = [measure(proc.pid) for _ in range(RUNS)]
+        with sync_playwright() as p:
+            browser = p.chromium.launch(executable_path=CHROMIUM, args=CHROMIUM_ARGS, headless=True)
+            relay = [measure_with_browser(proc.pid, browser, f"{url}/viser/") for _ in range(RUNS)]
+            direct = [measure_with_browser(proc.pid, browser, f"http://127.0.0.1:{viser_port}/") for _ in range(RUNS)]
+            browser.close()
+    finally:
+        proc.terminate()
+        proc.wait(timeout=30)
+    idle_cpu = statistics.median(idle)
+    print(f"server process, no client:           {idle_cpu:5.2f} % of a core (median of {RUNS} x {WINDOW_S:.0f} s)")
+    for name, runs in (("one tab via the /viser relay", relay), ("one tab direct to viser  ", direct)):
+        cpu = statistics.median(runs)
+        print(f"server process, {name}: {cpu:5.2f} % ({cpu - idle_cpu:+.2f} % for streaming; "
+              f"runs {', '.join(f'{r:.2f}' for r in runs)})")
+
+
+if __name__ == "__main__":
+    main()

@@ -66,6 +66,10 @@ class EpisodeFrames:
         c = self.columns.index
         return (float(row[c("x_m")]), float(row[c("y_m")]), float(row[c("psi_rad")]), float(row[c("delta_rad")]))
 
+    def course_at(self, i: int) -> float:
+        """Direction of travel psi + beta of row i [rad]."""
+        return float(self.rows[i, self.columns.index("psi_rad")] + self.rows[i, self.columns.index("beta_rad")])
+
     def tracked_circle_at(self, i: int) -> int:
         """The circle tracked in row i: LEFT (+1) or RIGHT (-1), from the planner's phase."""
         return Phase(int(self.rows[i, self.columns.index("phase")])).direction

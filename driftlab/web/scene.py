@@ -18,6 +18,7 @@ from driftlab.web.frames import EpisodeFrames, sideslip_colors
 
 TRACK_Z_M = 0.02  # lines just above the ground plane, so they never z-fight with it
 ROAD_HALF_WIDTH_M = 3.0
+TRAIL_Z_M = 0.25  # lines are camera-facing ribbons: the trail sits higher so the highlight never covers it
 _CIRCLE_SEGMENTS = 240  # smooth at any zoom: 1.15 m chords on a 44 m circle
 
 
@@ -46,6 +47,13 @@ def set_overview_camera(camera) -> None:
     camera.look_at = (0.0, -25.0, 0.0)  # aimed right of the 8's centre so the 8 sits left of the control panel
 
 
+def set_chase_camera(camera, x_m: float, y_m: float, course_rad: float, *, behind_m: float = 16.0,
+                     height_m: float = 8.0) -> None:
+    """Behind the car along its direction of travel: the body's angle to the path is the sideslip."""
+    camera.position = (x_m - behind_m * math.cos(course_rad), y_m - behind_m * math.sin(course_rad), height_m)
+    camera.look_at = (x_m, y_m, 0.8)
+
+
 def draw_track(scene: viser.SceneApi, track: FigureEight) -> dict[int, viser.LineSegmentsHandle]:
     """Ground, both circles with road edges, P0; returns the highlight of each circle (LEFT/RIGHT), hidden."""
     extent_x = 2.0 * max(track.left_radius_m, track.right_radius_m) + 40.0
@@ -64,7 +72,7 @@ def draw_track(scene: viser.SceneApi, track: FigureEight) -> dict[int, viser.Lin
                                     colors=(160, 160, 150), thickness=0.08)
         highlights[direction] = scene.add_line_segments(
             f"/track/{name}/tracked", _polyline_segments(circle_points(circle), 2.0 * TRACK_Z_M),
-            colors=(255, 214, 140), thickness=2.5, visible=False)
+            colors=(255, 200, 110), thickness=0.7, visible=False)
     scene.add_cylinder("/track/p0/post", radius=0.25, height=3.0, color=(20, 20, 20), position=(0.0, 0.0, 1.5))
     scene.add_label("/track/p0/label", "P0", position=(0.0, 0.0, 3.5), font_screen_scale=1.2)
     return highlights
@@ -122,7 +130,7 @@ class CarModel:
 class Trail:
     """The path driven so far, coloured by sideslip, sent in chunks so a frame never resends the whole path."""
 
-    def __init__(self, scene: viser.SceneApi, name: str, *, chunk_rows: int = 15, thickness_m: float = 0.8) -> None:
+    def __init__(self, scene: viser.SceneApi, name: str, *, chunk_rows: int = 6, thickness_m: float = 0.8) -> None:
         self.scene = scene
         self.name = name
         self.chunk_rows = chunk_rows
@@ -145,7 +153,7 @@ class Trail:
         lo = max(self._drawn_until - 1, 0)
         xy = np.column_stack([frames.column("x_m")[lo:i + 1], frames.column("y_m")[lo:i + 1]])
         if len(xy) >= 2:
-            segments = _polyline_segments(xy, 3.0 * TRACK_Z_M)
+            segments = _polyline_segments(xy, TRAIL_Z_M)
             colors = sideslip_colors(frames.column("beta_rad")[lo:i])
             self._chunks.append(self.scene.add_line_segments(
                 f"/{self.name}/{len(self._chunks)}", segments, colors=np.repeat(colors[:, None, :], 2, axis=1),

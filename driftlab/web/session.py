@@ -18,7 +18,7 @@ import viser.uplot
 from driftlab.core.tuning import DEFAULT_BOUNDS
 from driftlab.web.frames import EpisodeFrames
 from driftlab.web.player import EpisodePlayer
-from driftlab.web.scene import set_overview_camera
+from driftlab.web.scene import set_chase_camera, set_overview_camera
 from driftlab.web.sources import JobHistory, track_of_spec
 
 if TYPE_CHECKING:
@@ -97,6 +97,8 @@ class ClientSession:
                 self.index_input = gui.add_number("Evaluation #", 0, min=0, step=1)
                 self.index_button = gui.add_button("Play evaluation #")
             self.play_button = gui.add_button("Pause", icon=viser.Icon.PLAYER_PAUSE)
+            self.chase_checkbox = gui.add_checkbox("Chase camera", False,
+                                                   hint="Follow the car from behind, along its direction of travel")
             self.speed_slider = gui.add_slider("Speed (x real time)", 0.25, 8.0, 0.25, 1.0)
             self.time_slider = gui.add_slider("Time [s]", 0.0, 30.0, 0.1, 0.0)
         self.live_button.on_click(lambda _: self.follow_live())
@@ -105,6 +107,7 @@ class ClientSession:
         self.play_button.on_click(lambda _: self.toggle_play())
         self.speed_slider.on_update(self._on_speed)
         self.time_slider.on_update(self._on_scrub)
+        self.chase_checkbox.on_update(self._on_chase)
         with gui.add_folder("Episode states"):
             self.state_plots = [gui.add_uplot((np.zeros(1), np.zeros(1), np.zeros(1)),
                                               (_series("t [s]", "#888"), _series(label, "#2a6fdb"),
@@ -253,6 +256,17 @@ class ClientSession:
         if event.client is not None:
             self.speed = float(self.speed_slider.value)
 
+    def _on_chase(self, event: viser.GuiEvent) -> None:
+        if event.client is not None and not self.chase_checkbox.value:
+            set_overview_camera(self.client.camera)
+
+    def _follow_with_camera(self) -> None:
+        frames = self.player.frames
+        if self.chase_checkbox.value and frames is not None and frames.n_frames:
+            i = frames.index_at(self.player.t_s)
+            x_m, y_m, _, _ = frames.pose_at(i)
+            set_chase_camera(self.client.camera, x_m, y_m, frames.course_at(i))
+
     def _on_scrub(self, event: viser.GuiEvent) -> None:
         if event.client is None:  # our own 5 Hz update of the slider
             return
@@ -357,6 +371,7 @@ class ClientSession:
                 self._at_end()
                 return
             self.player.seek(self.player.t_s + period_s * self.speed)
+            self._follow_with_camera()
             if show_text:
                 self.time_slider.value = round(self.player.t_s, 1)
                 self._show_hud()

@@ -166,6 +166,9 @@ def _cmd_serve(args: argparse.Namespace) -> int:
     from driftlab.server.app import create_app
 
     app = create_app(_db_url(args.db), workers=args.workers)
+    shown_host = "localhost" if args.host == "0.0.0.0" else args.host
+    print(f"DriftLab: the 3D view on http://{shown_host}:{args.port}/viser/, the API docs on "
+          f"http://{shown_host}:{args.port}/docs", flush=True)
     uvicorn.run(app, host=args.host, port=args.port, log_level="info")
     return 0
 

@@ -7,7 +7,6 @@ The dashboard draws what it is given: stored trajectories, or episodes a worker 
 from __future__ import annotations
 
 import threading
-import time
 from collections import OrderedDict
 from collections.abc import Callable
 from concurrent.futures import Future
@@ -22,6 +21,7 @@ from driftlab.db import storage
 from driftlab.web.frames import EpisodeFrames
 from driftlab.web.session import ClientSession
 from driftlab.web.sources import JobHistory, frames_of_evaluation, frames_of_outcome
+from driftlab.web.viser_server import quiet_viser_server
 
 # run_episode(theta, config_doc) -> Future of an EpisodeOutcome (see driftlab.worker.executor).
 EpisodeRunner = Callable[[dict[str, float], dict[str, Any]], Future]
@@ -90,7 +90,7 @@ class Dashboard:
         self._frames_cache: OrderedDict[int, EpisodeFrames] = OrderedDict()
         self._lock = threading.RLock()
         self._stop = threading.Event()
-        self.server = viser.ViserServer(host=host, port=port, label="DriftLab", verbose=False)
+        self.server = quiet_viser_server(host=host, port=port, label="DriftLab")
         self.server.on_client_connect(self._on_connect)
         self.server.on_client_disconnect(self._on_disconnect)
         self._poller = threading.Thread(target=self._poll_loop, name="driftlab-view-poller", daemon=True)
@@ -168,14 +168,3 @@ class Dashboard:
                 session.set_job_options(jobs)
             for history in changed:
                 session.on_history(history)
-
-
-def wait_for_port(dashboard: Dashboard, timeout_s: float = 10.0) -> int:
-    """viser binds in a background thread; its port is known once it listens."""
-    deadline = time.monotonic() + timeout_s
-    while time.monotonic() < deadline:
-        port = dashboard.port
-        if port:
-            return port
-        time.sleep(0.02)
-    raise RuntimeError("the viser server did not start listening")

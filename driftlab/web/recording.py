@@ -14,6 +14,7 @@ from driftlab.core.track import FigureEight
 from driftlab.web.frames import EpisodeFrames
 from driftlab.web.player import EpisodePlayer
 from driftlab.web.scene import set_overview_camera
+from driftlab.web.viser_server import quiet_viser_server
 
 RECORDING_FPS = 30.0
 
@@ -26,7 +27,7 @@ class EpisodeRecorder:
 
     def _fresh_scene(self) -> viser.SceneApi:
         if self._server is None:
-            self._server = viser.ViserServer(host="127.0.0.1", port=0, verbose=False)
+            self._server = quiet_viser_server(host="127.0.0.1", port=0)
             set_overview_camera(self._server.initial_camera)
         self._server.scene.reset()
         return self._server.scene

@@ -165,8 +165,11 @@ class ClientSession:
         if len(index) == 0:
             index, j_done, best, failed = (np.zeros(1), np.full(1, np.nan), np.full(1, np.nan), np.full(1, np.nan))
         self.convergence.data = (index, j_done, best, failed)
-        # uPlot cannot auto-range a series that starts with NaN (a gap): give the y range explicitly.
-        self.convergence.scales = {"x": {"time": False}, "y": {"range": padded_range(j_done)}}
+        # Explicit ranges: uPlot cannot auto-range a series that starts with NaN (a gap), and viser's client
+        # keeps the x extent of the first data it saw; x spans the whole job, so the plot shows progress too.
+        x_max = float(max(history.iterations - 1, len(index) - 1, 1))
+        self.convergence.scales = {"x": {"time": False, "range": (0.0, x_max)},
+                                   "y": {"range": padded_range(j_done)}}
         best_pos = history.best_position()
         best_text = "none completed yet" if best_pos is None else (
             f"**{history.values[best_pos]:.3f}** at #{best_pos}")
@@ -229,6 +232,7 @@ class ClientSession:
         t = frames.column("t_s")
         for plot, (actual, reference, _) in zip(self.state_plots, STATE_PLOTS, strict=True):
             plot.data = (t, frames.column(actual), frames.column(reference))
+            plot.scales = {"x": {"time": False, "range": (0.0, max(float(t[-1]), 0.1))}}
 
     def _show_downloads(self, frames: EpisodeFrames) -> None:
         if frames.evaluation_id is None:

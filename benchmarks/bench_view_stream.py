@@ -14,9 +14,7 @@ from __future__ import annotations
 
 import os
 import statistics
-import subprocess
 import sys
-import tempfile
 import time
 from pathlib import Path
 
@@ -24,7 +22,7 @@ import httpx
 from playwright.sync_api import sync_playwright
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
-from tests.server_process import free_port, start_server  # noqa: E402
+from tests.server_process import serve_finished_job  # noqa: E402
 from tests.web.test_view_browser import CHROMIUM, CHROMIUM_ARGS  # noqa: E402
 
 RUNS = 5
@@ -55,11 +53,7 @@ def measure_with_browser(pid: int, browser, page_url: str) -> float:
 
 
 def main() -> None:
-    tmp = Path(tempfile.mkdtemp())
-    db = tmp / "bench.db"
-    subprocess.run([sys.executable, "-m", "driftlab.cli", "tune", "--iterations", "8", "--seed-points", "8",
-                    "--db", str(db), "--name", "bench"], check=True, capture_output=True)
-    proc, url = start_server(db, free_port())
+    proc, url = serve_finished_job()
     try:
         viser_port = httpx.get(f"{url}/api/view").json()["viser_port"]
         idle = [measure(proc.pid) for _ in range(RUNS)]

@@ -12,9 +12,7 @@ from __future__ import annotations
 
 import re
 import statistics
-import subprocess
 import sys
-import tempfile
 import time
 from pathlib import Path
 
@@ -22,7 +20,7 @@ import httpx
 from playwright.sync_api import sync_playwright
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
-from tests.server_process import free_port, start_server  # noqa: E402
+from tests.server_process import serve_finished_job  # noqa: E402
 from tests.web.test_view_browser import CHROMIUM, CHROMIUM_ARGS  # noqa: E402
 
 N_STEPS = 9
@@ -49,11 +47,7 @@ def step_latencies(page) -> tuple[list[float], list[float]]:
 
 
 def main() -> None:
-    tmp = Path(tempfile.mkdtemp())
-    db = tmp / "bench.db"
-    subprocess.run([sys.executable, "-m", "driftlab.cli", "tune", "--iterations", "8", "--seed-points", "8",
-                    "--db", str(db), "--name", "bench"], check=True, capture_output=True)
-    proc, url = start_server(db, free_port())
+    proc, url = serve_finished_job()
     try:
         with sync_playwright() as p:
             browser = p.chromium.launch(executable_path=CHROMIUM, args=CHROMIUM_ARGS, headless=True)

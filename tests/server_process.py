@@ -4,7 +4,9 @@ import os
 import socket
 import subprocess
 import sys
+import tempfile
 import time
+from pathlib import Path
 
 import httpx
 
@@ -38,3 +40,12 @@ def wait_status(url, job_id, statuses, timeout_s=120):
             return job
         time.sleep(0.2)
     raise AssertionError(f"job {job_id} stuck in {job['status']}")
+
+
+def serve_finished_job(iterations=8):
+    """A server on a fresh SQLite file holding one finished job (tuned by the CLI): (process, url)."""
+    db = Path(tempfile.mkdtemp()) / "driftlab.db"
+    subprocess.run([sys.executable, "-m", "driftlab.cli", "tune", "--iterations", str(iterations),
+                    "--seed-points", str(iterations), "--db", str(db), "--name", "finished"],
+                   check=True, capture_output=True)
+    return start_server(db, free_port())

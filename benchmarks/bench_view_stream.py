@@ -4,7 +4,8 @@ Starts ``driftlab serve`` on a small finished job (the view replays its newest e
 then measures the server process's CPU time (user + system, from /proc) over windows of WINDOW_S seconds:
 with no client, with one client through the API port's relay (what browsers use), and with one client
 straight to viser's own loopback port (the relay's share is the difference). The client is a real headless
-Chromium (viser creates a client's session only after the page reports its camera). Prints the median of
+Chromium (a bare websocket client received one message and no scene: viser's page sends what it needs
+first). Prints the median of
 RUNS windows, in percent of one core.
 
     OMP_NUM_THREADS=1 python benchmarks/bench_view_stream.py

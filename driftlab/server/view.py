@@ -9,6 +9,7 @@ from __future__ import annotations
 
 import asyncio
 import gzip
+import threading
 from collections import OrderedDict
 from collections.abc import Callable
 from pathlib import Path
@@ -35,23 +36,25 @@ class RecordingCache:
         self.recorder = EpisodeRecorder()
         self.size = size
         self._cache: OrderedDict[tuple[int, str], bytes] = OrderedDict()
+        self._lock = threading.Lock()  # routes run in a thread pool; recordings are made one at a time anyway
 
     def get(self, evaluation_id: int, kind: str) -> bytes:
         key = (evaluation_id, kind)
-        if key not in self._cache:
-            frames = frames_of_evaluation(self.factory, evaluation_id)
-            with storage.transaction(self.factory) as session:
-                job_id = storage.get_evaluation(session, evaluation_id=evaluation_id).job_id
-                track = track_of_spec(storage.get_job(session, job_id=job_id).spec)
-            if kind == "viser":
-                data = self.recorder.viser_file(frames, track)
-            else:
-                data = self.recorder.html(frames, track).encode()
-            self._cache[key] = data
-            while len(self._cache) > self.size:
-                self._cache.popitem(last=False)
-        self._cache.move_to_end(key)
-        return self._cache[key]
+        with self._lock:
+            if key not in self._cache:
+                self._cache[key] = self._record(evaluation_id, kind)
+                while len(self._cache) > self.size:
+                    self._cache.popitem(last=False)
+            self._cache.move_to_end(key)
+            return self._cache[key]
+
+    def _record(self, evaluation_id: int, kind: str) -> bytes:
+        frames = frames_of_evaluation(self.factory, evaluation_id)  # raises NotFound first
+        with storage.transaction(self.factory) as session:
+            track = track_of_spec(storage.get_evaluation(session, evaluation_id=evaluation_id).job.spec)
+        if kind == "viser":
+            return self.recorder.viser_file(frames, track)
+        return self.recorder.html(frames, track).encode()
 
 
 def add_view_routes(app: FastAPI, upstream_port: Callable[[], int | None], recordings: RecordingCache,

@@ -162,7 +162,8 @@ class Dashboard:
             self._jobs = jobs
             sessions = list(self.sessions.values())
             watched = {s.history.job_id for s in sessions if s.history is not None}
-        changed = [self.history(job_id) for job_id in watched if self.history(job_id).refresh(self.factory)]
+        histories = [self.history(job_id) for job_id in watched]
+        changed = [h for h in histories if h.refresh(self.factory)]
         for session in sessions:
             if jobs_changed:
                 session.set_job_options(jobs)

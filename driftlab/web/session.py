@@ -175,8 +175,6 @@ class ClientSession:
             f"**{history.values[best_pos]:.3f}** at #{best_pos}")
         self.job_text.content = (f"**{history.name}**: {history.status}, {history.n_done} / {history.iterations} "
                                  f"evaluations, {sum(history.completed)} completed; best J {best_text}")
-        if best_pos is not None and (self.best_frames is None or self.best_frames.index != best_pos):
-            self.best_frames = None  # loaded on demand
 
     # ----- choosing what plays -----------------------------------------------------------------------------
     def follow_live(self) -> None:

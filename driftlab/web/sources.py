@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import threading
 from dataclasses import dataclass, field
 from typing import Any
 
@@ -47,10 +48,12 @@ class JobHistory:
     values: list[float] = field(default_factory=list)
     completed: list[bool] = field(default_factory=list)
     thetas: list[dict[str, float]] = field(default_factory=list)
+    # The poller grows the lists while tabs read them: readers must never see them at different lengths.
+    _lock: threading.Lock = field(default_factory=threading.Lock, repr=False, compare=False)
 
     def refresh(self, factory: sessionmaker[Session]) -> bool:
         """Read job status and evaluations newer than the last one held; True if anything changed."""
-        with storage.transaction(factory) as session:
+        with self._lock, storage.transaction(factory) as session:
             job = storage.get_job(session, job_id=self.job_id)
             rows: list[Evaluation] = storage.evaluations(session, job_id=self.job_id, after=len(self.ids) - 1)
             changed = bool(rows) or job.status != self.status
@@ -68,8 +71,9 @@ class JobHistory:
 
     def best_position(self) -> int | None:
         """Position (= evaluation index) of the lowest J among completed evaluations."""
-        done = [i for i, ok in enumerate(self.completed) if ok]
-        return min(done, key=lambda i: self.values[i]) if done else None
+        with self._lock:
+            done = [i for i, ok in enumerate(self.completed) if ok]
+            return min(done, key=lambda i: self.values[i]) if done else None
 
     def convergence(self) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
         """(index, J of completed or NaN, best-so-far J or NaN, failed marker or NaN).
@@ -77,9 +81,10 @@ class JobHistory:
         Failed evaluations store a penalty, not a drift cost; they are marked at the top edge of the completed
         values so they do not squash the scale.
         """
-        index = np.arange(self.n_done, dtype=float)
-        values = np.array(self.values, dtype=float)
-        ok = np.array(self.completed, dtype=bool)
+        with self._lock:
+            values = np.array(self.values, dtype=float)
+            ok = np.array(self.completed, dtype=bool)
+        index = np.arange(len(values), dtype=float)
         j_done = np.where(ok, values, np.nan)
         best = np.fmin.accumulate(j_done) if len(j_done) else j_done
         top = np.nanmax(j_done) if ok.any() else 0.0

@@ -12,7 +12,7 @@ from driftlab.core import mpc
 from driftlab.core.config import EpisodeConfig, Theta
 from driftlab.core.episode import run_episode
 
-_solve = mpc.ReferenceQp.solve
+_solve = mpc.QpSession.solve
 SOLVE_US: list[float] = []
 OSQP_US: list[float] = []
 
@@ -46,9 +46,9 @@ def main() -> None:
             t0 = time.perf_counter()
             result = run_episode(theta, config)
             walls.append((time.perf_counter() - t0) * 1e3)
-        mpc.ReferenceQp.solve = timed_solve
+        mpc.QpSession.solve = timed_solve
         run_episode(theta, config)
-        mpc.ReferenceQp.solve = _solve
+        mpc.QpSession.solve = _solve
         solves = np.array(SOLVE_US)
         print(f"plant={plant:8s} controller={controller:8s} status={result.status:10s} "
               f"steps={len(result.trajectory)} episode wall median {statistics.median(walls):.1f} ms (7 runs)")

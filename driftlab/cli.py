@@ -6,6 +6,7 @@ import argparse
 import csv
 import json
 import math
+import os
 import sys
 import time
 from typing import Any
@@ -13,7 +14,26 @@ from typing import Any
 from driftlab.core.config import EpisodeConfig, Theta, apply_overrides
 from driftlab.core.equilibrium import drift_equilibrium
 from driftlab.core.errors import ConfigError, NoEquilibriumError
+from driftlab.core.robust import MAX_ROBUST_SAMPLES
+from driftlab.core.tuning import DEFAULT_CONFIRM_SAMPLES, DEFAULT_ROBUST_SAMPLES
 from driftlab.core.vehicle import pack_params
+from driftlab.db.lifecycle import TransitionError
+
+DB_HELP = ("SQLite file or SQLAlchemy URL (default: DRIFTLAB_DATABASE_URL, else the shared "
+           "~/.local/share/driftlab/driftlab.db)")
+
+
+def _int_in(lo: int, hi: int):
+    """An argparse type: an integer in [lo, hi], with a one-line error naming the range."""
+    def parse(text: str) -> int:
+        try:
+            value = int(text)
+        except ValueError:
+            raise argparse.ArgumentTypeError(f"must be an integer in [{lo}, {hi}], got {text!r}") from None
+        if not lo <= value <= hi:
+            raise argparse.ArgumentTypeError(f"must be an integer in [{lo}, {hi}], got {value}")
+        return value
+    return parse
 
 
 class _Parser(argparse.ArgumentParser):
@@ -77,7 +97,10 @@ def _cmd_episode(args: argparse.Namespace) -> int:
 
     config = _config(args)
     theta = Theta.from_mapping(_key_values(args.theta.split(",") if args.theta else [], "--theta"))
-    result = run_episode(theta, config)
+    for option, path in (("--csv", args.csv), ("--plot", args.plot)):  # before the episode runs, not after
+        if path and not os.path.isdir(os.path.dirname(os.path.abspath(path))):
+            raise ConfigError(f"{option} {path}: the folder {os.path.dirname(os.path.abspath(path))} does not exist")
+    result = run_episode(theta, config, seed=args.seed)
     print(json.dumps(_finite(result.summary())))
     if args.csv:
         with open(args.csv, "w", newline="") as handle:
@@ -89,8 +112,8 @@ def _cmd_episode(args: argparse.Namespace) -> int:
 
         scenario = config.scenario
         plot_episode(result, FigureEight(scenario.left_radius_m, scenario.right_radius_m), args.plot,
-                     title=f"{args.plant} plant, {args.controller} controller\ntheta {theta.as_dict()}\n"
-                           f"{result.status}, J = {result.J:.3f}")
+                     title=f"{args.plant} plant, {args.controller} controller, seed {args.seed}\n"
+                           f"theta {theta.as_dict()}\n{result.status}, J = {result.J:.3f}")
     return 0
 
 
@@ -103,27 +126,46 @@ def _tuning_spec(args: argparse.Namespace):
         name, _, pair = item.partition("=")
         lo, _, hi = pair.partition(":")
         bounds[name.strip()] = [lo, hi]
-    return TuningSpec(iterations=args.iterations, seed_points=args.seed_points, active_set=args.active_set,
-                      seed=args.seed, bounds=bounds, config=config)
+    iterations = 500 if args.iterations is None else args.iterations
+    return TuningSpec(iterations=iterations, seed_points=args.seed_points, active_set=args.active_set,
+                      seed=args.seed, robust_samples=args.robust_samples, confirm_samples=args.confirm_samples,
+                      bounds=bounds, config=config)
 
 
-def _cmd_tune(args: argparse.Namespace) -> int:
-    from driftlab.db import storage
-    from driftlab.worker.executor import LocalProcessExecutor
-    from driftlab.worker.job_loop import Progress, run_job
+def _open_tuning_job(factory, args: argparse.Namespace, runner: str) -> tuple[int, str]:
+    """Create the job, or take up the stored one of that name (its settings win; a given --iterations extends
+    it); then claim its lease. A job another live runner holds is refused (LeaseHeld: exit 2)."""
+    from driftlab.db import lifecycle, storage
+    from driftlab.db.lifecycle import JobStatus
 
-    spec = _tuning_spec(args)
-    factory = storage.open_database(storage.database_url(args.db))
     with storage.transaction(factory) as session:
         job = storage.find_job(session, name=args.name) if args.name else None
         if job is None:
+            spec = _tuning_spec(args)
             name = args.name or storage.unique_job_name(session, "tune")
             job = storage.create_job(session, name=name, spec=spec.to_dict(), seed=spec.seed)
             sys.stderr.write(f"job {job.name} (id {job.id}): {spec.iterations} iterations\n")
         else:
+            if args.iterations is not None and args.iterations != job.spec["iterations"]:
+                lifecycle.extend(session, job_id=job.id, iterations=args.iterations)
             done = storage.count_evaluations(session, job_id=job.id)
             sys.stderr.write(f"resuming job {job.name} (id {job.id}) at {done} of {job.spec['iterations']}\n")
-        job_id, name = job.id, job.name
+        job_id, name, status = job.id, job.name, job.status
+    if status != JobStatus.FINISHED:
+        with storage.transaction(factory) as session:
+            lifecycle.claim(session, job_id=job_id, runner=runner,
+                            from_statuses=(JobStatus.QUEUED, JobStatus.PAUSED, JobStatus.FAILED))
+    return job_id, name
+
+
+def _cmd_tune(args: argparse.Namespace) -> int:
+    from driftlab.db import lifecycle, storage
+    from driftlab.worker.executor import LocalProcessExecutor
+    from driftlab.worker.job_loop import Progress, run_job
+
+    factory = storage.open_database(_db_url(args.db))
+    runner = lifecycle.new_runner_id("tune")
+    job_id, name = _open_tuning_job(factory, args, runner)
 
     def progress(p: Progress) -> None:
         best = f"{p.best_J:.3f}" if p.best_J is not None else "-"
@@ -135,46 +177,77 @@ def _cmd_tune(args: argparse.Namespace) -> int:
             sys.stderr.write(line + "\n")
         sys.stderr.flush()
 
-    executor = LocalProcessExecutor(args.workers)
     started = time.perf_counter()
-    try:
-        status = run_job(factory, job_id, executor, workers=args.workers, on_progress=progress)
-    finally:
-        executor.shutdown()
+    with storage.transaction(factory) as session:
+        status = storage.get_job(session, job_id=job_id).status
+    if status == lifecycle.JobStatus.RUNNING:  # ours now
+        executor = LocalProcessExecutor(args.workers)
+        try:
+            status = run_job(factory, job_id, executor, runner=runner, workers=args.workers, on_progress=progress)
+        except KeyboardInterrupt:
+            with storage.transaction(factory) as session:
+                lifecycle.release(session, job_id=job_id, runner=runner, status=lifecycle.JobStatus.PAUSED)
+            sys.stderr.write(f"\njob {name} paused; run the same command to continue\n")
+            return 130
+        finally:
+            executor.shutdown()
     with storage.transaction(factory) as session:
         best = storage.best_evaluation(session, job_id=job_id)
-        out = {"job": name, "id": job_id, "status": status, "wall_s": round(time.perf_counter() - started, 2),
+        out = {"job": name, "id": job_id, "status": str(status), "wall_s": round(time.perf_counter() - started, 2),
                "n_done": storage.count_evaluations(session, job_id=job_id),
                "best": None if best is None else {"index": best.index, "theta": best.theta, "J": best.J,
-                                                   "status": best.status}}
+                                                   "status": best.status, "seeds": best.seeds}}
     sys.stderr.write("\n")
     print(json.dumps(out))
     return 0 if status != "failed" else 1
 
 
+def _cmd_rescore(args: argparse.Namespace) -> int:
+    from driftlab.worker.scoring import rescore_job
+
+    print(json.dumps(_finite(rescore_job(db_url=_db_url(args.db), name=args.name, samples=args.samples,
+                                         workers=args.workers))))
+    return 0
+
+
 def _cmd_report(args: argparse.Namespace) -> int:
     from driftlab.report import write_report
 
-    path = write_report(db_url=_db_url(args.db), name=args.name, out_dir=args.out, baseline_samples=args.baselines)
+    path = write_report(db_url=_db_url(args.db), name=args.name, out_dir=args.out, baseline_samples=args.baselines,
+                        rescore_samples=args.rescore_samples)
     print(json.dumps({"report": str(path)}))
     return 0
 
 
 def _cmd_serve(args: argparse.Namespace) -> int:
+    import socket
+
     import uvicorn
 
     from driftlab.server.app import create_app
 
+    # Bind before touching any job: a second server on a taken port must leave the first one's jobs alone.
+    family = socket.AF_INET6 if ":" in args.host else socket.AF_INET
+    sock = socket.socket(family, socket.SOCK_STREAM)
+    sock.setsockopt(socket.SOL_SOCKET, socket.SO_REUSEADDR, 1)
+    try:
+        sock.bind((args.host, args.port))
+    except OSError as exc:
+        sock.close()
+        raise ConfigError(f"--port {args.port} on {args.host}: {exc.strerror or exc}") from None
+    sock.listen(2048)
+    sock.set_inheritable(True)
     app = create_app(_db_url(args.db), workers=args.workers)
     shown_host = "localhost" if args.host == "0.0.0.0" else args.host
     print(f"DriftLab: the 3D view on http://{shown_host}:{args.port}/viser/, the API docs on "
           f"http://{shown_host}:{args.port}/docs", flush=True)
-    uvicorn.run(app, host=args.host, port=args.port, log_level="info")
+    server = uvicorn.Server(uvicorn.Config(app, log_level="info"))
+    server.run(sockets=[sock])
     return 0
 
 
 def _db_url(db: str | None) -> str:
-    from driftlab.db.storage import database_url
+    from driftlab.settings import database_url
 
     return database_url(db)
 
@@ -194,34 +267,53 @@ def build_parser() -> argparse.ArgumentParser:
     ep.add_argument("--controller", choices=("default", "paper"), default="default",
                     help="default: DriftLab's MPC with path states and actuator lags; paper: the paper's MPC")
     ep.add_argument("--set", action="append", metavar="KEY=VALUE", help="config override, e.g. mpc.q_sideslip=400")
+    ep.add_argument("--seed", type=int, default=0, help="episode seed: the plant's per-episode variation, start and "
+                    "sensor noise (default 0; the nominal plant has none)")
     ep.add_argument("--csv", help="write the trajectory to this CSV file")
     ep.add_argument("--plot", help="write the paper's figures to this PNG file")
     ep.set_defaults(func=_cmd_episode)
     tu = sub.add_parser("tune", help="run (or resume) a Bayesian-optimization tuning job headless")
-    tu.add_argument("--iterations", type=int, default=500)
+    tu.add_argument("--iterations", type=int, help="evaluations in total (default 500 for a new job); on a stored "
+                    "job a new budget: a finished job continues to it")
     tu.add_argument("--seed-points", type=int, default=20)
     tu.add_argument("--active-set", type=int, default=400)
-    tu.add_argument("--seed", type=int, default=0)
-    tu.add_argument("--db", help="SQLite file or SQLAlchemy URL (default: ./driftlab.db or DRIFTLAB_DATABASE_URL)")
+    tu.add_argument("--seed", type=int, default=0, help="optimizer seed; also picks the episode seeds")
+    tu.add_argument("--robust-samples", type=int, default=DEFAULT_ROBUST_SAMPLES, metavar="N",
+                    help=f"seeded episodes per evaluation, 1..{MAX_ROBUST_SAMPLES} (default {DEFAULT_ROBUST_SAMPLES}): "
+                         "J is their mean and an evaluation completes only if all of them do")
+    tu.add_argument("--confirm-samples", type=int, default=DEFAULT_CONFIRM_SAMPLES, metavar="N",
+                    help=f"more seeds an evaluation must also complete before it counts as the best so far "
+                         f"(0..64, default {DEFAULT_CONFIRM_SAMPLES}; 0: off)")
+    tu.add_argument("--db", help=DB_HELP)
     tu.add_argument("--name", help="job name; an existing name resumes that job")
     tu.add_argument("--set", action="append", metavar="KEY=VALUE", help="config override, e.g. plant.steer_lag_s=0.02")
     tu.add_argument("--bound", action="append", metavar="NAME=LO:HI", help="theta bound, e.g. k=0:0.1")
-    tu.add_argument("--workers", type=int, default=1, choices=range(1, 65), metavar="N",
+    tu.add_argument("--workers", type=_int_in(1, 64), default=1, metavar="N",
                     help="episodes evaluated at once (1..64)")
     tu.set_defaults(func=_cmd_tune)
     sv = sub.add_parser("serve", help="the dashboard and REST API (http://127.0.0.1:8000)")
     sv.add_argument("--host", default="127.0.0.1", help="bind address (default 127.0.0.1: this machine only)")
-    sv.add_argument("--port", type=int, default=8000)
-    sv.add_argument("--db", help="SQLite file or SQLAlchemy URL (default: ./driftlab.db or DRIFTLAB_DATABASE_URL)")
-    sv.add_argument("--workers", type=int, default=2, choices=range(1, 65), metavar="N",
+    sv.add_argument("--port", type=_int_in(1, 65535), default=8000, metavar="PORT",
+                    help="TCP port, 1..65535 (default 8000)")
+    sv.add_argument("--db", help=DB_HELP)
+    sv.add_argument("--workers", type=_int_in(1, 64), default=2, metavar="N",
                     help="episode processes (1..64)")
     sv.set_defaults(func=_cmd_serve)
+    rs = sub.add_parser("rescore", help="run a job's best theta, exactly as stored, under fresh seeds; print JSON")
+    rs.add_argument("--name", required=True)
+    rs.add_argument("--db", help=DB_HELP)
+    rs.add_argument("--samples", type=_int_in(1, 1000), default=30, metavar="N",
+                    help="episodes, each with a seed never used in tuning (1..1000, default 30)")
+    rs.add_argument("--workers", type=_int_in(1, 64), default=2, metavar="N", help="processes (1..64)")
+    rs.set_defaults(func=_cmd_rescore)
     rp = sub.add_parser("report", help="write the paper's results for a tuning job")
     rp.add_argument("--name", required=True)
-    rp.add_argument("--db")
+    rp.add_argument("--db", help=DB_HELP)
     rp.add_argument("--out", required=True, help="output directory")
     rp.add_argument("--baselines", type=int, help="random samples for the random-search baseline "
                     "(default: as many as the job's evaluations)")
+    rp.add_argument("--rescore-samples", type=_int_in(1, 1000), default=20, metavar="N",
+                    help="fresh seeds each theta of the table is rescored on (1..1000, default 20)")
     rp.set_defaults(func=_cmd_report)
     return parser
 
@@ -230,7 +322,10 @@ def main(argv: list[str] | None = None) -> int:
     args = build_parser().parse_args(argv)
     try:
         return args.func(args)
-    except (ConfigError, LookupError) as exc:  # bad input, or no such job / evaluation
+    except (ConfigError, LookupError, TransitionError) as exc:  # bad input, no such job, job held elsewhere
+        sys.stderr.write(f"driftlab: error: {exc}\n")
+        return 2
+    except OSError as exc:  # a file that cannot be written, a database that cannot be opened
         sys.stderr.write(f"driftlab: error: {exc}\n")
         return 2
 

@@ -9,23 +9,24 @@ import numpy as np
 from driftlab.core.config import PAPER_THETA, Theta
 from driftlab.core.episode import run_episode
 from driftlab.core.equilibrium import drift_equilibrium
+from driftlab.core.robust import aggregate, rescore_seeds, summarize
 from driftlab.core.track import FigureEight
 from driftlab.core.tuning import TuningSpec
 from driftlab.core.vehicle import pack_params
 from driftlab.db import storage
 from driftlab.plotting import plot_convergence, plot_episode
 from driftlab.worker.executor import LocalProcessExecutor
+from driftlab.worker.scoring import score_thetas
 
 # The paper's Table I (left-hand drift at R = 44 m, beta = -0.4; REFERENCE.md section 2).
 PAPER_TABLE_I = {"V": 19.1, "beta": -0.4, "r": 0.434, "delta": -0.270, "Fxr": 4324.0}
 
 
-def write_report(*, db_url: str, name: str, out_dir: str, baseline_samples: int | None = None) -> Path:
+def write_report(*, db_url: str, name: str, out_dir: str, baseline_samples: int | None = None,
+                 rescore_samples: int = 20) -> Path:
     factory = storage.open_database(db_url)
     with storage.transaction(factory) as session:
-        job = storage.find_job(session, name=name)
-        if job is None:
-            raise storage.NotFound(f"no job named {name!r}")
+        job = storage.get_job_by_name(session, name=name)
         spec = TuningSpec.from_dict(job.spec)
         evals = storage.evaluations(session, job_id=job.id)
         best = storage.best_evaluation(session, job_id=job.id)
@@ -35,9 +36,11 @@ def write_report(*, db_url: str, name: str, out_dir: str, baseline_samples: int 
     out.mkdir(parents=True, exist_ok=True)
     config = spec.config
     track = FigureEight(config.scenario.left_radius_m, config.scenario.right_radius_m)
-    best_result = run_episode(Theta.from_mapping(best.theta), config)
+    shown_seed = best.trajectory_seed or 0
+    best_result = run_episode(Theta.from_mapping(best.theta), config, seed=shown_seed)
     plot_episode(best_result, track, str(out / "best_episode.png"),
-                 title=f"{name}: best evaluation #{best.index}, {best.status}, J = {best.J:.3f}")
+                 title=f"{name}: best evaluation #{best.index}, {best.status}, J = {best.J:.3f} "
+                       f"(episode of seed {shown_seed}: J = {best_result.J:.3f})")
     values = np.array([e.J for e in evals])
     failed = np.array([not e.completed for e in evals])
     plot_convergence(values, failed, str(out / "convergence.png"), title=f"{name}: J per iteration")
@@ -48,28 +51,40 @@ def write_report(*, db_url: str, name: str, out_dir: str, baseline_samples: int 
     config_doc = spec.to_dict()["config"]
     executor = LocalProcessExecutor(workers=2)
     try:
-        futures = [executor.submit(theta, config_doc) for theta in
-                   (Theta().as_dict(), PAPER_THETA.as_dict(), *samples)]
-        untuned, paper, *scored = [(o.theta, o.status, o.J) for o in (f.result() for f in futures)]
+        # The random baseline is scored as tuning scored (the job's seeds, same aggregate); then every theta
+        # of the table is rescored under fresh seeds.
+        random_scores = [aggregate(r) for r in score_thetas(executor, samples, config_doc, spec.episode_seeds)]
+        ranked = sorted(range(n_random), key=lambda i: (random_scores[i].status != "completed", random_scores[i].J))
+        random_best = samples[ranked[0]]
+        table = [("learned (best)", dict(best.theta), best.status, best.J),
+                 ("untuned", Theta().as_dict(), None, None), ("paper's", PAPER_THETA.as_dict(), None, None),
+                 (f"best of {n_random} random", random_best, random_scores[ranked[0]].status,
+                  random_scores[ranked[0]].J)]
+        rescored = score_thetas(executor, [row[1] for row in table], config_doc, rescore_seeds(rescore_samples))
     finally:
         executor.shutdown()
-    random_best = min(scored, key=lambda s: s[2])
 
     eq = drift_equilibrium(config.scenario.left_radius_m, -abs(config.scenario.sideslip_rad),
                            pack_params(config.vehicle)).as_dict()
     lines = [f"# DriftLab report: {name}", "",
-             f"{len(evals)} evaluations ({int((~failed).sum())} completed), seed points {spec.seed_points}, "
-             f"active set {spec.active_set}, bounds {spec.bounds}.", "",
+             f"{len(evals)} evaluations ({int((~failed).sum())} completed), {spec.robust_samples} seeded episodes "
+             f"per evaluation, seed points {spec.seed_points}, active set {spec.active_set}, bounds {spec.bounds}. "
+             "Lower J is better.", "",
              "## Drift equilibria (R = 44 m) and learned parameters", "",
              "| | V (m/s) | beta (rad) | r (rad/s) | delta (rad) | Fxr (N) |", "|---|---|---|---|---|---|",
              "| paper Table I | {V} | {beta} | {r} | {delta} | {Fxr} |".format(**PAPER_TABLE_I),
              "| DriftLab model | {V:.3f} | {beta:.4f} | {r:.4f} | {delta:.4f} | {Fxr:.0f} |".format(**eq), "",
-             "| theta | c_lr | c_rl | dV (m/s) | k (rad/m) | status | J |", "|---|---|---|---|---|---|---|"]
-    for label, theta, status, value in (("learned (best)", best.theta, best.status, best.J),
-                                        ("untuned", *untuned), ("paper's", *paper),
-                                        (f"best of {n_random} random", *random_best)):
-        lines.append(f"| {label} | {theta['c_lr']:.4f} | {theta['c_rl']:.4f} | {theta['dV']:.3f} | "
-                     f"{theta['k']:.4f} | {status} | {value:.3f} |")
+             f"Theta at full precision. 'Tuning J': on the job's {spec.robust_samples} seeds (mean J over them, "
+             f"an evaluation completes only if all do). 'Rescore': {rescore_samples} fresh seeds never used in "
+             "tuning (J mean over all episodes, failures at their penalty).", "",
+             "| theta | c_lr | c_rl | dV (m/s) | k (rad/m) | tuning status | tuning J | rescore completed | "
+             "rescore J mean | rescore J worst |", "|---|---|---|---|---|---|---|---|---|---|"]
+    for (label, theta, status, value), results in zip(table, rescored, strict=True):
+        summary = summarize(results)
+        tuning = (status or "-", "-" if value is None else f"{value:.3f}")
+        lines.append(f"| {label} | {theta['c_lr']!r} | {theta['c_rl']!r} | {theta['dV']!r} | {theta['k']!r} | "
+                     f"{tuning[0]} | {tuning[1]} | {summary['completed']}/{summary['samples']} | "
+                     f"{summary['J_mean']:.3f} | {summary['J_worst']:.3f} |")
     lines += ["", "![best episode](best_episode.png)", "", "![convergence](convergence.png)", ""]
     path = out / "report.md"
     path.write_text("\n".join(lines))

@@ -6,8 +6,8 @@ import sys
 
 import pytest
 
-EPISODE_KEYS = {"status", "J", "completed_fraction", "mean_abs_e_m", "max_abs_e_m", "mean_abs_beta_err_rad",
-                "beta_flip_s", "min_speed_mps", "trigger_times_s", "wall_ms"}
+EPISODE_KEYS = {"status", "J", "theta", "seed", "completed_fraction", "mean_abs_e_m", "max_abs_e_m",
+                "mean_abs_beta_err_rad", "beta_flip_s", "min_speed_mps", "trigger_times_s", "wall_ms"}
 
 
 def _run(*args):
@@ -72,3 +72,48 @@ def test_tune_resumes_by_name_and_report_writes_the_tables(tmp_path):
 def test_tune_rejects_a_bad_bound_naming_it(tmp_path):
     r = _run("tune", "--iterations", "2", "--db", str(tmp_path / "t.db"), "--bound", "k=0.2:0.1")
     assert r.returncode == 2 and "bounds.k" in r.stderr
+
+
+def _theta_arg(theta):
+    return ",".join(f"{k}={v!r}" for k, v in theta.items())
+
+
+def test_stored_best_is_reproduced_by_episode_with_its_seed(tmp_path):
+    db = str(tmp_path / "t.db")
+    tuned = _run("tune", "--iterations", "5", "--seed-points", "3", "--robust-samples", "1", "--confirm-samples", "0",
+                 "--seed", "4",
+                 "--db", db, "--name", "repro", "--workers", "2")
+    assert tuned.returncode == 0, tuned.stderr
+    best = json.loads(tuned.stdout)["best"]
+    [sample] = best["seeds"]
+    assert sample["seed"] == 4 * 64 and sample["J"] == best["J"]
+    again = _run("episode", "--theta", _theta_arg(best["theta"]), "--seed", str(sample["seed"]))
+    assert again.returncode == 0, again.stderr
+    episode = json.loads(again.stdout)
+    assert episode["J"] == best["J"] and episode["status"] == best["status"]
+
+
+def test_robust_evaluation_stores_each_seed_and_rescore_uses_fresh_ones(tmp_path):
+    db = str(tmp_path / "t.db")
+    tuned = _run("tune", "--iterations", "3", "--seed-points", "3", "--robust-samples", "2", "--db", db,
+                 "--name", "robust", "--workers", "2")
+    assert tuned.returncode == 0, tuned.stderr
+    best = json.loads(tuned.stdout)["best"]
+    # Two seeds per evaluation, and a best so far is confirmed on the default 4 more.
+    assert [s["seed"] for s in best["seeds"]] == [0, 1, 2, 3, 4, 5]
+    assert best["J"] == pytest.approx(sum(s["J"] for s in best["seeds"]) / 6, abs=1e-12)
+    for sample in best["seeds"]:  # each episode of the evaluation, re-run in a fresh process
+        episode = json.loads(_run("episode", "--theta", _theta_arg(best["theta"]), "--seed",
+                                  str(sample["seed"])).stdout)
+        assert episode["J"] == sample["J"]
+    rescored = _run("rescore", "--name", "robust", "--db", db, "--samples", "3")
+    assert rescored.returncode == 0, rescored.stderr
+    out = json.loads(rescored.stdout)
+    assert {"theta", "samples", "completed", "completion_rate", "J_mean", "J_std", "J_worst", "J_stored"} <= set(out)
+    assert out["theta"] == best["theta"] and out["J_stored"] == best["J"] and out["samples"] == 3
+    assert min(out["seeds"]) >= 2**40
+
+
+def test_rescore_of_an_unknown_job_is_one_line_exit_2(tmp_path):
+    out = _run("rescore", "--name", "nope", "--db", str(tmp_path / "t.db"))
+    assert out.returncode == 2 and "nope" in out.stderr and len(out.stderr.strip().splitlines()) == 1

@@ -44,7 +44,15 @@ class Theta:
         unknown = set(values) - set(THETA_KEYS)
         if unknown:
             raise ConfigError(f"theta has no key {sorted(unknown)[0]!r}; allowed: {', '.join(THETA_KEYS)}")
-        return cls(**{k: float(v) for k, v in values.items()})
+        parsed = {}
+        for key, raw in values.items():
+            try:
+                if isinstance(raw, bool):
+                    raise ValueError
+                parsed[key] = float(raw)
+            except (TypeError, ValueError):
+                raise ConfigError(f"theta.{key} must be a number, got {raw!r}") from None
+        return cls(**parsed)
 
     def as_dict(self) -> dict[str, float]:
         return {k: float(getattr(self, k)) for k in THETA_KEYS}

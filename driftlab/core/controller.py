@@ -15,7 +15,7 @@ import numpy as np
 
 from driftlab.core.equilibrium import Equilibrium, drift_equilibrium
 from driftlab.core.mpc import DisturbanceEstimator, MpcConfig, MpcSolution, ReferenceQp, scale_inputs, to_scaled
-from driftlab.core.track import LEFT
+from driftlab.core.track import LEFT, RIGHT
 from driftlab.core.vehicle import VehicleParams, drift_derivatives_vec, pack_params
 
 
@@ -39,7 +39,8 @@ class ControllerModel:
 @lru_cache(maxsize=16)
 def build_controller_model(vehicle: VehicleParams, mpc: MpcConfig, left_radius_m: float,
                            right_radius_m: float, sideslip_rad: float) -> ControllerModel:
-    """Equilibria and condensed QPs for both sides; cached, as BO reuses them for every episode.
+    """Equilibria and condensed QPs for both sides; cached, as BO reuses them for every episode. Holds
+    constants only: what a solver learns during an episode lives in :class:`DriftController`.
 
     Raises:
         NoEquilibriumError: the model has no drift at one of the radii.
@@ -73,6 +74,8 @@ class DriftController:
         # Disturbances beyond these are not a model mismatch the linear MPC can use.
         limit = np.array([5.0, 2.0, 5.0])
         self.estimator = DisturbanceEstimator(mpc.disturbance_gain, mpc.dt_s, limit)
+        # Solver state lives and dies with this episode (the cached model holds only constants).
+        self.sessions = {LEFT: model.left_qp.session(), RIGHT: model.right_qp.session()}
 
     def reference(self, direction: int) -> np.ndarray:
         """z_ref = [V_eq + dV, beta_eq, r_eq, delta_eq, Fxr_eq kN] of the side being driven.
@@ -112,7 +115,7 @@ class DriftController:
         qp = self.model.qp(direction)
         z_now = qp.pack_state(state, np.array([lateral_error_m, course_error_rad]), scale_inputs(actuators),
                               scale_inputs(self.last_mpc_inputs))
-        solution = qp.solve(z_now, self.reference(direction), disturbance)
+        solution = self.sessions[direction].solve(z_now, self.reference(direction), disturbance)
         self.last_mpc_inputs = np.array([solution.steer_rad, solution.drive_force_n])
         e_la = lookahead_error_m(lateral_error_m, course_error_rad, self.lookahead_m)
         limit = self.mpc.steer_limit_rad

@@ -14,7 +14,7 @@ import numpy as np
 
 from driftlab.core.config import EpisodeConfig, Theta
 from driftlab.core.controller import DriftController, build_controller_model
-from driftlab.core.errors import NoEquilibriumError
+from driftlab.core.errors import ConfigError, NoEquilibriumError
 from driftlab.core.metrics import EpisodeMetrics, compute_metrics
 from driftlab.core.planner import InertiaDriftPlanner, Phase, Triggers
 from driftlab.core.plant import (
@@ -30,6 +30,16 @@ from driftlab.core.plant import (
     Plant,
 )
 from driftlab.core.track import FigureEight, track_errors, wrap_angle
+from driftlab.core.variation import (
+    MAX_SEED,
+    NOISE_HEADING,
+    NOISE_SIDESLIP,
+    NOISE_SPEED,
+    NOISE_X,
+    NOISE_Y,
+    NOISE_YAW_RATE,
+    draw_variation,
+)
 
 STATUSES = ("completed", "spun_out", "left_track", "stalled", "gripped_up", "solver_failed", "diverged")
 
@@ -52,6 +62,8 @@ class EpisodeResult:
     trajectory: np.ndarray
     trigger_points: list[dict[str, float]] = field(default_factory=list)
     wall_ms: float = 0.0
+    theta: Theta = field(default_factory=Theta)
+    seed: int = 0
 
     @property
     def completed(self) -> bool:
@@ -62,7 +74,8 @@ class EpisodeResult:
 
     def summary(self) -> dict:
         """The JSON object `driftlab episode` prints."""
-        return {"status": self.status, "J": self.J, **self.metrics.as_dict(), "wall_ms": round(self.wall_ms, 2)}
+        return {"status": self.status, "J": self.J, "theta": self.theta.as_dict(), "seed": self.seed,
+                **self.metrics.as_dict(), "wall_ms": round(self.wall_ms, 2)}
 
 
 class _FailureMonitor:
@@ -112,8 +125,15 @@ def failure_penalty(completed_fraction: float) -> float:
     return 3.5 + 5.0 * (1.0 - min(max(completed_fraction, 0.0), 1.0))
 
 
-def run_episode(theta: Theta, config: EpisodeConfig) -> EpisodeResult:
-    """Run the paper's figure-8 scenario once (paper Algorithm 1, inner loop) and score it (paper eq. 12)."""
+def run_episode(theta: Theta, config: EpisodeConfig, *, seed: int = 0) -> EpisodeResult:
+    """Run the paper's figure-8 scenario once (paper Algorithm 1, inner loop) and score it (paper eq. 12).
+
+    A pure function of its arguments: ``seed`` draws the episode's plant variation, start and measurement
+    noise (:mod:`driftlab.core.variation`; none in a plant whose spreads are zero), and no state survives
+    from one call to the next. The same arguments give a bit-identical trajectory in any process.
+    """
+    if isinstance(seed, bool) or not isinstance(seed, int) or not 0 <= seed <= MAX_SEED:
+        raise ConfigError(f"seed must be an integer in [0, {MAX_SEED}], got {seed!r}")
     started = time.perf_counter()
     scenario = config.scenario
     track = FigureEight(scenario.left_radius_m, scenario.right_radius_m)
@@ -123,30 +143,37 @@ def run_episode(theta: Theta, config: EpisodeConfig) -> EpisodeResult:
     except NoEquilibriumError:
         empty = np.zeros((0, len(COLUMNS)))
         return EpisodeResult("diverged", failure_penalty(0.0), compute_metrics(empty, [], track, COL), empty,
-                             wall_ms=(time.perf_counter() - started) * 1e3)
-    plant = Plant(config.plant, config.vehicle)
+                             wall_ms=(time.perf_counter() - started) * 1e3, theta=theta, seed=seed)
+    dt = config.mpc.dt_s
+    n_steps = int(round(scenario.max_time_s / dt))
+    variation = draw_variation(config.plant, seed, n_steps + 1)
+    noise = variation.noise
+    plant = Plant(variation.plant, config.vehicle)
     controller = DriftController(model, config.mpc, theta.dV, theta.k, scenario.lookahead_m)
     planner = InertiaDriftPlanner(Triggers(theta.c_lr, theta.c_rl), scenario.settle_tolerance_rad)
     monitor = _FailureMonitor(config)
     start = model.left
-    state = initial_plant_state(config, track, start.speed_mps + theta.dV, start.sideslip_rad,
-                                start.yaw_rate_radps, start.steer_rad, start.drive_force_n)
-    dt = config.mpc.dt_s
-    n_steps = int(round(scenario.max_time_s / dt))
+    offset = variation.start_offset
+    state = initial_plant_state(config, track, start.speed_mps + theta.dV + offset[0], start.sideslip_rad + offset[1],
+                                start.yaw_rate_radps + offset[2], start.steer_rad, start.drive_force_n)
     rows = np.zeros((n_steps + 1, len(COLUMNS)))
     status = "completed"
     n_rows = 0
     for step in range(n_steps + 1):
         t = step * dt
+        # What the sensors report (the planner and the controller see this; J and the failure rules the truth).
+        sensed = _measured(state, noise[step]) if variation.noisy else state
         circle = track.circle(planner.phase.direction)
-        errors = track_errors(circle, state[X_POS], state[Y_POS], state[HEADING] + state[SIDESLIP])
+        seen = track_errors(circle, sensed[X_POS], sensed[Y_POS], sensed[HEADING] + sensed[SIDESLIP])
         ref = controller.reference(planner.phase.direction)
-        phase = planner.update(t, state[X_POS], state[Y_POS], errors.trigger_fraction, state[SIDESLIP] - ref[1])
+        phase = planner.update(t, sensed[X_POS], sensed[Y_POS], seen.trigger_fraction, sensed[SIDESLIP] - ref[1])
         if phase != Phase.FINISHED and phase.direction != circle.direction:
             circle = track.circle(phase.direction)
-            errors = track_errors(circle, state[X_POS], state[Y_POS], state[HEADING] + state[SIDESLIP])
+            seen = track_errors(circle, sensed[X_POS], sensed[Y_POS], sensed[HEADING] + sensed[SIDESLIP])
             ref = controller.reference(phase.direction)
             monitor.last_trigger_s = t
+        errors = track_errors(circle, state[X_POS], state[Y_POS], state[HEADING] + state[SIDESLIP]) \
+            if variation.noisy else seen
         row = rows[n_rows]
         row[COL["t_s"]] = t
         row[COL["x_m"]], row[COL["y_m"]], row[COL["psi_rad"]] = state[X_POS], state[Y_POS], state[HEADING]
@@ -165,10 +192,10 @@ def run_episode(theta: Theta, config: EpisodeConfig) -> EpisodeResult:
         if phase == Phase.FINISHED:
             break
         controller.freeze_estimate(not phase.is_sustained)
-        measured = np.array([state[SPEED], state[SIDESLIP], state[YAW_RATE]])
+        measured = np.array([sensed[SPEED], sensed[SIDESLIP], sensed[YAW_RATE]])
         actuators = np.array([state[STEER], state[DRIVE]])
-        steer, drive, solution = controller.step(measured, actuators, phase.direction, errors.lateral_error_m,
-                                                 errors.course_error_rad)
+        steer, drive, solution = controller.step(measured, actuators, phase.direction, seen.lateral_error_m,
+                                                 seen.course_error_rad)
         row[COL["delta_cmd_rad"]], row[COL["delta_mpc_rad"]], row[COL["Fxr_cmd_n"]] = steer, solution.steer_rad, drive
         row[COL["osqp"]] = 1.0 if solution.used_osqp else 0.0
         if not solution.ok:
@@ -186,4 +213,16 @@ def run_episode(theta: Theta, config: EpisodeConfig) -> EpisodeResult:
     else:
         j_value = failure_penalty(metrics.completed_fraction)
     return EpisodeResult(status, float(j_value), metrics, trajectory, triggers,
-                         wall_ms=(time.perf_counter() - started) * 1e3)
+                         wall_ms=(time.perf_counter() - started) * 1e3, theta=theta, seed=seed)
+
+
+def _measured(state: np.ndarray, noise: np.ndarray) -> np.ndarray:
+    """The plant state as the sensors report it: pose and [V, beta, r] with this step's noise."""
+    sensed = state.copy()
+    sensed[X_POS] += noise[NOISE_X]
+    sensed[Y_POS] += noise[NOISE_Y]
+    sensed[HEADING] += noise[NOISE_HEADING]
+    sensed[SPEED] += noise[NOISE_SPEED]
+    sensed[SIDESLIP] += noise[NOISE_SIDESLIP]
+    sensed[YAW_RATE] += noise[NOISE_YAW_RATE]
+    return sensed

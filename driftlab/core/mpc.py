@@ -8,9 +8,9 @@ delta, Fxr and both increments.
 
 Solving: the QP is condensed to the 2*Nc increments once per reference. Each step first forms the
 unconstrained minimizer with a precomputed gain; when it satisfies every limit it *is* the QP's solution
-(the constraints are inactive, the QP is strictly convex). Only otherwise OSQP (set up once, warm-started,
-only q, l, u updated) solves the constrained QP. OSQP's polishing is off: OSQP 1.x prints an unguarded line
-on stdout per polish (osqp/osqp#785), which would corrupt the CLI's JSON.
+(the constraints are inactive, the QP is strictly convex). Only otherwise OSQP (set up once per episode,
+warm-started within it, only q, l, u updated) solves the constrained QP. OSQP's polishing is off: OSQP 1.x
+prints an unguarded line on stdout per polish (osqp/osqp#785), which would corrupt the CLI's JSON.
 
 Offset-free extension (not in the paper; ``disturbance_gain`` > 0): a constant additive disturbance d on
 (Vdot, betadot, rdot) is estimated each step from the difference between the measured state and the
@@ -271,23 +271,6 @@ class ReferenceQp:
         self.step_limit = np.tile(step_limit, n_h)
         self.input_lo = np.tile(np.array([-config.steer_limit_rad, config.drive_min_n * KN]), n_h)
         self.input_hi = np.tile(np.array([config.steer_limit_rad, config.drive_max_n * KN]), n_h)
-        self._solver: osqp.OSQP | None = None
-        self._ref_key = b""
-        self._ref_terms: tuple[np.ndarray, np.ndarray] | None = None
-
-    def _osqp(self) -> osqp.OSQP:
-        if self._solver is None:
-            solver = osqp.OSQP()
-            solver.setup(
-                sp.csc_matrix(np.triu(self.hessian)), np.zeros(self.hessian.shape[0]),
-                sp.csc_matrix(self.constraint_matrix),
-                np.concatenate([-self.step_limit, self.input_lo]), np.concatenate([self.step_limit, self.input_hi]),
-                eps_abs=self.config.osqp_eps, eps_rel=self.config.osqp_eps, polishing=False, verbose=False,
-                warm_starting=True, max_iter=4000,
-            )
-            self._solver = solver
-        return self._solver
-
     def augmented_reference(self, z_ref: np.ndarray) -> np.ndarray:
         """The 5-entry reference [V, beta, r, delta, Fxr kN] in this QP's state layout (path errors 0)."""
         return self.pack_state(z_ref[:N_X], np.zeros(2), z_ref[N_X:], z_ref[N_X:])
@@ -303,11 +286,45 @@ class ReferenceQp:
         parts.append(previous_commands_scaled)
         return np.concatenate(parts)
 
+    def session(self) -> QpSession:
+        """A fresh solver for one episode (its OSQP warm start and caches die with the episode)."""
+        return QpSession(self)
+
+
+class QpSession:
+    """One episode's use of a :class:`ReferenceQp`: the OSQP instance (set up on first need) and the last
+    reference's terms.
+
+    Kept apart from the cached :class:`ReferenceQp` so that no solver state (OSQP's warm start, its adapted
+    rho) survives from one episode to the next: an episode is a pure function of its inputs.
+    """
+
+    def __init__(self, qp: ReferenceQp) -> None:
+        self.qp = qp
+        self._solver: osqp.OSQP | None = None
+        self._ref_key = b""
+        self._ref_terms: tuple[np.ndarray, np.ndarray] | None = None
+
+    def _osqp(self) -> osqp.OSQP:
+        if self._solver is None:
+            qp = self.qp
+            solver = osqp.OSQP()
+            solver.setup(
+                sp.csc_matrix(np.triu(qp.hessian)), np.zeros(qp.hessian.shape[0]),
+                sp.csc_matrix(qp.constraint_matrix),
+                np.concatenate([-qp.step_limit, qp.input_lo]), np.concatenate([qp.step_limit, qp.input_hi]),
+                eps_abs=qp.config.osqp_eps, eps_rel=qp.config.osqp_eps, polishing=False, verbose=False,
+                warm_starting=True, max_iter=4000,
+            )
+            self._solver = solver
+        return self._solver
+
     def _reference_terms(self, z_ref: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         key = z_ref.tobytes()
         if key != self._ref_key or self._ref_terms is None:  # the reference changes rarely: cache one
-            deviation = np.tile(self.augmented_reference(z_ref) - self.z_lin, self.config.horizon)
-            self._ref_terms = (self.gain_reference @ deviation, self.gamma_t_q @ deviation)
+            qp = self.qp
+            deviation = np.tile(qp.augmented_reference(z_ref) - qp.z_lin, qp.config.horizon)
+            self._ref_terms = (qp.gain_reference @ deviation, qp.gamma_t_q @ deviation)
             self._ref_key = key
         return self._ref_terms
 
@@ -319,28 +336,30 @@ class ReferenceQp:
             z_ref: reference [V, beta, r, delta, Fxr kN].
             disturbance: estimated additive disturbance on (Vdot, betadot, rdot).
         """
-        dz = z_now - self.z_lin
+        qp = self.qp
+        dz = z_now - qp.z_lin
         ref_gain_term, ref_linear_term = self._reference_terms(z_ref)
-        du = ref_gain_term - self.gain_state @ dz - self.gain_disturbance @ disturbance
+        du = ref_gain_term - qp.gain_state @ dz - qp.gain_disturbance @ disturbance
         u_prev = z_now[-N_U:]
-        offset = self.repeat @ u_prev
-        cumulative = offset + self.cumsum @ du
+        offset = qp.repeat @ u_prev
+        cumulative = offset + qp.cumsum @ du
         tol = 1e-9
-        within = ((np.abs(du) - self.step_limit).max() <= tol and (self.input_lo - cumulative).max() <= tol
-                  and (cumulative - self.input_hi).max() <= tol)
+        within = ((np.abs(du) - qp.step_limit).max() <= tol and (qp.input_lo - cumulative).max() <= tol
+                  and (cumulative - qp.input_hi).max() <= tol)
         used_osqp = False
         ok = True
         if not within:
             used_osqp = True
             solver = self._osqp()
-            q = self.gamma_t_q @ (self.phi @ dz + self.lam @ disturbance) - ref_linear_term
-            solver.update(q=q, l=np.concatenate([-self.step_limit, self.input_lo - offset]),
-                          u=np.concatenate([self.step_limit, self.input_hi - offset]))
+            q = qp.gamma_t_q @ (qp.phi @ dz + qp.lam @ disturbance) - ref_linear_term
+            solver.update(q=q, l=np.concatenate([-qp.step_limit, qp.input_lo - offset]),
+                          u=np.concatenate([qp.step_limit, qp.input_hi - offset]))
             result = solver.solve(raise_error=False)
             ok = result.info.status_val in (1, 2) and result.x is not None and np.all(np.isfinite(result.x))
-            du = np.clip(result.x, -self.step_limit, self.step_limit) if ok else np.zeros_like(du)
-        steer = float(np.clip(u_prev[0] + du[0], -self.config.steer_limit_rad, self.config.steer_limit_rad))
-        drive_kn = float(np.clip(u_prev[1] + du[1], self.config.drive_min_n * KN, self.config.drive_max_n * KN))
+            du = np.clip(result.x, -qp.step_limit, qp.step_limit) if ok else np.zeros_like(du)
+        config = qp.config
+        steer = float(np.clip(u_prev[0] + du[0], -config.steer_limit_rad, config.steer_limit_rad))
+        drive_kn = float(np.clip(u_prev[1] + du[1], config.drive_min_n * KN, config.drive_max_n * KN))
         return MpcSolution(steer, drive_kn / KN, used_osqp, ok, du)
 
 

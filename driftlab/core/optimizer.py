@@ -36,6 +36,7 @@ from sklearn.gaussian_process import GaussianProcessClassifier, GaussianProcessR
 from sklearn.gaussian_process.kernels import RBF, ConstantKernel, Matern, WhiteKernel
 
 from driftlab.core.errors import ConfigError
+from driftlab.core.limits import check_int
 
 _CANDIDATES = 1000
 _LOCAL_STARTS = 2
@@ -64,10 +65,8 @@ class BayesianOptimizer:
             lo, hi = (float(v) for v in pair)
             if not (math.isfinite(lo) and math.isfinite(hi) and lo < hi):
                 raise ConfigError(f"bounds.{name} must be [lo, hi] with finite lo < hi, got {list(pair)}")
-        if not 1 <= seed_points <= 10_000:
-            raise ConfigError(f"seed_points must be in [1, 10000], got {seed_points}")
-        if not 10 <= active_set <= 5_000:
-            raise ConfigError(f"active_set must be in [10, 5000], got {active_set}")
+        check_int("seed_points", seed_points)
+        check_int("active_set", active_set)
         self.names = list(bounds)
         self.lo = np.array([float(bounds[n][0]) for n in self.names])
         self.hi = np.array([float(bounds[n][1]) for n in self.names])

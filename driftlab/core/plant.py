@@ -31,6 +31,20 @@ from driftlab.core.vehicle import VehicleParams, drift_derivatives, pack_params,
 X_POS, Y_POS, HEADING, SPEED, SIDESLIP, YAW_RATE, STEER, DRIVE = range(8)
 N_PLANT_STATES = 8
 
+# Per-episode variation settings and their largest allowed value (see PlantConfig).
+VARIATION_LIMITS: dict[str, float] = {
+    "friction_spread": 0.3, "mass_spread": 0.3, "steer_lag_spread_s": 0.5, "initial_speed_spread_mps": 2.0,
+    "initial_sideslip_spread_rad": 0.2, "initial_yaw_rate_spread_radps": 0.2, "noise_speed_mps": 1.0,
+    "noise_sideslip_rad": 0.1, "noise_yaw_rate_radps": 0.1, "noise_position_m": 1.0, "noise_heading_rad": 0.1}
+
+PLANT_LIMITS: dict[str, tuple[float, float]] = {
+    "friction_scale": (0.5, 2.0), "mass_scale": (0.5, 2.0), "yaw_inertia_scale": (0.5, 2.0),
+    "tyre_b_scale": (0.5, 2.0), "tyre_c_scale": (0.5, 1.6), "cg_height_m": (0.0, 1.5),
+    "steer_lag_s": (0.0, 0.5), "steer_rate_radps": (0.1, 100.0), "drive_lag_s": (0.0, 1.0),
+    "drive_rate_nps": (100.0, 1e7), "substep_s": (1e-4, 0.01),
+    **{name: (0.0, hi) for name, hi in VARIATION_LIMITS.items()},
+}
+
 # Actuator parameter layout: [steer lag s, steer rate rad/s, drive lag s, drive rate N/s].
 A_STEER_LAG, A_STEER_RATE, A_DRIVE_LAG, A_DRIVE_RATE = range(4)
 
@@ -60,6 +74,20 @@ class PlantConfig:
         drive_lag_s: drive-force actuator time constant [s] (0: follows at once).
         drive_rate_nps: drive-force rate limit [N/s].
         substep_s: RK4 integration step [s].
+
+    Per-episode variation, drawn from the episode's seed (:mod:`driftlab.core.variation`); a real car never
+    drives the same episode twice. Spreads are half-widths of uniform draws, noise levels standard deviations
+    of Gaussian measurement noise (an RTK GNSS/INS with an optical slip sensor). All zero in :meth:`nominal`.
+    The defaults are modest because the default controller's basin on the default plant is small: with
+    sideslip noise 0.001 rad, or friction +-2%, no theta of the default bounds completes 95% of episodes
+    (benchmarks/variation_sweep.py); widening that basin is the mismatch-envelope work.
+        friction_spread: relative spread of friction, mu x (1 + U(-s, s)) [-].
+        mass_spread: relative spread of mass (and with it yaw inertia) [-].
+        steer_lag_spread_s: spread of the steering time constant [s].
+        initial_speed_spread_mps, initial_sideslip_spread_rad, initial_yaw_rate_spread_radps: spread of the
+            start state around the start equilibrium.
+        noise_speed_mps, noise_sideslip_rad, noise_yaw_rate_radps: noise on the measured V, beta, r.
+        noise_position_m, noise_heading_rad: noise on the measured x, y and psi (hence on e and dpsi).
     """
 
     friction_scale: float = 1.1
@@ -75,15 +103,23 @@ class PlantConfig:
     drive_lag_s: float = 0.05
     drive_rate_nps: float = 40000.0
     substep_s: float = 0.005
+    friction_spread: float = 0.01
+    mass_spread: float = 0.02
+    steer_lag_spread_s: float = 0.002
+    initial_speed_spread_mps: float = 0.1
+    initial_sideslip_spread_rad: float = 0.002
+    initial_yaw_rate_spread_radps: float = 0.004
+    noise_speed_mps: float = 0.01
+    noise_sideslip_rad: float = 0.0005
+    noise_yaw_rate_radps: float = 0.002
+    noise_position_m: float = 0.01
+    noise_heading_rad: float = 0.002
 
     def __post_init__(self) -> None:
-        limits = {
-            "friction_scale": (0.5, 2.0), "mass_scale": (0.5, 2.0), "yaw_inertia_scale": (0.5, 2.0),
-            "tyre_b_scale": (0.5, 2.0), "tyre_c_scale": (0.5, 1.6), "cg_height_m": (0.0, 1.5),
-            "steer_lag_s": (0.0, 0.5), "steer_rate_radps": (0.1, 100.0), "drive_lag_s": (0.0, 1.0),
-            "drive_rate_nps": (100.0, 1e7), "substep_s": (1e-4, 0.01),
-        }
-        check_ranges(self, "plant", limits)
+        check_ranges(self, "plant", PLANT_LIMITS)
+        if self.steer_lag_spread_s > self.steer_lag_s:
+            raise ConfigError(f"plant.steer_lag_spread_s must be in [0, plant.steer_lag_s = {self.steer_lag_s}], "
+                              f"got {self.steer_lag_spread_s!r}")
         for name in ("friction_circle", "load_transfer"):
             if not isinstance(getattr(self, name), bool):
                 raise ConfigError(f"plant.{name} must be true or false, got {getattr(self, name)!r}")
@@ -92,7 +128,13 @@ class PlantConfig:
     def nominal(cls) -> PlantConfig:
         """A plant equal to the controller's model (ideal actuators, same car)."""
         return cls(friction_scale=1.0, tyre_c_scale=1.0, friction_circle=False, load_transfer=False,
-                   steer_lag_s=0.0, steer_rate_radps=100.0, drive_lag_s=0.0, drive_rate_nps=1e7)
+                   steer_lag_s=0.0, steer_rate_radps=100.0, drive_lag_s=0.0, drive_rate_nps=1e7,
+                   **{name: 0.0 for name in VARIATION_LIMITS})
+
+    @property
+    def varies(self) -> bool:
+        """Whether episodes of this plant differ by seed."""
+        return any(getattr(self, name) > 0.0 for name in VARIATION_LIMITS)
 
     def vehicle(self, model_vehicle: VehicleParams) -> VehicleParams:
         """The plant's own car: the controller's vehicle with this config's scale factors."""

@@ -12,6 +12,8 @@ from typing import Any
 
 from driftlab.core.config import THETA_KEYS, EpisodeConfig, apply_overrides, config_from_dict, config_to_dict
 from driftlab.core.errors import ConfigError
+from driftlab.core.limits import JOB_LIMITS, MAX_ROBUST_SAMPLES, check_int
+from driftlab.core.robust import tuning_seeds
 
 # Around the band where the default controller completes the 8 on the default plant (benchmarks/mismatch_sweep.py:
 # c outside [0.005, 0.04] or k above 0.12 fail nearly always).
@@ -20,13 +22,13 @@ DEFAULT_BOUNDS: dict[str, tuple[float, float]] = {
 # What a bound may span: theta's own validity range.
 BOUND_LIMITS: dict[str, tuple[float, float]] = {"c_lr": (0.0, 0.5), "c_rl": (0.0, 0.5), "dV": (-5.0, 5.0),
                                                 "k": (-1.0, 1.0)}
-MAX_ITERATIONS = 5000
-
-
-def _check_int(name: str, value: Any, lo: int, hi: int) -> int:
-    if isinstance(value, bool) or not isinstance(value, int) or not lo <= value <= hi:
-        raise ConfigError(f"{name} must be an integer in [{lo}, {hi}], got {value!r}")
-    return value
+MAX_ITERATIONS = JOB_LIMITS["iterations"][1]
+# Episodes per evaluation by default: with 4 seeds a theta that fails one run in ten still fails an evaluation
+# 34% of the time, enough for the failure model to steer away from it, at 4x the episodes (2 workers keep
+# one evaluation in flight, so the BO stays sequential).
+DEFAULT_ROBUST_SAMPLES = 4
+# Extra seeds a would-be best evaluation must also complete (see driftlab.worker.job_loop).
+DEFAULT_CONFIRM_SAMPLES = 4
 
 
 def validate_bounds(bounds: dict[str, Any]) -> dict[str, tuple[float, float]]:
@@ -58,7 +60,10 @@ class TuningSpec:
         iterations: episodes to evaluate in total (1..5000).
         seed_points: space-filling proposals before the GP (1..1000).
         active_set: most observations the GP is fit on (10..5000).
-        seed: optimizer seed.
+        seed: optimizer seed (also picks the episode seeds, :func:`driftlab.core.robust.tuning_seeds`).
+        robust_samples: seeded episodes per evaluation (1..64), aggregated by :mod:`driftlab.core.robust`.
+        confirm_samples: more seeded episodes an evaluation runs when it would become the best so far
+            (0..64, robust_samples + confirm_samples <= 64); it is stored with all of them.
         bounds: theta name -> (lo, hi).
         config: the episode configuration (plant, controller, scenario ...).
     """
@@ -67,25 +72,39 @@ class TuningSpec:
     seed_points: int = 20
     active_set: int = 400
     seed: int = 0
+    robust_samples: int = DEFAULT_ROBUST_SAMPLES
+    confirm_samples: int = DEFAULT_CONFIRM_SAMPLES
     bounds: dict[str, tuple[float, float]] = field(default_factory=lambda: dict(DEFAULT_BOUNDS))
     config: EpisodeConfig = field(default_factory=EpisodeConfig)
 
     def __post_init__(self) -> None:
-        _check_int("iterations", self.iterations, 1, MAX_ITERATIONS)
-        _check_int("seed_points", self.seed_points, 1, 1000)
-        _check_int("active_set", self.active_set, 10, 5000)
-        _check_int("seed", self.seed, 0, 2**31 - 1)
+        for name in ("iterations", "seed_points", "active_set", "seed", "robust_samples"):
+            check_int(name, getattr(self, name))
+        # The confirmation seeds follow the evaluation seeds in the job's block of MAX_ROBUST_SAMPLES.
+        check_int("confirm_samples", self.confirm_samples, 0, MAX_ROBUST_SAMPLES - self.robust_samples)
         object.__setattr__(self, "bounds", validate_bounds(dict(self.bounds)))
 
     def to_dict(self) -> dict[str, Any]:
         return {"iterations": self.iterations, "seed_points": self.seed_points, "active_set": self.active_set,
-                "seed": self.seed, "bounds": {k: list(v) for k, v in self.bounds.items()},
+                "seed": self.seed, "robust_samples": self.robust_samples, "confirm_samples": self.confirm_samples,
+                "bounds": {k: list(v) for k, v in self.bounds.items()},
                 "config": config_to_dict(self.config)}
+
+    @property
+    def episode_seeds(self) -> list[int]:
+        """The seeds every evaluation of this job runs (common random numbers)."""
+        return tuning_seeds(self.seed, self.robust_samples)
+
+    @property
+    def confirm_seeds(self) -> list[int]:
+        """The further seeds a would-be best evaluation runs."""
+        return tuning_seeds(self.seed, self.robust_samples + self.confirm_samples)[self.robust_samples:]
 
     @classmethod
     def from_dict(cls, data: dict[str, Any]) -> TuningSpec:
         """From a stored or posted document. ``config`` may be nested sections or flat dotted keys."""
-        allowed = {"iterations", "seed_points", "active_set", "seed", "bounds", "config"}
+        allowed = {"iterations", "seed_points", "active_set", "seed", "robust_samples", "confirm_samples", "bounds",
+                   "config"}
         unknown = set(data) - allowed
         if unknown:
             raise ConfigError(f"unknown field {sorted(unknown)[0]!r}; allowed: {', '.join(sorted(allowed))}")
@@ -96,5 +115,6 @@ class TuningSpec:
             config = config_from_dict(raw_config)
         else:
             config = apply_overrides(EpisodeConfig(), raw_config)
-        kwargs = {k: data[k] for k in ("iterations", "seed_points", "active_set", "seed") if k in data}
+        scalars = ("iterations", "seed_points", "active_set", "seed", "robust_samples", "confirm_samples")
+        kwargs = {k: data[k] for k in scalars if k in data}
         return cls(**kwargs, bounds=data.get("bounds") or {}, config=config)

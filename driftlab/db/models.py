@@ -1,4 +1,5 @@
-"""SQLAlchemy 2.x tables: jobs, their evaluations, and each evaluation's compressed trajectory."""
+"""SQLAlchemy 2.x tables: jobs, their evaluations, and each evaluation's compressed trajectory. The schema
+changes only through a revision in driftlab/db/migrations (see driftlab.db.schema)."""
 
 from __future__ import annotations
 
@@ -7,8 +8,6 @@ from typing import Any
 
 from sqlalchemy import JSON, Float, ForeignKey, Integer, LargeBinary, String, UniqueConstraint
 from sqlalchemy.orm import DeclarativeBase, Mapped, mapped_column, relationship
-
-SCHEMA_VERSION = 1
 
 
 def utcnow() -> datetime:
@@ -26,11 +25,14 @@ class Job(Base):
     name: Mapped[str] = mapped_column(String(200), unique=True)
     spec: Mapped[dict[str, Any]] = mapped_column(JSON)  # TuningSpec.to_dict()
     seed: Mapped[int] = mapped_column(Integer)
-    status: Mapped[str] = mapped_column(String(20), default="queued")  # queued running paused finished failed
+    status: Mapped[str] = mapped_column(String(20), default="queued")  # a lifecycle.JobStatus
     error: Mapped[str | None] = mapped_column(String(2000), default=None)
     created_at: Mapped[datetime] = mapped_column(default=utcnow)
     updated_at: Mapped[datetime] = mapped_column(default=utcnow, onupdate=utcnow)
     started_at: Mapped[datetime | None] = mapped_column(default=None)
+    # The lease (driftlab.db.lifecycle): the runner that holds the job and its last heartbeat.
+    runner_id: Mapped[str | None] = mapped_column(String(100), default=None)
+    heartbeat_at: Mapped[datetime | None] = mapped_column(default=None)
 
     evaluations: Mapped[list[Evaluation]] = relationship(back_populates="job", order_by="Evaluation.index")
 
@@ -43,11 +45,15 @@ class Evaluation(Base):
     job_id: Mapped[int] = mapped_column(ForeignKey("jobs.id"), index=True)
     index: Mapped[int] = mapped_column(Integer)  # 0-based, in order of completion
     theta: Mapped[dict[str, float]] = mapped_column(JSON)
-    J: Mapped[float] = mapped_column(Float)  # the paper's J when completed, the failure penalty otherwise
+    # Mean over its episodes of the paper's J (a failed episode at its failure penalty), driftlab.core.robust.
+    J: Mapped[float] = mapped_column(Float)
     status: Mapped[str] = mapped_column(String(20))
     metrics: Mapped[dict[str, Any]] = mapped_column(JSON)
     trigger_points: Mapped[list[dict[str, float]]] = mapped_column(JSON)
-    wall_ms: Mapped[float] = mapped_column(Float)
+    wall_ms: Mapped[float] = mapped_column(Float)  # CPU time of all its episodes
+    # One entry per episode: {seed, status, J, completed_fraction}; J above is their aggregate.
+    seeds: Mapped[list[dict[str, Any]] | None] = mapped_column(JSON, default=None)
+    trajectory_seed: Mapped[int | None] = mapped_column(Integer, default=None)  # the stored episode's seed
     created_at: Mapped[datetime] = mapped_column(default=utcnow)
 
     job: Mapped[Job] = relationship(back_populates="evaluations")

@@ -1,13 +1,11 @@
 """Storage functions (keyword-only, no HTTP): jobs, evaluations, trajectories.
 
-SQLite by default (``driftlab.db`` in the working directory, or a ``--db`` file, or any SQLAlchemy URL in
-``DRIFTLAB_DATABASE_URL``), opened in WAL mode with a busy timeout so readers never see "database is
-locked" while a worker commits.
+SQLite by default (where: :func:`driftlab.settings.database_url`), opened in WAL mode with a busy timeout so
+readers never see "database is locked" while a worker commits.
 """
 
 from __future__ import annotations
 
-import os
 import zlib
 from collections.abc import Iterator
 from contextlib import contextmanager
@@ -17,9 +15,9 @@ import numpy as np
 from sqlalchemy import Engine, create_engine, event, func, select
 from sqlalchemy.orm import Session, sessionmaker
 
-from driftlab.db.models import SCHEMA_VERSION, Base, Evaluation, Job, Meta, Trajectory
+from driftlab.db import schema
+from driftlab.db.models import Evaluation, Job, Meta, Trajectory  # noqa: F401  (Meta: re-exported)
 
-DEFAULT_DB_FILE = "driftlab.db"
 _BUSY_TIMEOUT_MS = 30_000
 
 
@@ -27,24 +25,13 @@ class NotFound(LookupError):
     """No such job or evaluation."""
 
 
-def database_url(db_file: str | None = None) -> str:
-    """--db FILE wins, then DRIFTLAB_DATABASE_URL, then ./driftlab.db."""
-    if db_file:
-        return db_file if "://" in db_file else f"sqlite:///{os.path.abspath(db_file)}"
-    return os.environ.get("DRIFTLAB_DATABASE_URL") or f"sqlite:///{os.path.abspath(DEFAULT_DB_FILE)}"
-
-
 def open_database(url: str) -> sessionmaker[Session]:
-    """Engine and session factory; creates the schema if missing."""
+    """Engine and session factory; creates or upgrades the schema to the newest revision."""
     engine = create_engine(url, connect_args={"timeout": _BUSY_TIMEOUT_MS / 1000} if url.startswith("sqlite") else {})
     if url.startswith("sqlite"):
         event.listen(engine, "connect", _sqlite_pragmas)
-    Base.metadata.create_all(engine)
-    factory = sessionmaker(engine, expire_on_commit=False)
-    with factory.begin() as session:
-        if session.get(Meta, "schema_version") is None:
-            session.add(Meta(key="schema_version", value=str(SCHEMA_VERSION)))
-    return factory
+    schema.upgrade(engine)
+    return sessionmaker(engine, expire_on_commit=False)
 
 
 def _sqlite_pragmas(dbapi_connection, _record) -> None:
@@ -85,6 +72,13 @@ def find_job(session: Session, *, name: str) -> Job | None:
     return session.scalar(select(Job).where(Job.name == name))
 
 
+def get_job_by_name(session: Session, *, name: str) -> Job:
+    job = find_job(session, name=name)
+    if job is None:
+        raise NotFound(f"no job named {name!r}")
+    return job
+
+
 def list_jobs(session: Session) -> list[Job]:
     return list(session.scalars(select(Job).order_by(Job.id)))
 
@@ -111,11 +105,13 @@ def unique_job_name(session: Session, base: str) -> str:
 # -- evaluations -------------------------------------------------------------------------------------------
 def add_evaluation(session: Session, *, job_id: int, theta: dict[str, float], J: float, status: str,
                    metrics: dict[str, Any], trigger_points: list[dict[str, float]], wall_ms: float,
-                   columns: list[str], trajectory: np.ndarray) -> Evaluation:
+                   columns: list[str], trajectory: np.ndarray, seeds: list[dict[str, Any]] | None = None,
+                   trajectory_seed: int | None = None) -> Evaluation:
     """Appends the next evaluation of a job (its index is the count so far, so numbering survives resumes)."""
     index = count_evaluations(session, job_id=job_id)
     evaluation = Evaluation(job_id=job_id, index=index, theta=theta, J=J, status=status, metrics=metrics,
-                            trigger_points=trigger_points, wall_ms=wall_ms)
+                            trigger_points=trigger_points, wall_ms=wall_ms, seeds=seeds,
+                            trajectory_seed=trajectory_seed)
     data = np.ascontiguousarray(trajectory, dtype=np.float64)
     evaluation.trajectory = Trajectory(columns=list(columns), rows=int(data.shape[0]),
                                        data=zlib.compress(data.tobytes(), 6))

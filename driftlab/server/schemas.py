@@ -1,22 +1,54 @@
-"""Request bodies and responses of the REST API."""
+"""Request bodies and path/query types of the REST API. Integers are strict (no booleans, no numeric strings)
+and their ranges come from the one table in :mod:`driftlab.core.limits`."""
 
 from __future__ import annotations
 
-from typing import Any
+from typing import Annotated, Any
 
+from fastapi import Path, Query
 from pydantic import BaseModel, ConfigDict, Field
 
-from driftlab.core.tuning import MAX_ITERATIONS
+from driftlab.core.limits import JOB_LIMITS
+from driftlab.core.tuning import DEFAULT_CONFIRM_SAMPLES, DEFAULT_ROBUST_SAMPLES
+
+MAX_ID = 2**63 - 1  # SQLite's INTEGER; larger ids cannot exist (and used to overflow into a 500)
+MAX_PAGE = 1000
+
+JobId = Annotated[int, Path(ge=1, le=MAX_ID, description="a job's id")]
+EvaluationId = Annotated[int, Path(ge=1, le=MAX_ID, description="an evaluation's id (global, as in the API)")]
+After = Annotated[int, Query(ge=-1, le=MAX_ID, description="only evaluations with index > after")]
+Limit = Annotated[int, Query(ge=1, le=MAX_PAGE, description="at most this many evaluations")]
+
+
+def _limited(name: str, default: int | None = None, description: str = "") -> Any:
+    lo, hi = JOB_LIMITS[name]
+    if default is None:
+        return Field(ge=lo, le=hi, strict=True, description=description)
+    return Field(default=default, ge=lo, le=hi, strict=True, description=description)
 
 
 class JobCreate(BaseModel):
     model_config = ConfigDict(extra="forbid")
 
     name: str | None = Field(default=None, min_length=1, max_length=200)
-    iterations: int = Field(ge=1, le=MAX_ITERATIONS)
-    seed_points: int = Field(default=20, ge=1, le=1000)
-    active_set: int = Field(default=400, ge=10, le=5000)
-    seed: int = Field(default=0, ge=0, le=2**31 - 1)
+    iterations: int = _limited("iterations", description="evaluations in total")
+    seed_points: int = _limited("seed_points", 20)
+    active_set: int = _limited("active_set", 400)
+    seed: int = _limited("seed", 0)
+    robust_samples: int = _limited("robust_samples", DEFAULT_ROBUST_SAMPLES,
+                                   "seeded episodes per evaluation; J is their mean, and the evaluation "
+                                   "completes only if every episode does")
+    confirm_samples: int = _limited("confirm_samples", DEFAULT_CONFIRM_SAMPLES,
+                                    "more seeds an evaluation must also complete before it counts as the best "
+                                    "so far (robust_samples + confirm_samples <= 64)")
     bounds: dict[str, tuple[float, float]] | None = Field(default=None, max_length=4)
     config: dict[str, Any] | None = Field(default=None, description="dotted keys as `driftlab --set`, "
                                           "e.g. {\"plant.steer_lag_s\": 0.02}, or nested sections")
+
+
+class JobPatch(BaseModel):
+    """A new budget: at least the evaluations stored. A finished job with a larger budget is queued again."""
+
+    model_config = ConfigDict(extra="forbid")
+
+    iterations: int = _limited("iterations")

@@ -21,6 +21,7 @@ from fastapi.responses import HTMLResponse, RedirectResponse, Response
 from sqlalchemy.orm import Session, sessionmaker
 
 from driftlab.db import storage
+from driftlab.server.schemas import EvaluationId
 from driftlab.web.recording import EpisodeRecorder
 from driftlab.web.sources import frames_of_evaluation, track_of_spec
 
@@ -83,13 +84,13 @@ def add_view_routes(app: FastAPI, upstream_port: Callable[[], int | None], recor
         await relay(websocket, upstream_port())
 
     @app.get("/api/evaluations/{evaluation_id}/recording.viser", tags=["view"])
-    def recording(evaluation_id: int) -> Response:
+    def recording(evaluation_id: EvaluationId) -> Response:
         """The episode as a viser recording: open it with ``/viser/?playbackPath=<this URL>``."""
         return Response(recordings.get(evaluation_id, "viser"), media_type="application/octet-stream",
                         headers={"Content-Disposition": f'attachment; filename="evaluation-{evaluation_id}.viser"'})
 
     @app.get("/api/evaluations/{evaluation_id}/replay.html", tags=["view"])
-    def replay(evaluation_id: int) -> Response:
+    def replay(evaluation_id: EvaluationId) -> Response:
         """A standalone HTML page that replays the episode with no server."""
         return Response(recordings.get(evaluation_id, "html"), media_type="text/html",
                         headers={"Content-Disposition": f'attachment; filename="evaluation-{evaluation_id}.html"'})

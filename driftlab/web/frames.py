@@ -78,6 +78,6 @@ class EpisodeFrames:
         return [p for p in self.trigger_points if p["t_s"] <= t_s]
 
     def caption(self) -> str:
-        theta = ", ".join(f"{k} {v:+.4f}" for k, v in self.theta.items())
+        theta = ", ".join(f"{k} {v!r}" for k, v in self.theta.items())  # full precision: copied, it reproduces
         which = f"#{self.index}" if self.index is not None else "what-if"
         return f"{which} {self.status} J {self.J:.3f} | {theta}"

@@ -8,6 +8,8 @@ from __future__ import annotations
 
 import multiprocessing
 import os
+import threading
+import time
 from concurrent.futures import Future, ProcessPoolExecutor
 from dataclasses import dataclass
 from typing import Any, Protocol
@@ -20,6 +22,7 @@ class EpisodeOutcome:
     """What a worker process sends back: everything storage needs, as plain data."""
 
     theta: dict[str, float]
+    seed: int
     status: str
     J: float
     metrics: dict[str, Any]
@@ -34,27 +37,38 @@ class EpisodeOutcome:
 
 
 class EpisodeExecutor(Protocol):
-    def submit(self, theta: dict[str, float], config_doc: dict[str, Any]) -> Future[EpisodeOutcome]: ...
+    def submit(self, theta: dict[str, float], config_doc: dict[str, Any], seed: int = 0) -> Future[EpisodeOutcome]:
+        ...
 
     def shutdown(self) -> None: ...
 
 
-def evaluate_episode(theta: dict[str, float], config_doc: dict[str, Any]) -> EpisodeOutcome:
-    """Runs in the worker process."""
+def evaluate_episode(theta: dict[str, float], config_doc: dict[str, Any], seed: int = 0) -> EpisodeOutcome:
+    """Runs in the worker process. A pure function of its arguments (see run_episode)."""
     from driftlab.core.config import Theta, config_from_dict
     from driftlab.core.episode import COLUMNS, run_episode
 
-    result = run_episode(Theta.from_mapping(theta), config_from_dict(config_doc))
-    return EpisodeOutcome(theta=dict(theta), status=result.status, J=float(result.J),
+    result = run_episode(Theta.from_mapping(theta), config_from_dict(config_doc), seed=seed)
+    return EpisodeOutcome(theta=dict(theta), seed=seed, status=result.status, J=float(result.J),
                           metrics=result.metrics.as_dict(), trigger_points=result.trigger_points,
                           wall_ms=float(result.wall_ms), columns=list(COLUMNS), trajectory=result.trajectory)
 
 
-def _init_worker(niceness: int) -> None:
+def _exit_with_parent(parent_pid: int, period_s: float = 0.5) -> None:
+    """A worker whose parent died (kill -9 included: no cleanup ran) exits within ``period_s`` instead of
+    living on as an orphan; it notices by being re-parented."""
+    while True:
+        time.sleep(period_s)
+        if os.getppid() != parent_pid:
+            os._exit(0)
+
+
+def _init_worker(niceness: int, parent_pid: int) -> None:
     # BLAS oversubscription on 2 cores costs up to 8x.
     os.environ["OMP_NUM_THREADS"] = "1"
     if niceness:
         os.nice(niceness)
+    threading.Thread(target=_exit_with_parent, args=(parent_pid,), name="exit-with-parent", daemon=True).start()
 
 
 class LocalProcessExecutor:
@@ -65,10 +79,10 @@ class LocalProcessExecutor:
         os.environ.setdefault("OMP_NUM_THREADS", "1")
         self.workers = workers
         self.pool = ProcessPoolExecutor(max_workers=workers, mp_context=multiprocessing.get_context("spawn"),
-                                        initializer=_init_worker, initargs=(niceness,))
+                                        initializer=_init_worker, initargs=(niceness, os.getpid()))
 
-    def submit(self, theta: dict[str, float], config_doc: dict[str, Any]) -> Future[EpisodeOutcome]:
-        return self.pool.submit(evaluate_episode, theta, config_doc)
+    def submit(self, theta: dict[str, float], config_doc: dict[str, Any], seed: int = 0) -> Future[EpisodeOutcome]:
+        return self.pool.submit(evaluate_episode, theta, config_doc, seed)
 
     def warm_up(self) -> Future[EpisodeOutcome]:
         """Start the workers and load the compiled dynamics now, so the first real episode is not slow."""

@@ -1,4 +1,5 @@
-"""Runs one tuning job: rebuild the optimizer from stored evaluations, then ask, evaluate, store, tell.
+"""Runs one tuning job: rebuild the optimizer from stored evaluations, then ask, evaluate (one episode per
+seed), store, tell.
 
 Shared by `driftlab tune` and the server's worker. Every evaluation is committed as it completes; a job
 that was interrupted continues from what is stored, with no repeated evaluation and unbroken numbering.
@@ -9,14 +10,16 @@ from __future__ import annotations
 import time
 from collections.abc import Callable
 from concurrent.futures import FIRST_COMPLETED, Future, wait
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 
 from sqlalchemy.orm import Session, sessionmaker
 
 from driftlab.core.optimizer import BayesianOptimizer
+from driftlab.core.robust import RobustScore, SampleResult, aggregate
 from driftlab.core.tuning import TuningSpec
-from driftlab.db import storage
-from driftlab.db.models import utcnow
+from driftlab.db import lifecycle, storage
+from driftlab.db.lifecycle import JobStatus
+from driftlab.db.models import Job
 from driftlab.worker.executor import EpisodeExecutor, EpisodeOutcome
 
 
@@ -25,7 +28,7 @@ class Progress:
     n_done: int
     iterations: int
     best_J: float | None
-    last: EpisodeOutcome | None
+    last: RobustScore | None
     seconds_per_evaluation: float | None
 
     @property
@@ -44,54 +47,156 @@ def restore_optimizer(spec: TuningSpec, history: list[tuple[dict[str, float], fl
     return optimizer
 
 
-def run_job(factory: sessionmaker[Session], job_id: int, executor: EpisodeExecutor, *, workers: int = 1,
-            should_stop: Callable[[], bool] = lambda: False,
+@dataclass
+class _PendingEvaluation:
+    """One asked theta whose episodes (one per seed) are running."""
+
+    theta: dict[str, float]
+    seeds: list[int]
+    outcomes: dict[int, EpisodeOutcome] = field(default_factory=dict)
+    confirming: bool = False
+
+    @property
+    def done(self) -> bool:
+        return len(self.outcomes) == len(self.seeds)
+
+    def score(self) -> tuple[RobustScore, list[SampleResult], EpisodeOutcome]:
+        ordered = [self.outcomes[s] for s in self.seeds]
+        samples = [SampleResult(o.seed, o.status, float(o.J), float(o.metrics.get("completed_fraction", 0.0)))
+                   for o in ordered]
+        score = aggregate(samples)
+        return score, samples, ordered[score.representative]
+
+
+def _store(factory: sessionmaker[Session], job_id: int, runner: str,
+           evaluation: _PendingEvaluation) -> tuple[RobustScore, int] | None:
+    """Commit the evaluation if this runner still holds the job (None if the job was taken over or deleted:
+    its new runner asks again, and no index is stored twice)."""
+    score, samples, shown = evaluation.score()
+    metrics = {**shown.metrics, "n_samples": len(samples), "n_completed": score.n_completed,
+               "J_samples_mean": score.J}
+    with storage.transaction(factory) as session:
+        job = session.get(Job, job_id)
+        if job is None or job.runner_id != runner:
+            return None
+        stored = storage.add_evaluation(session, job_id=job_id, theta=evaluation.theta, J=score.J,
+                                        status=score.status, metrics=metrics, trigger_points=shown.trigger_points,
+                                        wall_ms=sum(o.wall_ms for o in evaluation.outcomes.values()),
+                                        columns=shown.columns, trajectory=shown.trajectory,
+                                        seeds=[s.as_dict() for s in samples], trajectory_seed=shown.seed)
+        index = stored.index
+    return score, index
+
+
+def claim_job(factory: sessionmaker[Session], job_id: int, runner: str,
+              from_statuses: tuple[JobStatus, ...] = (JobStatus.QUEUED,)) -> None:
+    """Take the job's lease (raises LeaseHeld or TransitionError, see driftlab.db.lifecycle)."""
+    with storage.transaction(factory) as session:
+        lifecycle.claim(session, job_id=job_id, runner=runner, from_statuses=from_statuses)
+
+
+class _Lease:
+    """Renews the job's lease every HEARTBEAT_S; tells when it is lost and what the budget is now."""
+
+    def __init__(self, factory: sessionmaker[Session], job_id: int, runner: str, iterations: int) -> None:
+        self.factory, self.job_id, self.runner = factory, job_id, runner
+        self.iterations = iterations
+        self.held = True
+        self._last = time.monotonic()
+
+    def renew_if_due(self) -> None:
+        if not self.held or time.monotonic() - self._last < lifecycle.HEARTBEAT_S:
+            return
+        with storage.transaction(self.factory) as session:
+            self.held = lifecycle.heartbeat(session, job_id=self.job_id, runner=self.runner)
+            job = session.get(Job, self.job_id)
+            if job is not None:
+                self.iterations = int(job.spec["iterations"])  # PATCH on a running job takes effect here
+        self._last = time.monotonic()
+
+
+def run_job(factory: sessionmaker[Session], job_id: int, executor: EpisodeExecutor, *, runner: str,
+            workers: int = 1, should_stop: Callable[[], bool] = lambda: False,
             on_progress: Callable[[Progress], None] | None = None) -> str:
-    """Runs the job until its budget is spent or ``should_stop()``; returns the status it leaves the job in
-    ("finished", "paused" or "failed")."""
+    """Runs a job whose lease ``runner`` holds (:func:`claim_job`) until its budget is spent, it is paused
+    (the lease is lost), or ``should_stop()`` (the runner shuts down: the job goes back to the queue). Returns
+    the status it leaves the job in and releases the lease.
+
+    Each evaluation runs one episode per seed of the job (``robust_samples`` of them, the same seeds for
+    every theta) on the executor; one that completes every episode with a J better than the best so far
+    then runs ``confirm_samples`` more seeds, and is stored with all of them. New thetas are asked while
+    fewer than ``workers`` episodes are in flight, so with several samples per evaluation the optimizer stays
+    nearly sequential.
+    """
     with storage.transaction(factory) as session:
         job = storage.get_job(session, job_id=job_id)
         spec = TuningSpec.from_dict(job.spec)
         stored = storage.evaluations(session, job_id=job_id)
         history = [(e.theta, e.J if e.completed else None) for e in stored]
         best = min((e.J for e in stored if e.completed), default=None)
-        job.status = "running"
-        job.started_at = job.started_at or utcnow()
     optimizer = restore_optimizer(spec, history)
     config_doc = spec.to_dict()["config"]
+    seeds, confirm_seeds = spec.episode_seeds, spec.confirm_seeds
+    lease = _Lease(factory, job_id, runner, spec.iterations)
     n_done = len(history)
-    running: dict[Future[EpisodeOutcome], dict[str, float]] = {}
+    evaluations: list[_PendingEvaluation] = []
+    episodes: dict[Future[EpisodeOutcome], _PendingEvaluation] = {}
     started = time.perf_counter()
     n_at_start = n_done
+    shutting_down = False
     try:
-        while n_done < spec.iterations:
-            stopping = should_stop()
-            while not stopping and len(running) < workers and n_done + len(running) < spec.iterations:
-                theta = optimizer.ask()
-                running[executor.submit(theta, config_doc)] = theta
-            if not running:
+        while n_done < lease.iterations:
+            lease.renew_if_due()
+            shutting_down = shutting_down or should_stop()
+            stopping = shutting_down or not lease.held
+            while (not stopping and len(episodes) < workers
+                   and n_done + len(evaluations) < lease.iterations):
+                evaluation = _PendingEvaluation(optimizer.ask(), seeds)
+                evaluations.append(evaluation)
+                for seed in seeds:
+                    episodes[executor.submit(evaluation.theta, config_doc, seed)] = evaluation
+            if not episodes:
                 break
-            finished, _ = wait(list(running), return_when=FIRST_COMPLETED)
+            finished, _ = wait(list(episodes), timeout=lifecycle.HEARTBEAT_S, return_when=FIRST_COMPLETED)
             for future in finished:
-                theta = running.pop(future)
                 outcome = future.result()
-                with storage.transaction(factory) as session:
-                    storage.add_evaluation(session, job_id=job_id, theta=theta, J=outcome.J,
-                                           status=outcome.status, metrics=outcome.metrics,
-                                           trigger_points=outcome.trigger_points, wall_ms=outcome.wall_ms,
-                                           columns=outcome.columns, trajectory=outcome.trajectory)
-                optimizer.tell(theta, outcome.J if outcome.completed else None)
+                episodes.pop(future).outcomes[outcome.seed] = outcome
+            for evaluation in [e for e in evaluations if e.done]:
+                score, _, _ = evaluation.score()
+                if (confirm_seeds and not evaluation.confirming and score.status == "completed"
+                        and (best is None or score.J < best)):
+                    # A would-be best must hold on more seeds before it counts (the winner's curse: among
+                    # hundreds of thetas, some pass a few seeds by luck near a failure boundary).
+                    evaluation.confirming = True
+                    evaluation.seeds = evaluation.seeds + confirm_seeds
+                    for seed in confirm_seeds:
+                        episodes[executor.submit(evaluation.theta, config_doc, seed)] = evaluation
+                    continue
+                evaluations.remove(evaluation)
+                stored_as = _store(factory, job_id, runner, evaluation)
+                if stored_as is None:  # taken over: stop at once, the new runner owns the job
+                    lease.held = False
+                    continue
+                completed = score.status == "completed"
+                optimizer.tell(evaluation.theta, score.J if completed else None)
                 n_done += 1
-                if outcome.completed:
-                    best = outcome.J if best is None else min(best, outcome.J)
+                if completed:
+                    best = score.J if best is None else min(best, score.J)
                 if on_progress is not None:
                     rate = (time.perf_counter() - started) / max(n_done - n_at_start, 1)
-                    on_progress(Progress(n_done, spec.iterations, best, outcome, rate))
+                    on_progress(Progress(n_done, lease.iterations, best, score, rate))
     except Exception as exc:  # an evaluation crashed the worker process: the job fails, storage stays
         with storage.transaction(factory) as session:
-            storage.set_job_status(session, job_id=job_id, status="failed", error=f"{type(exc).__name__}: {exc}")
-        return "failed"
-    status = "finished" if n_done >= spec.iterations else "paused"
+            lifecycle.release(session, job_id=job_id, runner=runner, status=JobStatus.FAILED,
+                              error=f"{type(exc).__name__}: {exc}")
+        return JobStatus.FAILED
+    if n_done >= lease.iterations:
+        status = JobStatus.FINISHED
+    elif shutting_down:
+        status = JobStatus.QUEUED  # the runner stops, not the job: the next runner continues it
+    else:
+        status = JobStatus.PAUSED
     with storage.transaction(factory) as session:
-        storage.set_job_status(session, job_id=job_id, status=status)
-    return status
+        lifecycle.release(session, job_id=job_id, runner=runner, status=status)
+        job = session.get(Job, job_id)
+        return JobStatus(job.status) if job is not None else status

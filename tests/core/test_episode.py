@@ -75,10 +75,11 @@ def test_a_diverging_config_is_a_result_not_an_exception():
 DEFAULT_PLANT_THETA = Theta(c_lr=0.0225, c_rl=0.0218, dV=-0.064, k=0.057)
 
 
-def test_default_controller_drifts_the_eight_on_the_mismatched_plant():
-    r = run_episode(DEFAULT_PLANT_THETA, EpisodeConfig())
+@pytest.mark.parametrize("seed", [0, 1, 2])
+def test_default_controller_drifts_the_eight_on_the_mismatched_plant(seed):
+    r = run_episode(Theta(), EpisodeConfig(), seed=seed)  # the default plant varies by seed
     assert r.status == "completed"
-    assert r.metrics.mean_abs_e_m <= 0.5 and r.metrics.max_abs_e_m <= 2.0
+    assert r.metrics.mean_abs_e_m <= 1.0 and r.metrics.max_abs_e_m <= 2.5
     beta = r.column("beta_rad")
     t = r.column("t_s")
     for trig, sign_after in zip(r.trigger_points, (1.0, -1.0), strict=True):

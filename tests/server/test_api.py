@@ -42,6 +42,40 @@ def test_a_small_job_runs_to_the_end(server):
     assert db.exists() and db.stat().st_size > 0
 
 
+def test_robust_job_stores_each_seed_and_exports_theta_at_full_precision(server):
+    url, _ = server
+    r = httpx.post(f"{url}/api/jobs", json={"name": "robust", "iterations": 3, "seed_points": 3,
+                                            "robust_samples": 2, "seed": 1})
+    assert r.status_code == 201, r.text
+    assert r.json()["spec"]["robust_samples"] == 2
+    _wait_status(url, r.json()["id"], {"finished"})
+    evals = httpx.get(f"{url}/api/jobs/{r.json()['id']}/evaluations").json()
+    for e in evals:
+        seeds = [s["seed"] for s in e["seeds"]]
+        assert seeds in ([64, 65], [64, 65, 66, 67, 68, 69])  # a best so far is confirmed on 4 more seeds
+        assert e["J"] == pytest.approx(sum(s["J"] for s in e["seeds"]) / len(seeds), abs=1e-12)
+        assert e["completed"] == all(s["status"] == "completed" for s in e["seeds"])
+        assert e["trajectory_seed"] in seeds and e["metrics"]["n_samples"] == len(seeds)
+    assert any(len(e["seeds"]) == 6 for e in evals) == any(e["completed"] for e in evals)
+    best = httpx.get(f"{url}/api/jobs/{r.json()['id']}/best").json()
+    assert best["seeds"] == next(e for e in evals if e["id"] == best["id"])["seeds"]
+    assert httpx.get(f"{url}/api/jobs/{r.json()['id']}").json()["best"]["seeds"] == best["seeds"]
+    exported = httpx.get(f"{url}/api/jobs/{r.json()['id']}/evaluations", params={"format": "csv"})
+    assert exported.status_code == 200 and "attachment" in exported.headers["content-disposition"]
+    rows = list(csv.DictReader(io.StringIO(exported.text)))
+    assert len(rows) == 3
+    for row, e in zip(rows, evals, strict=True):
+        assert {k: float(row[k]) for k in ("c_lr", "c_rl", "dV", "k")} == e["theta"]  # bit-exact round trip
+        assert float(row["J"]) == e["J"] and row["seeds"] == " ".join(str(s["seed"]) for s in e["seeds"])
+
+
+@pytest.mark.parametrize("value", [0, 65, 1.5, "2"])
+def test_robust_samples_out_of_range_is_a_422_naming_it(server, value):
+    url, _ = server
+    r = httpx.post(f"{url}/api/jobs", json={"iterations": 3, "robust_samples": value})
+    assert r.status_code == 422 and "robust_samples" in r.json()["detail"]
+
+
 def test_trajectory_downloads_parse(server):
     url, _ = server
     job = next(j for j in httpx.get(f"{url}/api/jobs").json() if j["name"] == "small")

@@ -1,0 +1,97 @@
+"""Robust evaluation: one theta scored over several seeded episodes (paper section III-C's objective, made to
+hold on a car that never repeats an episode exactly).
+
+Seeds. Tuning uses common random numbers: every evaluation of a job runs the same ``robust_samples`` seeds
+(:func:`tuning_seeds`), so two thetas are compared on the same cars and noise, and the objective the GP sees
+is a deterministic function of theta. Rescoring (:func:`rescore_seeds`) draws from a range tuning never
+uses, so it measures how a learned theta generalizes, not how well it fits its tuning seeds.
+
+Aggregate. J of an evaluation is the mean of its episodes' J, a failed episode counting with its failure
+penalty (:func:`driftlab.core.episode.failure_penalty`). The evaluation counts as *completed* only when every
+episode completed: a theta that fails one seed in four is a controller that fails one real run in four, so
+the optimizer's failure model treats it as a failure (its classifier learns where all seeds complete) and the
+GP regression never sees a penalty. The mean, not a tail measure such as CVaR: the failure constraint already
+guards the tail, and among thetas that always complete the mean is the lower-variance estimate of what the
+car does.
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Sequence
+from dataclasses import asdict, dataclass
+
+from driftlab.core.limits import MAX_ROBUST_SAMPLES
+
+# Tuning seeds of BO seed s are s * 64 + j (below 2^37 for s < 2^31); rescoring starts above them.
+RESCORE_SEED_BASE = 2**40
+
+
+def tuning_seeds(bo_seed: int, samples: int) -> list[int]:
+    """The episode seeds every evaluation of a job with this BO seed runs."""
+    return [bo_seed * MAX_ROBUST_SAMPLES + j for j in range(samples)]
+
+
+def rescore_seeds(samples: int, offset: int = 0) -> list[int]:
+    """Fresh episode seeds, never used by any tuning job."""
+    return [RESCORE_SEED_BASE + offset + j for j in range(samples)]
+
+
+@dataclass(frozen=True)
+class SampleResult:
+    """One episode of an evaluation."""
+
+    seed: int
+    status: str
+    J: float
+    completed_fraction: float
+
+    @property
+    def completed(self) -> bool:
+        return self.status == "completed"
+
+    def as_dict(self) -> dict:
+        return asdict(self)
+
+
+@dataclass(frozen=True)
+class RobustScore:
+    """The aggregate of an evaluation's episodes.
+
+    Attributes:
+        status: "completed" when every episode completed, else the status of the first failed one.
+        J: mean J over the episodes (failed ones at their penalty).
+        n_completed: episodes that completed.
+        representative: index of the episode whose trajectory is kept: the worst (highest J), since a robust
+            controller is judged by its worst run, and a failure is what a user wants to watch.
+    """
+
+    status: str
+    J: float
+    n_completed: int
+    representative: int
+
+
+def aggregate(samples: Sequence[SampleResult]) -> RobustScore:
+    if not samples:
+        raise ValueError("an evaluation needs at least one episode")
+    failed = [s for s in samples if not s.completed]
+    values = [s.J if math.isfinite(s.J) else math.inf for s in samples]
+    mean_j = sum(values) / len(values)
+    worst = max(range(len(samples)), key=lambda i: (values[i], -i))
+    return RobustScore(status=failed[0].status if failed else "completed", J=mean_j,
+                       n_completed=len(samples) - len(failed), representative=worst)
+
+
+def summarize(samples: Sequence[SampleResult]) -> dict:
+    """Completion and J over a theta's episodes (failed episodes at their penalty, as in tuning)."""
+    values = [s.J for s in samples]
+    completed = [s.J for s in samples if s.completed]
+    n = len(values)
+    mean = sum(values) / n
+    return {"samples": n, "completed": len(completed), "completion_rate": len(completed) / n, "J_mean": mean,
+            "J_std": math.sqrt(sum((v - mean) ** 2 for v in values) / (n - 1)) if n > 1 else 0.0,
+            "J_worst": max(values),
+            "J_mean_completed": sum(completed) / len(completed) if completed else None,
+            "statuses": {status: sum(s.status == status for s in samples)
+                         for status in sorted({s.status for s in samples})}}

@@ -1,0 +1,163 @@
+"""A job's lifecycle in one place: its statuses, the allowed transitions, and the lease that makes exactly one
+runner (the server's worker or a `driftlab tune`) run a job at a time.
+
+    queued --claim--> running --release--> finished | paused | failed | queued (server shutdown)
+    running --request_pause--> paused (the runner sees it at its next heartbeat and stops)
+    paused | failed --requeue--> queued;  finished --extend--> queued;  any but running --delete--> gone
+
+The lease is two columns of the job: ``runner_id`` and ``heartbeat_at``. A runner claims a job with one
+conditional UPDATE (so two runners racing for it cannot both win), renews the heartbeat while it runs, and
+clears the lease when it stops. A lease whose heartbeat is older than ``LEASE_TIMEOUT_S`` belongs to a dead
+runner (kill -9, power loss) and may be taken over.
+"""
+
+from __future__ import annotations
+
+import os
+import socket
+import uuid
+from datetime import datetime, timedelta
+from enum import StrEnum
+
+from sqlalchemy import delete, or_, select, update
+from sqlalchemy.orm import Session
+
+from driftlab.db.models import Evaluation, Job, Trajectory, utcnow
+from driftlab.db.storage import NotFound, count_evaluations, get_job
+
+LEASE_TIMEOUT_S = 15.0  # a runner renews every HEARTBEAT_S; three missed renewals and more mean it is gone
+HEARTBEAT_S = 2.0
+
+
+class JobStatus(StrEnum):
+    QUEUED = "queued"
+    RUNNING = "running"
+    PAUSED = "paused"
+    FINISHED = "finished"
+    FAILED = "failed"
+
+
+class TransitionError(Exception):
+    """The job is not in a status that allows this (HTTP 409, CLI exit 2)."""
+
+
+class LeaseHeld(TransitionError):
+    """Another live runner holds the job."""
+
+
+def new_runner_id(kind: str) -> str:
+    """A runner's identity: what it is, where, which process, and a nonce (pids are reused)."""
+    return f"{kind}@{socket.gethostname()}:{os.getpid()}:{uuid.uuid4().hex[:8]}"
+
+
+def _naive(moment: datetime) -> datetime:
+    return moment.replace(tzinfo=None)  # SQLite stores naive datetimes; compare like with like
+
+
+def _stale_before(now: datetime) -> datetime:
+    return _naive(now - timedelta(seconds=LEASE_TIMEOUT_S))
+
+
+def lease_is_live(job: Job, now: datetime | None = None) -> bool:
+    now = now or utcnow()
+    return (job.status == JobStatus.RUNNING and job.runner_id is not None and job.heartbeat_at is not None
+            and _naive(job.heartbeat_at) >= _stale_before(now))
+
+
+def claim(session: Session, *, job_id: int, runner: str, from_statuses: tuple[JobStatus, ...] = (JobStatus.QUEUED,)
+          ) -> Job:
+    """Take the job for ``runner``: from one of ``from_statuses``, or from a dead runner's stale lease.
+
+    Raises:
+        NotFound: no such job.
+        LeaseHeld: another runner's lease is live.
+        TransitionError: the job's status allows no claim.
+    """
+    now = utcnow()
+    stale = or_(Job.heartbeat_at.is_(None), Job.heartbeat_at < _stale_before(now))
+    claimable = or_(Job.status.in_([str(s) for s in from_statuses]), (Job.status == JobStatus.RUNNING) & stale)
+    result = session.execute(update(Job).where(Job.id == job_id, claimable)
+                             .values(status=JobStatus.RUNNING, runner_id=runner, heartbeat_at=_naive(now), error=None)
+                             .execution_options(synchronize_session=False))
+    job = get_job(session, job_id=job_id)
+    session.refresh(job)
+    if result.rowcount == 1:
+        job.started_at = job.started_at or now
+        return job
+    if lease_is_live(job, now):
+        age = (_naive(now) - _naive(job.heartbeat_at)).total_seconds()
+        raise LeaseHeld(f"job {job.name!r} is being run by {job.runner_id} (last heartbeat {age:.1f} s ago); "
+                        "pause it first, or wait for it to finish")
+    raise TransitionError(f"job {job.name!r} is {job.status}; it can be run from {', '.join(from_statuses)}")
+
+
+def heartbeat(session: Session, *, job_id: int, runner: str) -> bool:
+    """Renew the lease; False when the runner no longer holds it (paused, deleted or taken over): stop."""
+    result = session.execute(update(Job).where(Job.id == job_id, Job.runner_id == runner,
+                                               Job.status == JobStatus.RUNNING)
+                             .values(heartbeat_at=_naive(utcnow())).execution_options(synchronize_session=False))
+    return result.rowcount == 1
+
+
+def release(session: Session, *, job_id: int, runner: str, status: JobStatus, error: str | None = None) -> None:
+    """The runner stops: the job takes ``status`` unless someone changed it meanwhile (a pause request stays
+    paused; a job taken over stays with its new runner)."""
+    values = {"runner_id": None, "heartbeat_at": None, "status": status, "error": error}
+    session.execute(update(Job).where(Job.id == job_id, Job.runner_id == runner, Job.status == JobStatus.RUNNING)
+                    .values(**values).execution_options(synchronize_session=False))
+    session.execute(update(Job).where(Job.id == job_id, Job.runner_id == runner)
+                    .values(runner_id=None, heartbeat_at=None).execution_options(synchronize_session=False))
+
+
+def request_pause(session: Session, *, job_id: int) -> Job:
+    job = get_job(session, job_id=job_id)
+    if job.status not in (JobStatus.QUEUED, JobStatus.RUNNING):
+        raise TransitionError(f"job {job_id} is {job.status}; pause needs queued or running")
+    job.status = JobStatus.PAUSED
+    return job
+
+
+def requeue(session: Session, *, job_id: int) -> Job:
+    job = get_job(session, job_id=job_id)
+    if job.status not in (JobStatus.PAUSED, JobStatus.FAILED):
+        raise TransitionError(f"job {job_id} is {job.status}; resume needs paused or failed")
+    job.status, job.error = JobStatus.QUEUED, None
+    return job
+
+
+def extend(session: Session, *, job_id: int, iterations: int) -> Job:
+    """A new budget. Raising a finished job's budget queues it again; a running job takes it on the fly."""
+    job = get_job(session, job_id=job_id)
+    done = count_evaluations(session, job_id=job_id)
+    if iterations < done:
+        raise TransitionError(f"iterations must be at least the {done} evaluations already stored, got {iterations}")
+    job.spec = {**job.spec, "iterations": iterations}
+    if job.status == JobStatus.FINISHED and iterations > done:
+        job.status = JobStatus.QUEUED
+    elif job.status in (JobStatus.QUEUED, JobStatus.PAUSED) and iterations == done:
+        job.status = JobStatus.FINISHED
+    return job
+
+
+def delete_job(session: Session, *, job_id: int) -> None:
+    job = get_job(session, job_id=job_id)
+    if lease_is_live(job):
+        raise TransitionError(f"job {job_id} is running; pause it first")
+    ids = select(Evaluation.id).where(Evaluation.job_id == job_id)
+    session.execute(delete(Trajectory).where(Trajectory.evaluation_id.in_(ids)))
+    session.execute(delete(Evaluation).where(Evaluation.job_id == job_id))
+    session.execute(delete(Job).where(Job.id == job_id))
+
+
+def next_claimable(session: Session) -> int | None:
+    """The oldest queued job, or one whose runner died."""
+    now = utcnow()
+    stale = or_(Job.heartbeat_at.is_(None), Job.heartbeat_at < _stale_before(now))
+    query = (select(Job.id).where(or_(Job.status == JobStatus.QUEUED, (Job.status == JobStatus.RUNNING) & stale))
+             .order_by(Job.id).limit(1))
+    return session.scalar(query)
+
+
+__all__ = ["HEARTBEAT_S", "LEASE_TIMEOUT_S", "JobStatus", "LeaseHeld", "NotFound", "TransitionError", "claim",
+           "delete_job", "extend", "heartbeat", "lease_is_live", "new_runner_id", "next_claimable", "release",
+           "request_pause", "requeue"]

@@ -1,0 +1,53 @@
+"""The database schema's version, kept by Alembic (driftlab/db/migrations): every `driftlab serve`, `tune`,
+`rescore` and `report` upgrades the database it opens to the newest revision before touching it.
+
+A database written before Alembic came in (schema 1: tables, no ``alembic_version``) is stamped at the
+baseline revision first, then upgraded like any other.
+"""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+from alembic import command
+from alembic.config import Config
+from alembic.runtime.migration import MigrationContext
+from alembic.script import ScriptDirectory
+from sqlalchemy import Engine, inspect, text
+
+MIGRATIONS = Path(__file__).parent / "migrations"
+BASELINE = "0001"
+
+
+def _config(connection) -> Config:
+    config = Config()
+    config.set_main_option("script_location", str(MIGRATIONS))
+    config.attributes["connection"] = connection
+    return config
+
+
+def head_revision() -> str:
+    return ScriptDirectory.from_config(_config(None)).get_current_head()
+
+
+def current_revision(engine: Engine) -> str | None:
+    with engine.connect() as connection:
+        return MigrationContext.configure(connection).get_current_revision()
+
+
+def _revision_of_meta(connection) -> str:
+    """A pre-Alembic database's revision, from its meta table's schema_version (1: the baseline)."""
+    version = connection.execute(text("SELECT value FROM meta WHERE key = 'schema_version'")).scalar()
+    return {"2": "0002"}.get(str(version), BASELINE)
+
+
+def upgrade(engine: Engine) -> None:
+    """Bring the database to the head revision (a no-op when it is there)."""
+    if current_revision(engine) == head_revision():
+        return
+    with engine.begin() as connection:
+        config = _config(connection)
+        tables = set(inspect(connection).get_table_names())
+        if "alembic_version" not in tables and "jobs" in tables:
+            command.stamp(config, _revision_of_meta(connection))
+        command.upgrade(config, "head")

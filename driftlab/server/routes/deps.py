@@ -1,0 +1,27 @@
+"""What routes need from the app: its storage, its job runner, the token check."""
+
+from __future__ import annotations
+
+import secrets
+
+from fastapi import Header, HTTPException, Request
+from sqlalchemy.orm import Session, sessionmaker
+
+from driftlab.settings import Settings
+
+
+def factory(request: Request) -> sessionmaker[Session]:
+    return request.app.state.factory
+
+
+def wake_runner(request: Request) -> None:
+    runner = getattr(request.app.state, "runner", None)
+    if runner is not None:
+        runner.wake()
+
+
+def require_token(request: Request, authorization: str | None = Header(default=None)) -> None:
+    settings: Settings = request.app.state.settings
+    token = settings.token
+    if token and not (authorization and secrets.compare_digest(authorization, f"Bearer {token}")):
+        raise HTTPException(401, "this endpoint needs 'Authorization: Bearer <DRIFTLAB_TOKEN>'")

@@ -1,0 +1,120 @@
+"""Jobs: create, list, read, pause, resume, extend, delete; their evaluations and best."""
+
+from __future__ import annotations
+
+import json
+from typing import Annotated, Any
+
+from fastapi import APIRouter, Depends, HTTPException, Query, Request, Response
+from sqlalchemy.orm import Session, sessionmaker
+
+from driftlab.core.tuning import TuningSpec
+from driftlab.db import lifecycle, storage
+from driftlab.server.routes.deps import factory, require_token, wake_runner
+from driftlab.server.schemas import After, JobCreate, JobId, JobPatch, Limit
+from driftlab.server.serialize import evaluation_dict, evaluations_csv, job_dict
+
+router = APIRouter(prefix="/api/jobs", tags=["jobs"])
+Factory = Annotated[sessionmaker[Session], Depends(factory)]
+Mutating = [Depends(require_token)]
+
+
+def _conflict(exc: lifecycle.TransitionError) -> HTTPException:
+    return HTTPException(409, str(exc))
+
+
+@router.post("", status_code=201, dependencies=Mutating)
+def create_job(body: JobCreate, db: Factory, request: Request) -> dict[str, Any]:
+    doc = body.model_dump(exclude_none=True, exclude={"name"})
+    if "bounds" in doc:
+        doc["bounds"] = {k: list(v) for k, v in doc["bounds"].items()}
+    spec = TuningSpec.from_dict(doc)  # ConfigError -> 422 naming the field
+    with storage.transaction(db) as session:
+        if body.name and storage.find_job(session, name=body.name) is not None:
+            raise HTTPException(409, f"name: a job named {body.name!r} exists")
+        name = body.name or storage.unique_job_name(session, "job")
+        out = job_dict(session, storage.create_job(session, name=name, spec=spec.to_dict(), seed=spec.seed))
+    wake_runner(request)
+    return out
+
+
+@router.get("")
+def list_jobs(db: Factory) -> list[dict[str, Any]]:
+    with storage.transaction(db) as session:
+        return [job_dict(session, j) for j in storage.list_jobs(session)]
+
+
+@router.get("/{job_id}")
+def get_job(job_id: JobId, db: Factory) -> dict[str, Any]:
+    with storage.transaction(db) as session:
+        return job_dict(session, storage.get_job(session, job_id=job_id))
+
+
+@router.post("/{job_id}/pause", dependencies=Mutating)
+def pause(job_id: JobId, db: Factory) -> dict[str, Any]:
+    """409 unless queued or running; a running job stops after the evaluations in flight."""
+    try:
+        with storage.transaction(db) as session:
+            return job_dict(session, lifecycle.request_pause(session, job_id=job_id))
+    except lifecycle.TransitionError as exc:
+        raise _conflict(exc) from None
+
+
+@router.post("/{job_id}/resume", dependencies=Mutating)
+def resume(job_id: JobId, db: Factory, request: Request) -> dict[str, Any]:
+    """409 unless paused or failed."""
+    try:
+        with storage.transaction(db) as session:
+            out = job_dict(session, lifecycle.requeue(session, job_id=job_id))
+    except lifecycle.TransitionError as exc:
+        raise _conflict(exc) from None
+    wake_runner(request)
+    return out
+
+
+@router.patch("/{job_id}", dependencies=Mutating)
+def extend(job_id: JobId, body: JobPatch, db: Factory, request: Request) -> dict[str, Any]:
+    """A new budget (>= the evaluations stored); a finished job with more iterations continues."""
+    try:
+        with storage.transaction(db) as session:
+            out = job_dict(session, lifecycle.extend(session, job_id=job_id, iterations=body.iterations))
+    except lifecycle.TransitionError as exc:
+        raise HTTPException(422, f"iterations: {exc}") from None
+    wake_runner(request)
+    return out
+
+
+@router.delete("/{job_id}", status_code=204, dependencies=Mutating)
+def delete(job_id: JobId, db: Factory) -> Response:
+    """The job, its evaluations and trajectories; 409 while a runner holds it (pause it first)."""
+    try:
+        with storage.transaction(db) as session:
+            lifecycle.delete_job(session, job_id=job_id)
+    except lifecycle.TransitionError as exc:
+        raise _conflict(exc) from None
+    return Response(status_code=204)
+
+
+@router.get("/{job_id}/evaluations")
+def list_evaluations(job_id: JobId, db: Factory, after: After = -1, limit: Limit = 1000,
+                     format: str = Query("json", pattern="^(csv|json)$")) -> Response:  # noqa: A002
+    """Evaluations with index > after, in order, at most ``limit`` (page with the last index you have).
+    ``format=csv``: one row per evaluation, theta at full precision (what you copy reproduces)."""
+    with storage.transaction(db) as session:
+        storage.get_job(session, job_id=job_id)
+        rows = [evaluation_dict(e) for e in storage.evaluations(session, job_id=job_id, after=after, limit=limit)]
+    if format == "csv":
+        return Response(evaluations_csv(rows), media_type="text/csv", headers={
+            "Content-Disposition": f'attachment; filename="job-{job_id}-evaluations.csv"'})
+    # Plain JSON types already: skip FastAPI's generic encoder, which dominates the cost at 500 rows.
+    return Response(json.dumps(rows), media_type="application/json")
+
+
+@router.get("/{job_id}/best")
+def best(job_id: JobId, db: Factory) -> dict[str, Any]:
+    with storage.transaction(db) as session:
+        storage.get_job(session, job_id=job_id)
+        e = storage.best_evaluation(session, job_id=job_id)
+        if e is None:
+            raise HTTPException(404, f"job {job_id} has no evaluations yet")
+        return evaluation_dict(e)

@@ -1,0 +1,44 @@
+"""DriftLab's settings from the environment (``DRIFTLAB_*``), one class for the CLI and the server.
+
+The database: ``--db FILE`` wins, then ``DRIFTLAB_DATABASE_URL``, then the one default file that `serve`,
+`tune`, `rescore` and `report` share wherever they are started: ``$XDG_DATA_HOME/driftlab/driftlab.db``
+(``~/.local/share/driftlab/driftlab.db``).
+"""
+
+from __future__ import annotations
+
+import os
+from pathlib import Path
+
+from pydantic_settings import BaseSettings, SettingsConfigDict
+
+
+class Settings(BaseSettings):
+    """Attributes:
+        database_url: SQLAlchemy URL of the database (DRIFTLAB_DATABASE_URL).
+        token: bearer token every mutating API request must carry, if set (DRIFTLAB_TOKEN).
+        chromium: the browser the view's tests drive (DRIFTLAB_CHROMIUM).
+    """
+
+    model_config = SettingsConfigDict(env_prefix="DRIFTLAB_", extra="ignore")
+
+    database_url: str | None = None
+    token: str | None = None
+    chromium: str = "/usr/bin/chromium"
+
+
+def default_database_file() -> Path:
+    data_home = os.environ.get("XDG_DATA_HOME") or str(Path.home() / ".local" / "share")
+    return Path(data_home) / "driftlab" / "driftlab.db"
+
+
+def database_url(db: str | None = None, settings: Settings | None = None) -> str:
+    """--db FILE (or URL), then DRIFTLAB_DATABASE_URL, then the shared default file (its folder created)."""
+    if db:
+        return db if "://" in db else f"sqlite:///{os.path.abspath(db)}"
+    settings = settings or Settings()
+    if settings.database_url:
+        return settings.database_url
+    path = default_database_file()
+    path.parent.mkdir(parents=True, exist_ok=True)
+    return f"sqlite:///{path}"

@@ -1,0 +1,72 @@
+"""The server's background job runner: one thread that takes the next claimable job (queued, or held by a
+dead runner) and runs it; its episodes run in worker processes.
+
+Exactly one runner runs a job at a time (the lease in driftlab.db.lifecycle): a `driftlab tune` on the same
+job is refused while this one holds it, and a job this server held when it died is taken over by the next
+runner once its lease goes stale.
+"""
+
+from __future__ import annotations
+
+import threading
+
+from sqlalchemy.orm import Session, sessionmaker
+
+from driftlab.db import lifecycle, storage
+from driftlab.worker.executor import LocalProcessExecutor
+from driftlab.worker.job_loop import claim_job, run_job
+
+
+class JobRunner:
+    def __init__(self, factory: sessionmaker[Session], workers: int = 2, poll_s: float = 0.2) -> None:
+        self.factory = factory
+        self.workers = workers
+        self.poll_s = poll_s
+        self.runner_id = lifecycle.new_runner_id("server")
+        self._stop = threading.Event()
+        self._wake = threading.Event()
+        self._thread: threading.Thread | None = None
+        self._executor: LocalProcessExecutor | None = None
+        self.current_job_id: int | None = None
+
+    def start(self) -> None:
+        # Below the what-if worker and the web server in priority: a slider must not wait behind a job.
+        self._executor = LocalProcessExecutor(self.workers, niceness=10)
+        self._thread = threading.Thread(target=self._loop, name="driftlab-job-runner", daemon=True)
+        self._thread.start()
+
+    def wake(self) -> None:
+        self._wake.set()
+
+    def stop(self) -> None:
+        self._stop.set()
+        self._wake.set()
+        if self._thread is not None:
+            self._thread.join(timeout=30)
+        if self._executor is not None:
+            self._executor.shutdown()
+
+    def _claim_next(self) -> int | None:
+        with storage.transaction(self.factory) as session:
+            job_id = lifecycle.next_claimable(session)
+        if job_id is None:
+            return None
+        try:
+            claim_job(self.factory, job_id, self.runner_id)
+        except lifecycle.TransitionError:  # another runner was quicker, or its lease is live
+            return None
+        return job_id
+
+    def _loop(self) -> None:
+        while not self._stop.is_set():
+            job_id = self._claim_next()
+            if job_id is None:
+                self._wake.wait(self.poll_s)
+                self._wake.clear()
+                continue
+            self.current_job_id = job_id
+            try:
+                run_job(self.factory, job_id, self._executor, runner=self.runner_id, workers=self.workers,
+                        should_stop=self._stop.is_set)
+            finally:
+                self.current_job_id = None

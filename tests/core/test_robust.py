@@ -1,0 +1,57 @@
+"""Robust evaluation's aggregate and seeds."""
+
+import pytest
+
+from driftlab.core.episode import failure_penalty
+from driftlab.core.robust import RESCORE_SEED_BASE, SampleResult, aggregate, rescore_seeds, summarize, tuning_seeds
+from driftlab.core.tuning import TuningSpec
+
+
+def _s(seed, status, value, fraction=1.0):
+    return SampleResult(seed, status, value, fraction)
+
+
+def test_all_completed_is_the_mean_and_keeps_the_worst_trajectory():
+    score = aggregate([_s(0, "completed", -1.0), _s(1, "completed", -0.4), _s(2, "completed", -1.3)])
+    assert score.status == "completed" and score.n_completed == 3
+    assert score.J == pytest.approx(-0.9)
+    assert score.representative == 1
+
+
+def test_one_failed_episode_fails_the_evaluation_and_its_penalty_enters_the_mean():
+    penalty = failure_penalty(0.6)
+    score = aggregate([_s(0, "completed", -1.0), _s(1, "gripped_up", penalty, 0.6), _s(2, "completed", -1.0)])
+    assert score.status == "gripped_up" and score.n_completed == 2
+    assert score.J == pytest.approx((penalty - 2.0) / 3)
+    assert score.representative == 1
+
+
+def test_tuning_seeds_are_common_to_a_job_and_rescore_seeds_never_overlap_them():
+    assert tuning_seeds(0, 3) == [0, 1, 2]
+    spec = TuningSpec(seed=2, robust_samples=2, confirm_samples=3)
+    assert spec.episode_seeds == [128, 129] and spec.confirm_seeds == [130, 131, 132]
+    largest = max(tuning_seeds(2**31 - 1, 64))
+    assert largest < RESCORE_SEED_BASE == min(rescore_seeds(5))
+
+
+def test_summary_counts_completion_and_tail():
+    out = summarize([_s(0, "completed", -1.0), _s(1, "spun_out", 5.0, 0.4), _s(2, "completed", -0.5),
+                     _s(3, "completed", -1.5)])
+    assert out["completed"] == 3 and out["completion_rate"] == 0.75
+    assert out["J_worst"] == 5.0 and out["J_mean"] == pytest.approx(0.5)
+    assert out["J_mean_completed"] == pytest.approx(-1.0) and out["statuses"] == {"completed": 3, "spun_out": 1}
+
+
+@pytest.mark.parametrize("value", [0, 65, True, 2.0])
+def test_robust_samples_out_of_range_names_the_field(value):
+    from driftlab.core.errors import ConfigError
+
+    with pytest.raises(ConfigError, match=r"robust_samples must be an integer in \[1, 64\]"):
+        TuningSpec(robust_samples=value)
+
+
+def test_confirm_samples_share_the_seed_block():
+    from driftlab.core.errors import ConfigError
+
+    with pytest.raises(ConfigError, match=r"confirm_samples must be an integer in \[0, 4\]"):
+        TuningSpec(robust_samples=60, confirm_samples=5)

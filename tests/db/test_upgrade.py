@@ -1,0 +1,79 @@
+"""A database written by the release before robust evaluation (schema 1) opens, upgrades and keeps meaning
+what it meant: its jobs ran one deterministic episode per evaluation, on a plant without variation."""
+
+import json
+import sqlite3
+import zlib
+
+import numpy as np
+
+from driftlab.core.config import EpisodeConfig, Theta, apply_overrides, config_to_dict
+from driftlab.core.episode import run_episode
+from driftlab.core.plant import VARIATION_LIMITS
+from driftlab.core.tuning import TuningSpec
+from driftlab.db import schema, storage
+from driftlab.db.models import Evaluation, Job
+
+SCHEMA_1 = """
+CREATE TABLE jobs ( id INTEGER NOT NULL, name VARCHAR(200) NOT NULL, spec JSON NOT NULL, seed INTEGER NOT NULL,
+  status VARCHAR(20) NOT NULL, error VARCHAR(2000), created_at DATETIME NOT NULL, updated_at DATETIME NOT NULL,
+  started_at DATETIME, PRIMARY KEY (id), UNIQUE (name) );
+CREATE TABLE meta ( "key" VARCHAR(50) NOT NULL, value VARCHAR(200) NOT NULL, PRIMARY KEY ("key") );
+CREATE TABLE evaluations ( id INTEGER NOT NULL, job_id INTEGER NOT NULL, "index" INTEGER NOT NULL, theta JSON NOT NULL,
+  "J" FLOAT NOT NULL, status VARCHAR(20) NOT NULL, metrics JSON NOT NULL, trigger_points JSON NOT NULL,
+  wall_ms FLOAT NOT NULL, created_at DATETIME NOT NULL, PRIMARY KEY (id), UNIQUE (job_id, "index"),
+  FOREIGN KEY(job_id) REFERENCES jobs (id) );
+CREATE INDEX ix_evaluations_job_id ON evaluations (job_id);
+CREATE TABLE trajectories ( evaluation_id INTEGER NOT NULL, columns JSON NOT NULL, rows INTEGER NOT NULL,
+  data BLOB NOT NULL, PRIMARY KEY (evaluation_id), FOREIGN KEY(evaluation_id) REFERENCES evaluations (id) );
+"""
+
+
+def _schema_1_spec() -> dict:
+    """TuningSpec.to_dict() as schema 1 wrote it: no robust_samples, no variation keys."""
+    config = config_to_dict(EpisodeConfig())
+    config["plant"] = {k: v for k, v in config["plant"].items() if k not in VARIATION_LIMITS}
+    return {"iterations": 10, "seed_points": 3, "active_set": 400, "seed": 0,
+            "bounds": {"c_lr": [0.005, 0.04], "c_rl": [0.005, 0.04], "dV": [-0.3, 0.3], "k": [0.0, 0.12]},
+            "config": config}
+
+
+def test_schema_1_database_upgrades_and_its_results_still_reproduce(tmp_path):
+    path = tmp_path / "old.db"
+    theta = Theta()
+    # What the schema-1 release computed: one episode, no variation (bit-identical to today's code with
+    # the spreads at zero).
+    old = run_episode(theta, apply_overrides(EpisodeConfig(), {f"plant.{k}": 0.0 for k in VARIATION_LIMITS}))
+    with sqlite3.connect(path) as db:
+        db.executescript(SCHEMA_1)
+        db.execute("INSERT INTO meta VALUES ('schema_version', '1')")
+        db.execute("INSERT INTO jobs VALUES (1, 'old', ?, 0, 'paused', NULL, '2026-11-01', '2026-11-01', NULL)",
+                   (json.dumps(_schema_1_spec()),))
+        db.execute("INSERT INTO evaluations VALUES (1, 1, 0, ?, ?, ?, ?, '[]', 40.0, '2026-11-01')",
+                   (json.dumps(theta.as_dict()), old.J, old.status, json.dumps(old.metrics.as_dict())))
+        data = zlib.compress(np.ascontiguousarray(old.trajectory).tobytes())
+        db.execute("INSERT INTO trajectories VALUES (1, '[]', ?, ?)", (len(old.trajectory), data))
+
+    factory = storage.open_database(f"sqlite:///{path}")
+    with storage.transaction(factory) as session:
+        job = session.get(Job, 1)
+        evaluation = session.get(Evaluation, 1)
+        assert session.get(storage.Meta, "schema_version").value == "3"
+        spec = TuningSpec.from_dict(job.spec)
+        assert spec.robust_samples == 1 and spec.confirm_samples == 0 and not spec.config.plant.varies
+        assert evaluation.seeds == [{"seed": 0, "status": old.status, "J": old.J,
+                                     "completed_fraction": old.metrics.completed_fraction}]
+        assert evaluation.trajectory_seed == 0
+    again = run_episode(theta, spec.config, seed=evaluation.trajectory_seed)
+    assert again.J == old.J
+    engine = storage.engine_of(factory)
+    assert schema.current_revision(engine) == schema.head_revision()
+    storage.open_database(f"sqlite:///{path}")  # a second open is a no-op
+
+
+def test_a_new_database_is_created_at_the_head_revision(tmp_path):
+    factory = storage.open_database(f"sqlite:///{tmp_path / 'new.db'}")
+    assert schema.current_revision(storage.engine_of(factory)) == schema.head_revision() == "0003"
+    with storage.transaction(factory) as session:
+        job = storage.create_job(session, name="fresh", spec=TuningSpec().to_dict(), seed=0)
+        assert job.runner_id is None and job.heartbeat_at is None

@@ -7,7 +7,7 @@ ENV PYTHONDONTWRITEBYTECODE=1 PYTHONUNBUFFERED=1 OMP_NUM_THREADS=1 \
 WORKDIR /opt/driftlab
 COPY pyproject.toml README.md ./
 COPY driftlab ./driftlab
-RUN pip install --no-cache-dir . \
+RUN pip install --no-cache-dir ".[dask]" \
     && useradd --create-home --uid 1000 driftlab \
     && mkdir -p /data "$NUMBA_CACHE_DIR" \
     # Warm the numba cache at build time: the first episode would otherwise compile for ~5 s.

@@ -36,6 +36,10 @@ def _int_in(lo: int, hi: int):
     return parse
 
 
+DASK_HELP = ("run episodes on this Dask scheduler, e.g. tcp://HOST:8786 (default: DRIFTLAB_DASK_ADDRESS, else a "
+             "local process pool)")
+
+
 class _Parser(argparse.ArgumentParser):
     """argparse that reports bad arguments on one line with exit code 2."""
 
@@ -160,7 +164,7 @@ def _open_tuning_job(factory, args: argparse.Namespace, runner: str) -> tuple[in
 
 def _cmd_tune(args: argparse.Namespace) -> int:
     from driftlab.db import lifecycle, storage
-    from driftlab.worker.executor import LocalProcessExecutor
+    from driftlab.worker.executor import open_executor
     from driftlab.worker.job_loop import Progress, run_job
 
     factory = storage.open_database(_db_url(args.db))
@@ -181,9 +185,9 @@ def _cmd_tune(args: argparse.Namespace) -> int:
     with storage.transaction(factory) as session:
         status = storage.get_job(session, job_id=job_id).status
     if status == lifecycle.JobStatus.RUNNING:  # ours now
-        executor = LocalProcessExecutor(args.workers)
+        executor, workers = open_executor(args.workers, _dask_address(args))
         try:
-            status = run_job(factory, job_id, executor, runner=runner, workers=args.workers, on_progress=progress)
+            status = run_job(factory, job_id, executor, runner=runner, workers=workers, on_progress=progress)
         except KeyboardInterrupt:
             with storage.transaction(factory) as session:
                 lifecycle.release(session, job_id=job_id, runner=runner, status=lifecycle.JobStatus.PAUSED)
@@ -192,6 +196,9 @@ def _cmd_tune(args: argparse.Namespace) -> int:
         finally:
             executor.shutdown()
     with storage.transaction(factory) as session:
+        error = storage.get_job(session, job_id=job_id).error
+        if status == lifecycle.JobStatus.PAUSED and error:
+            sys.stderr.write(f"\ndriftlab: job {name} paused: {error}; run the same command to continue\n")
         best = storage.best_evaluation(session, job_id=job_id)
         out = {"job": name, "id": job_id, "status": str(status), "wall_s": round(time.perf_counter() - started, 2),
                "n_done": storage.count_evaluations(session, job_id=job_id),
@@ -225,6 +232,7 @@ def _cmd_serve(args: argparse.Namespace) -> int:
     import uvicorn
 
     from driftlab.server.app import create_app
+    from driftlab.settings import Settings
 
     # Bind before touching any job: a second server on a taken port must leave the first one's jobs alone.
     family = socket.AF_INET6 if ":" in args.host else socket.AF_INET
@@ -237,13 +245,23 @@ def _cmd_serve(args: argparse.Namespace) -> int:
         raise ConfigError(f"--port {args.port} on {args.host}: {exc.strerror or exc}") from None
     sock.listen(2048)
     sock.set_inheritable(True)
-    app = create_app(_db_url(args.db), workers=args.workers)
+    settings = Settings()
+    if args.dask:
+        settings = settings.model_copy(update={"dask_address": args.dask})
+    workers = args.workers or (None if settings.dask_address else 2)
+    app = create_app(_db_url(args.db), workers=workers, settings=settings)
     shown_host = "localhost" if args.host == "0.0.0.0" else args.host
     print(f"DriftLab: the 3D view on http://{shown_host}:{args.port}/viser/, the API docs on "
           f"http://{shown_host}:{args.port}/docs", flush=True)
     server = uvicorn.Server(uvicorn.Config(app, log_level="info"))
     server.run(sockets=[sock])
     return 0
+
+
+def _dask_address(args: argparse.Namespace) -> str | None:
+    from driftlab.settings import Settings
+
+    return args.dask or Settings().dask_address
 
 
 def _db_url(db: str | None) -> str:
@@ -288,16 +306,19 @@ def build_parser() -> argparse.ArgumentParser:
     tu.add_argument("--name", help="job name; an existing name resumes that job")
     tu.add_argument("--set", action="append", metavar="KEY=VALUE", help="config override, e.g. plant.steer_lag_s=0.02")
     tu.add_argument("--bound", action="append", metavar="NAME=LO:HI", help="theta bound, e.g. k=0:0.1")
-    tu.add_argument("--workers", type=_int_in(1, 64), default=1, metavar="N",
-                    help="episodes evaluated at once (1..64)")
+    tu.add_argument("--dask", metavar="ADDRESS", help=DASK_HELP)
+    tu.add_argument("--workers", type=_int_in(1, 1024), metavar="N",
+                    help="episodes in flight at once, 1..1024 (default: 1 locally, the cluster's threads with --dask)")
     tu.set_defaults(func=_cmd_tune)
     sv = sub.add_parser("serve", help="the dashboard and REST API (http://127.0.0.1:8000)")
     sv.add_argument("--host", default="127.0.0.1", help="bind address (default 127.0.0.1: this machine only)")
     sv.add_argument("--port", type=_int_in(1, 65535), default=8000, metavar="PORT",
                     help="TCP port, 1..65535 (default 8000)")
     sv.add_argument("--db", help=DB_HELP)
-    sv.add_argument("--workers", type=_int_in(1, 64), default=2, metavar="N",
-                    help="episode processes (1..64)")
+    sv.add_argument("--dask", metavar="ADDRESS", help=DASK_HELP)
+    sv.add_argument("--workers", type=_int_in(1, 1024), metavar="N",
+                    help="episodes in flight at once, 1..1024 (default: 2 local processes, the cluster's threads "
+                         "with --dask)")
     sv.set_defaults(func=_cmd_serve)
     rs = sub.add_parser("rescore", help="run a job's best theta, exactly as stored, under fresh seeds; print JSON")
     rs.add_argument("--name", required=True)

@@ -79,13 +79,28 @@ def write_report(*, db_url: str, name: str, out_dir: str, baseline_samples: int 
              "tuning (J mean over all episodes, failures at their penalty).", "",
              "| theta | c_lr | c_rl | dV (m/s) | k (rad/m) | tuning status | tuning J | rescore completed | "
              "rescore J mean | rescore J worst |", "|---|---|---|---|---|---|---|---|---|---|"]
-    for (label, theta, status, value), results in zip(table, rescored, strict=True):
-        summary = summarize(results)
+    summaries = [summarize(results) for results in rescored]
+    for (label, theta, status, value), summary in zip(table, summaries, strict=True):
         tuning = (status or "-", "-" if value is None else f"{value:.3f}")
         lines.append(f"| {label} | {theta['c_lr']!r} | {theta['c_rl']!r} | {theta['dV']!r} | {theta['k']!r} | "
                      f"{tuning[0]} | {tuning[1]} | {summary['completed']}/{summary['samples']} | "
                      f"{summary['J_mean']:.3f} | {summary['J_worst']:.3f} |")
+    lines += _verdict(summaries[0], summaries[1], len(evals))
     lines += ["", "![best episode](best_episode.png)", "", "![convergence](convergence.png)", ""]
     path = out / "report.md"
     path.write_text("\n".join(lines))
     return path
+
+
+def _verdict(learned: dict, untuned: dict, n_evaluations: int) -> list[str]:
+    """Say plainly when the learned theta does not beat the untuned one on fresh seeds."""
+    worse_j = learned["J_mean"] > untuned["J_mean"]
+    less_robust = learned["completion_rate"] < untuned["completion_rate"]
+    if not (worse_j or less_robust):
+        return ["", f"The learned theta beats the untuned one on fresh seeds (J mean {learned['J_mean']:.3f} against "
+                    f"{untuned['J_mean']:.3f}; lower is better)."]
+    what = " and ".join(w for w, bad in (("a worse J", worse_j), ("fewer completed episodes", less_robust)) if bad)
+    return ["", f"**Note:** the learned theta scores {what} than the untuned one on fresh seeds. After "
+                f"{n_evaluations} evaluations the optimizer has mostly explored (the first 20 are space-filling "
+                "points); the paper runs 500. Continue the job (`driftlab tune --name NAME --iterations 500`) "
+                "and report again."]

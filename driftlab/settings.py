@@ -17,14 +17,15 @@ class Settings(BaseSettings):
     """Attributes:
         database_url: SQLAlchemy URL of the database (DRIFTLAB_DATABASE_URL).
         token: bearer token every mutating API request must carry, if set (DRIFTLAB_TOKEN).
-        chromium: the browser the view's tests drive (DRIFTLAB_CHROMIUM).
+        dask_address: a Dask scheduler (tcp://HOST:8786) to run episodes on (DRIFTLAB_DASK_ADDRESS); unset: a
+            local process pool.
     """
 
     model_config = SettingsConfigDict(env_prefix="DRIFTLAB_", extra="ignore")
 
     database_url: str | None = None
     token: str | None = None
-    chromium: str = "/usr/bin/chromium"
+    dask_address: str | None = None
 
 
 def default_database_file() -> Path:

@@ -19,8 +19,10 @@ def free_port() -> int:
 
 def start_server(db_path, port, env_extra=None):
     env = {**os.environ, "OMP_NUM_THREADS": "1", **(env_extra or {})}
+    # The server's log goes to a file: an undrained pipe would block the server once it fills.
+    log = tempfile.NamedTemporaryFile(prefix="driftlab-serve-", suffix=".log", delete=False)
     proc = subprocess.Popen([sys.executable, "-m", "driftlab.cli", "serve", "--port", str(port), "--db", str(db_path)],
-                            env=env, stdout=subprocess.DEVNULL, stderr=subprocess.PIPE)
+                            env=env, stdout=subprocess.DEVNULL, stderr=log)
     url = f"http://127.0.0.1:{port}"
     for _ in range(150):
         try:
@@ -29,7 +31,8 @@ def start_server(db_path, port, env_extra=None):
         except httpx.HTTPError:
             time.sleep(0.1)
     proc.kill()
-    raise RuntimeError(proc.stderr.read().decode())
+    proc.wait()
+    raise RuntimeError(Path(log.name).read_text())
 
 
 def wait_status(url, job_id, statuses, timeout_s=120):

@@ -40,10 +40,11 @@ def _field(err: dict) -> str:
     return ".".join(str(p) for p in err["loc"] if p != "body") or "body"
 
 
-def create_app(db_url: str, *, workers: int = 2, start_worker: bool = True,
+def create_app(db_url: str, *, workers: int | None = 2, start_worker: bool = True,
                settings: Settings | None = None) -> FastAPI:
+    settings = settings or Settings()
     factory = storage.open_database(db_url)
-    runner = JobRunner(factory, workers=workers)
+    runner = JobRunner(factory, workers=workers, dask_address=settings.dask_address)
 
     @asynccontextmanager
     async def lifespan(app: FastAPI):
@@ -57,7 +58,7 @@ def create_app(db_url: str, *, workers: int = 2, start_worker: bool = True,
 
     app = FastAPI(title="DriftLab", version="0.1.0", lifespan=lifespan,
                   description="Learning-based inertia drift: tuning jobs, evaluations, trajectories.")
-    app.state.settings = settings or Settings()
+    app.state.settings = settings
     app.state.factory = factory
     app.state.runner = runner
     app.state.recordings = RecordingCache(factory)

@@ -77,7 +77,12 @@ class EpisodeFrames:
     def triggers_before(self, t_s: float) -> list[dict[str, Any]]:
         return [p for p in self.trigger_points if p["t_s"] <= t_s]
 
+    def name(self) -> str:
+        """Which episode: the API's evaluation id first (what the URLs use), the job's index beside it."""
+        if self.evaluation_id is None:
+            return "what-if episode"
+        return f"evaluation id {self.evaluation_id} (index {self.index} in its job)"
+
     def caption(self) -> str:
         theta = ", ".join(f"{k} {v!r}" for k, v in self.theta.items())  # full precision: copied, it reproduces
-        which = f"#{self.index}" if self.index is not None else "what-if"
-        return f"{which} {self.status} J {self.J:.3f} | {theta}"
+        return f"{self.name()}: {self.status}, J {self.J:.3f} (lower is better) | {theta}"

@@ -53,7 +53,22 @@ class EpisodePlayer:
         self.ghost_trail.clear()
         self.markers.clear()
         self.ghost.visible = ghost is not None and ghost.n_frames > 0
+        self.car.visible = True
         self.seek(0.0)
+
+    def unload(self) -> None:
+        """Show no episode: trail and markers cleared, the car parked out of sight."""
+        self.frames, self.ghost_frames = None, None
+        self.trail.clear()
+        self.ghost_trail.clear()
+        self.markers.clear()
+        self.ghost.visible = False
+        self.car.visible = False
+        self.t_s = 0.0
+
+    def show_caption(self, text: str) -> None:
+        """A label over the track (recordings have no GUI panel: this is where their J and theta show)."""
+        self.scene.add_label("/caption", text, position=(0.0, 0.0, 14.0), font_screen_scale=0.9)
 
     def seek(self, t_s: float) -> None:
         self.t_s = min(max(t_s, 0.0), self.duration_s)

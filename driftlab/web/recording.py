@@ -38,6 +38,7 @@ class EpisodeRecorder:
         player = EpisodePlayer(scene, track)
         serializer = self._server.get_scene_serializer()
         player.load(frames)
+        player.show_caption(frames.caption())
         step_s = 1.0 / self.fps
         n_steps = int(frames.duration_s * self.fps) + 1
         for k in range(n_steps + 1):

@@ -74,8 +74,11 @@ def draw_track(scene: viser.SceneApi, track: FigureEight) -> dict[int, viser.Lin
             f"/track/{name}/tracked", _polyline_segments(circle_points(circle), 2.0 * TRACK_Z_M),
             colors=(255, 200, 110), thickness=0.7, visible=False)
     scene.add_cylinder("/track/p0/post", radius=0.25, height=3.0, color=(20, 20, 20), position=(0.0, 0.0, 1.5))
-    scene.add_label("/track/p0/label", "P0", position=(0.0, 0.0, 3.5), font_screen_scale=1.2)
+    scene.add_label("/track/p0/label", "P0", position=(0.0, 0.0, 3.2), font_screen_scale=1.2)
     return highlights
+
+
+HALO_RADIUS_M = 4.0
 
 
 class CarModel:
@@ -94,6 +97,9 @@ class CarModel:
                       position=(body_centre_x, 0.0, 0.6))
         scene.add_box(f"/{name}/cabin", color=(40, 40, 50), dimensions=(0.5 * length, 1.55, 0.5), opacity=opacity,
                       position=(body_centre_x - 0.2, 0.0, 1.1))
+        # A flat disc around the car: from the overview camera a 4.3 m car is ~15 px; the disc marks it.
+        scene.add_cylinder(f"/{name}/halo", radius=HALO_RADIUS_M, height=0.02, color=color,
+                           opacity=0.35 if opacity is None else 0.5 * opacity, position=(0.0, 0.0, 0.03))
         axle_turn = (math.cos(math.pi / 4), math.sin(math.pi / 4), 0.0, 0.0)  # cylinder axis z -> car's y
         self.front_wheels = []
         for label, x_m, y_m in (("fl", cg_to_front_m, self.TRACK_HALF_WIDTH_M),
@@ -161,6 +167,18 @@ class Trail:
         self._drawn_until = i
 
 
+TRIGGER_LABEL_Z_M = 4.6  # just above the 4 m post, so the chase camera sees it by the post, not in the sky
+TRIGGER_LABEL_OFFSET_M = 5.0
+
+
+def trigger_label_position(x_m: float, y_m: float) -> tuple[float, float, float]:
+    """Beside the trigger post, pushed away from P0 (triggers fire a few metres before it, where the P0 label
+    would cover the text)."""
+    distance = math.hypot(x_m, y_m)
+    ux, uy = (x_m / distance, y_m / distance) if distance > 1e-6 else (-1.0, 0.0)
+    return (x_m + TRIGGER_LABEL_OFFSET_M * ux, y_m + TRIGGER_LABEL_OFFSET_M * uy, TRIGGER_LABEL_Z_M)
+
+
 class TriggerMarkers:
     """A post and a label where the planner switched sides, added as playback passes them."""
 
@@ -186,5 +204,5 @@ class TriggerMarkers:
             post = self.scene.add_cylinder(f"{base}/post", radius=0.35, height=4.0, color=(255, 190, 0),
                                            position=(p["x_m"], p["y_m"], 2.0))
             label = self.scene.add_label(f"{base}/label", f"trigger {k + 1}  t {p['t_s']:.2f} s",
-                                         position=(p["x_m"], p["y_m"], 9.0))
+                                         position=trigger_label_position(p["x_m"], p["y_m"]))
             self._shown.append((post, label))

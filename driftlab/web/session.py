@@ -42,12 +42,14 @@ def _series(label: str, color: str, *, points: bool = False, width: float = 1.5)
     return {"label": label, "stroke": color, "width": width, "points": {"show": False}}
 
 
-def padded_range(values: np.ndarray) -> tuple[float, float]:
+def padded_range(values: np.ndarray, min_span: float = 0.0) -> tuple[float, float]:
+    """A y range around the finite values, 8% padded and at least ``min_span`` wide (uPlot puts a single tick
+    on a range much narrower than its tick spacing: the steering plot had one)."""
     finite = values[np.isfinite(values)]
     if finite.size == 0:
         return (-1.0, 1.0)
     lo, hi = float(finite.min()), float(finite.max())
-    pad = max(0.08 * (hi - lo), 0.05)
+    pad = max(0.08 * (hi - lo), 0.05, 0.5 * (min_span - (hi - lo)))
     return (lo - pad, hi + pad)
 
 
@@ -94,8 +96,9 @@ class ClientSession:
             with gui.add_folder("Choose", expand_by_default=True):
                 self.live_button = gui.add_button("Follow live", icon=viser.Icon.ACTIVITY)
                 self.best_button = gui.add_button("Play best", icon=viser.Icon.TROPHY)
-                self.index_input = gui.add_number("Evaluation #", 0, min=0, step=1)
-                self.index_button = gui.add_button("Play evaluation #")
+                self.index_input = gui.add_number("Evaluation index", 0, min=0, step=1,
+                                                  hint="0-based index within the job (the API's 'index')")
+                self.index_button = gui.add_button("Play evaluation at index")
             self.play_button = gui.add_button("Pause", icon=viser.Icon.PLAYER_PAUSE)
             self.chase_checkbox = gui.add_checkbox("Chase camera", False,
                                                    hint="Follow the car from behind, along its direction of travel")
@@ -172,7 +175,8 @@ class ClientSession:
                                    "y": {"range": padded_range(j_done)}}
         best_pos = history.best_position()
         best_text = "none completed yet" if best_pos is None else (
-            f"**{history.values[best_pos]:.3f}** at #{best_pos}")
+            f"**{history.values[best_pos]:.3f}** (lower is better), evaluation id {history.ids[best_pos]} "
+            f"(index {best_pos})")
         self.job_text.content = (f"**{history.name}**: {history.status}, {history.n_done} / {history.iterations} "
                                  f"evaluations, {sum(history.completed)} completed; best J {best_text}")
 
@@ -185,7 +189,11 @@ class ClientSession:
 
     def _load_latest(self) -> None:
         history = self.history
-        if history is None or history.n_done == 0:
+        if history is None:
+            return
+        if history.n_done == 0:  # nothing of this job to show: not the previous job's episode under its name
+            self.player.unload()
+            self._show_hud()
             return
         self._load(self.dashboard.frames(history.ids[-1]))
 
@@ -230,7 +238,9 @@ class ClientSession:
         t = frames.column("t_s")
         for plot, (actual, reference, _) in zip(self.state_plots, STATE_PLOTS, strict=True):
             plot.data = (t, frames.column(actual), frames.column(reference))
-            plot.scales = {"x": {"time": False, "range": (0.0, max(float(t[-1]), 0.1))}}
+            both = np.concatenate([frames.column(actual), frames.column(reference)])
+            plot.scales = {"x": {"time": False, "range": (0.0, max(float(t[-1]), 0.1))},
+                           "y": {"range": padded_range(both, min_span=0.4)}}
 
     def _show_downloads(self, frames: EpisodeFrames) -> None:
         if frames.evaluation_id is None:
@@ -238,7 +248,7 @@ class ClientSession:
             return
         base = f"/api/evaluations/{frames.evaluation_id}"
         self.downloads.content = (
-            f"Evaluation #{frames.index} (id {frames.evaluation_id}):\n\n"
+            f"{frames.name().capitalize()}:\n\n"
             f"- [trajectory CSV]({base}/trajectory?format=csv)\n"
             f"- [trajectory JSON]({base}/trajectory?format=json)\n"
             f"- [recording (.viser)]({base}/recording.viser)\n"
@@ -279,14 +289,15 @@ class ClientSession:
     def _show_hud(self) -> None:
         frames = self.player.frames
         if frames is None:
-            self.hud.content = "Waiting for the first evaluation..."
+            name = f" of job **{self.history.name}**" if self.history is not None else ""
+            self.hud.content = f"Waiting for the first evaluation{name}..."
             return
         mode = {"live": "Live (follows the job)", "rewatch": "Rewatch", "what-if": "What-if"}[self.mode]
         lines = [f"**{mode}** · t {self.player.t_s:5.1f} / {frames.duration_s:.1f} s", frames.caption()]
         if self.player.ghost_frames is not None:
             lines.append(f"ghost (blue): {self.player.ghost_frames.caption()}")
-        if self.mode == "live" and self.history is not None:
-            lines.append(f"newest: #{self.history.n_done - 1}")
+        if self.mode == "live" and self.history is not None and self.history.n_done:
+            lines.append(f"newest: evaluation id {self.history.ids[-1]} (index {self.history.n_done - 1})")
         self.hud.content = "\n\n".join(lines)
 
     # ----- what-if -----------------------------------------------------------------------------------------

@@ -92,3 +92,15 @@ class LocalProcessExecutor:
 
     def shutdown(self) -> None:
         self.pool.shutdown(wait=True, cancel_futures=True)
+
+
+def open_executor(workers: int | None, dask_address: str | None = None, *, niceness: int = 0
+                  ) -> tuple[EpisodeExecutor, int]:
+    """The local process pool, or a Dask cluster by address; and how many episodes to keep in flight (given,
+    or the cluster's worker threads; 1 locally by default)."""
+    if dask_address:
+        from driftlab.worker.dask_executor import DaskExecutor
+
+        executor = DaskExecutor(dask_address)
+        return executor, workers or executor.workers
+    return LocalProcessExecutor(workers or 1, niceness=niceness), workers or 1

@@ -47,6 +47,18 @@ def restore_optimizer(spec: TuningSpec, history: list[tuple[dict[str, float], fl
     return optimizer
 
 
+EXECUTOR_LOST = "episode executor unreachable"
+
+
+def is_executor_lost(exc: BaseException) -> bool:
+    """A cluster that went away (connection closed or refused, timed out, futures cancelled by a lost client),
+    as opposed to an episode that raised."""
+    from concurrent.futures import CancelledError
+
+    return isinstance(exc, (ConnectionError, TimeoutError, CancelledError)) or type(exc).__name__ in (
+        "CommClosedError", "FutureCancelledError", "SchedulerUnreachable")
+
+
 @dataclass
 class _PendingEvaluation:
     """One asked theta whose episodes (one per seed) are running."""
@@ -185,11 +197,15 @@ def run_job(factory: sessionmaker[Session], job_id: int, executor: EpisodeExecut
                 if on_progress is not None:
                     rate = (time.perf_counter() - started) / max(n_done - n_at_start, 1)
                     on_progress(Progress(n_done, lease.iterations, best, score, rate))
-    except Exception as exc:  # an evaluation crashed the worker process: the job fails, storage stays
+    except Exception as exc:
+        # The executor lost its cluster: the job waits for it (paused, resumed when it is back). Anything else
+        # crashed an evaluation: the job fails. Either way what is stored stays.
+        lost = is_executor_lost(exc)
+        status = JobStatus.PAUSED if lost else JobStatus.FAILED
+        error = f"{EXECUTOR_LOST}: {type(exc).__name__}: {exc}" if lost else f"{type(exc).__name__}: {exc}"
         with storage.transaction(factory) as session:
-            lifecycle.release(session, job_id=job_id, runner=runner, status=JobStatus.FAILED,
-                              error=f"{type(exc).__name__}: {exc}")
-        return JobStatus.FAILED
+            lifecycle.release(session, job_id=job_id, runner=runner, status=status, error=error[:2000])
+        return status
     if n_done >= lease.iterations:
         status = JobStatus.FINISHED
     elif shutting_down:

@@ -10,28 +10,32 @@ from __future__ import annotations
 
 import threading
 
+from sqlalchemy import select
 from sqlalchemy.orm import Session, sessionmaker
 
 from driftlab.db import lifecycle, storage
-from driftlab.worker.executor import LocalProcessExecutor
-from driftlab.worker.job_loop import claim_job, run_job
+from driftlab.db.models import Job
+from driftlab.worker.executor import EpisodeExecutor, open_executor
+from driftlab.worker.job_loop import EXECUTOR_LOST, claim_job, run_job
 
 
 class JobRunner:
-    def __init__(self, factory: sessionmaker[Session], workers: int = 2, poll_s: float = 0.2) -> None:
+    def __init__(self, factory: sessionmaker[Session], workers: int | None = 2, poll_s: float = 0.2,
+                 dask_address: str | None = None) -> None:
         self.factory = factory
         self.workers = workers
+        self.dask_address = dask_address
         self.poll_s = poll_s
         self.runner_id = lifecycle.new_runner_id("server")
         self._stop = threading.Event()
         self._wake = threading.Event()
         self._thread: threading.Thread | None = None
-        self._executor: LocalProcessExecutor | None = None
+        self._executor: EpisodeExecutor | None = None
         self.current_job_id: int | None = None
 
     def start(self) -> None:
         # Below the what-if worker and the web server in priority: a slider must not wait behind a job.
-        self._executor = LocalProcessExecutor(self.workers, niceness=10)
+        self._executor, self.workers = open_executor(self.workers, self.dask_address, niceness=10)
         self._thread = threading.Thread(target=self._loop, name="driftlab-job-runner", daemon=True)
         self._thread.start()
 
@@ -46,7 +50,17 @@ class JobRunner:
         if self._executor is not None:
             self._executor.shutdown()
 
+    def _requeue_jobs_waiting_for_the_cluster(self) -> None:
+        """Jobs paused because the cluster went away continue once the executor reaches it again."""
+        if not getattr(self._executor, "connected", True):
+            return
+        with storage.transaction(self.factory) as session:
+            for job in session.scalars(select(Job).where(Job.status == lifecycle.JobStatus.PAUSED,
+                                                         Job.error.startswith(EXECUTOR_LOST))):
+                lifecycle.requeue(session, job_id=job.id)
+
     def _claim_next(self) -> int | None:
+        self._requeue_jobs_waiting_for_the_cluster()
         with storage.transaction(self.factory) as session:
             job_id = lifecycle.next_claimable(session)
         if job_id is None:

@@ -143,28 +143,6 @@ def test_unknown_ids_are_404(server):
     assert httpx.get(f"{url}/api/evaluations/999999/trajectory").status_code == 404
 
 
-def test_a_killed_server_resumes_its_job_without_repeats(tmp_path):
-    db = tmp_path / "crash.db"
-    proc, url = _start(db, _free_port())
-    job = httpx.post(f"{url}/api/jobs", json={"iterations": 30, "seed_points": 5}).json()
-    deadline = time.time() + 60
-    while httpx.get(f"{url}/api/jobs/{job['id']}").json()["n_done"] < 6 and time.time() < deadline:
-        time.sleep(0.1)
-    proc.kill()  # no clean shutdown
-    proc.wait()
-    proc, url = _start(db, _free_port())
-    try:
-        done = _wait_status(url, job["id"], {"finished"})
-        assert done["n_done"] == 30
-        evals = httpx.get(f"{url}/api/jobs/{job['id']}/evaluations").json()
-        assert [e["index"] for e in evals] == list(range(30))
-        thetas = [tuple(sorted(e["theta"].items())) for e in evals]
-        assert len(set(thetas)) == 30
-    finally:
-        proc.terminate()
-        proc.wait(timeout=30)
-
-
 def test_token_guards_mutating_endpoints(tmp_path):
     proc, url = _start(tmp_path / "tok.db", _free_port(), {"DRIFTLAB_TOKEN": "s3cret"})
     try:

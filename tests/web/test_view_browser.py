@@ -159,3 +159,32 @@ def test_recording_plays_back_from_storage(server, browser, job):
 def test_landing_page_links_the_view(server):
     page = httpx.get(f"{server}/").text
     assert 'href="/viser/"' in page and 'href="/docs"' in page
+
+
+def test_an_empty_job_shows_nothing_of_another_job(server, browser, job):
+    _wait_for_evaluations(server, job["id"], 16)
+    # The runner takes one job at a time, in order: behind a long job, a new one stays empty.
+    busy = httpx.post(f"{server}/api/jobs", json={"name": "busy", "iterations": 5000, "seed_points": 5}).json()
+    _wait_for_evaluations(server, busy["id"], 1)
+    empty = httpx.post(f"{server}/api/jobs", json={"name": "empty", "iterations": 10}).json()
+    try:
+        page, log = _open(browser, f"{server}/viser/")
+        log.wait_for("Connected!")
+        page.get_by_text("Waiting for the first evaluation of job empty").wait_for(timeout=60_000)
+        assert not page.get_by_text("Live (follows the job)").is_visible()
+        assert not page.get_by_text(re.compile("newest: ")).is_visible()
+        page.close()
+        assert httpx.delete(f"{server}/api/jobs/{empty['id']}").status_code == 204  # queued, not running
+        page, log = _open(browser, f"{server}/viser/")  # now the newest is busy, playing live
+        log.wait_for("Connected!")
+        page.get_by_text(re.compile(r"newest: evaluation id \d+ \(index \d+\)")).wait_for(timeout=60_000)
+        page.get_by_text(re.compile(r"evaluation id \d+ \(index \d+ in its job\)")).first.wait_for(timeout=60_000)
+        page.close()
+    finally:
+        for j in (busy, empty):
+            httpx.post(f"{server}/api/jobs/{j['id']}/pause")
+        deadline = time.time() + 60
+        while httpx.get(f"{server}/api/jobs/{busy['id']}").json()["runner_id"] and time.time() < deadline:
+            time.sleep(0.2)
+        for j in (busy, empty):
+            assert httpx.delete(f"{server}/api/jobs/{j['id']}").status_code in (204, 404)

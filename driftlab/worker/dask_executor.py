@@ -1,0 +1,79 @@
+"""Episodes on a Dask cluster: the executor protocol (submit -> Future, shutdown) over ``distributed.Client``.
+
+Every episode is a pure function of (theta, config, seed), so Dask may run it anywhere and again: a worker
+lost mid-episode has its tasks rescheduled by the scheduler on another worker (up to the scheduler's
+``allowed-failures``), and an exception is retried ``retries`` times. The job loop still decides what is
+stored, once, when an evaluation's episodes are all back: no evaluation is lost or stored twice.
+
+The futures handed out are :class:`concurrent.futures.Future`, so the job loop waits on a Dask cluster as on
+the local pool; the Dask future behind each is held until it resolves (a released Dask future cancels its
+task).
+"""
+
+from __future__ import annotations
+
+import logging
+import threading
+from concurrent.futures import Future
+from typing import Any
+
+from driftlab.worker.executor import EpisodeOutcome, evaluate_episode
+
+
+class SchedulerUnreachable(ConnectionError):
+    """The Dask scheduler does not answer (the job pauses; it resumes when the scheduler is back)."""
+
+
+class DaskExecutor:
+    def __init__(self, address: str, *, retries: int = 2, connect_timeout_s: float = 10.0) -> None:
+        from distributed import Client
+
+        # A lost scheduler is reported once, by the job (paused, with the reason); the client's own reconnect
+        # attempts would print a traceback each.
+        for name in ("distributed.client", "distributed.comm", "distributed.core", "distributed.batched"):
+            logging.getLogger(name).setLevel(logging.CRITICAL)
+        try:
+            self.client = Client(address, timeout=connect_timeout_s, set_as_default=False)
+        except (OSError, TimeoutError) as exc:
+            raise SchedulerUnreachable(f"no Dask scheduler at {address}: {exc}") from None
+        self.address = address
+        self.retries = retries
+        self._pending: dict[int, Any] = {}
+        self._lock = threading.Lock()
+
+    @property
+    def connected(self) -> bool:
+        """Whether the client talks to its scheduler now (it reconnects by itself after an outage)."""
+        return self.client.status == "running"
+
+    @property
+    def workers(self) -> int:
+        """Worker threads in the cluster now (a job's default batch size)."""
+        return max(sum(self.client.nthreads().values()), 1)
+
+    def submit(self, theta: dict[str, float], config_doc: dict[str, Any], seed: int = 0) -> Future[EpisodeOutcome]:
+        result: Future[EpisodeOutcome] = Future()
+        dask_future = self.client.submit(evaluate_episode, theta, config_doc, seed, pure=False,
+                                         retries=self.retries)
+        key = id(result)
+        with self._lock:
+            self._pending[key] = dask_future
+
+        def resolve(done) -> None:
+            with self._lock:
+                self._pending.pop(key, None)
+            try:
+                result.set_result(done.result())
+            except Exception as exc:  # the episode raised after its retries, or the cluster lost it
+                result.set_exception(exc)
+
+        dask_future.add_done_callback(resolve)
+        return result
+
+    def shutdown(self) -> None:
+        with self._lock:
+            pending = list(self._pending.values())
+            self._pending.clear()
+        for future in pending:
+            future.cancel()
+        self.client.close()

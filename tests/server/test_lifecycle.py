@@ -1,0 +1,211 @@
+"""One runner per job, no orphans, no 500s: the job lifecycle against real server and CLI processes and a real
+SQLite file."""
+
+import json
+import os
+import signal
+import subprocess
+import sys
+import time
+
+import httpx
+import pytest
+
+from tests.server_process import free_port, start_server, wait_status
+
+
+def _cli(*args, env=None):
+    return subprocess.run([sys.executable, "-m", "driftlab.cli", *args], capture_output=True, text=True,
+                          timeout=300, env={**os.environ, "OMP_NUM_THREADS": "1", **(env or {})})
+
+
+def _children(pid: int) -> set[int]:
+    """Every descendant process of ``pid`` (from /proc)."""
+    parents = {}
+    for entry in os.listdir("/proc"):
+        if entry.isdigit():
+            try:
+                with open(f"/proc/{entry}/stat") as handle:
+                    stat = handle.read()
+            except OSError:
+                continue
+            parents[int(entry)] = int(stat.rsplit(")", 1)[1].split()[1])
+    found, frontier = set(), {pid}
+    while frontier:
+        frontier = {child for child, parent in parents.items() if parent in frontier} - found
+        found |= frontier
+    return found
+
+
+def _alive(pid: int) -> bool:
+    try:
+        with open(f"/proc/{pid}/stat") as handle:
+            return handle.read().rsplit(")", 1)[1].split()[0] != "Z"
+    except OSError:
+        return False
+
+
+@pytest.fixture
+def server(tmp_path):
+    db = tmp_path / "driftlab.db"
+    proc, url = start_server(db, free_port())
+    yield proc, url, db
+    if proc.poll() is None:
+        proc.terminate()
+        proc.wait(timeout=30)
+
+
+def _wait_done(url, job_id, n, timeout_s=120):
+    deadline = time.time() + timeout_s
+    while httpx.get(f"{url}/api/jobs/{job_id}").json()["n_done"] < n and time.time() < deadline:
+        time.sleep(0.1)
+
+
+def test_a_second_runner_on_a_running_job_is_refused(server):
+    _, url, db = server
+    job = httpx.post(f"{url}/api/jobs", json={"name": "race", "iterations": 400, "seed_points": 5}).json()
+    _wait_done(url, job["id"], 2)
+    other = _cli("tune", "--name", "race", "--db", str(db))
+    assert other.returncode == 2
+    assert "being run by server@" in other.stderr and "Traceback" not in other.stderr
+    assert httpx.get(f"{url}/api/jobs/{job['id']}").json()["status"] == "running"
+    httpx.post(f"{url}/api/jobs/{job['id']}/pause")
+    paused = wait_status(url, job["id"], {"paused"})
+    time.sleep(1.0)
+    evals = httpx.get(f"{url}/api/jobs/{job['id']}/evaluations").json()
+    assert [e["index"] for e in evals] == list(range(len(evals))) and len(evals) >= paused["n_done"]
+
+
+def test_a_second_server_on_a_taken_port_leaves_the_first_ones_jobs_alone(server):
+    _, url, db = server
+    job = httpx.post(f"{url}/api/jobs", json={"iterations": 200, "seed_points": 5, "robust_samples": 1}).json()
+    _wait_done(url, job["id"], 2)
+    before = httpx.get(f"{url}/api/jobs/{job['id']}").json()
+    port = url.rsplit(":", 1)[1]
+    second = subprocess.run([sys.executable, "-m", "driftlab.cli", "serve", "--port", port, "--db", str(db)],
+                            capture_output=True, text=True, timeout=60)
+    assert second.returncode == 2 and f"--port {port}" in second.stderr
+    assert "Traceback" not in second.stderr and "DriftLab:" not in second.stdout
+    after = httpx.get(f"{url}/api/jobs/{job['id']}").json()
+    assert after["status"] == "running" and after["runner_id"] == before["runner_id"]
+    httpx.post(f"{url}/api/jobs/{job['id']}/pause")
+    wait_status(url, job["id"], {"paused"})
+
+
+def test_kill_9_leaves_no_orphan_workers_and_the_next_server_takes_the_job_over(tmp_path):
+    db = tmp_path / "crash.db"
+    proc, url = start_server(db, free_port())
+    job = httpx.post(f"{url}/api/jobs", json={"iterations": 30, "seed_points": 5, "robust_samples": 1}).json()
+    _wait_done(url, job["id"], 4)
+    workers = _children(proc.pid)
+    assert len(workers) >= 3  # the job's pool, the what-if worker, multiprocessing's helpers
+    proc.send_signal(signal.SIGKILL)
+    proc.wait()
+    deadline = time.time() + 10
+    while any(_alive(p) for p in workers) and time.time() < deadline:
+        time.sleep(0.2)
+    assert not [p for p in workers if _alive(p)], "worker processes outlived a killed server"
+    proc, url = start_server(db, free_port())
+    try:  # the dead server's lease goes stale, then the new server takes the job over
+        done = wait_status(url, job["id"], {"finished"}, timeout_s=180)
+        evals = httpx.get(f"{url}/api/jobs/{job['id']}/evaluations").json()
+        assert done["n_done"] == 30 and [e["index"] for e in evals] == list(range(30))
+        assert len({tuple(sorted(e["theta"].items())) for e in evals}) == 30
+    finally:
+        proc.terminate()
+        proc.wait(timeout=30)
+    assert not [p for p in _children(os.getpid()) if _alive(p) and p in workers]
+
+
+HUGE = ["99999999999999999999999", "9223372036854775808", str(2**70)]
+
+
+@pytest.mark.parametrize("path", [
+    "/api/jobs/{n}", "/api/evaluations/{n}", "/api/evaluations/{n}/trajectory", "/api/jobs/1/evaluations?after={n}",
+    "/api/evaluations/{n}/recording.viser", "/api/jobs/{n}/best",
+])
+def test_out_of_range_ids_are_404_or_422_never_500(server, path):
+    _, url, _ = server
+    for n in HUGE + ["0", "-5"]:
+        r = httpx.get(url + path.format(n=n))
+        assert r.status_code in (404, 422), (path, n, r.status_code, r.text)
+    r = httpx.post(f"{url}/api/jobs/{HUGE[1]}/pause")
+    assert r.status_code in (404, 422)
+
+
+@pytest.mark.parametrize(("body", "field"), [
+    ({"iterations": True}, "iterations"),
+    ({"iterations": "40"}, "iterations"),
+    ({"iterations": 40.0}, "iterations"),
+    ({"iterations": 5, "seed": False}, "seed"),
+    ({"iterations": 5, "seed_points": "3"}, "seed_points"),
+])
+def test_numbers_are_strict(server, body, field):
+    _, url, _ = server
+    r = httpx.post(f"{url}/api/jobs", json=body)
+    assert r.status_code == 422 and field in r.json()["detail"]
+
+
+def test_invalid_json_is_a_422_naming_the_body(server):
+    _, url, _ = server
+    r = httpx.post(f"{url}/api/jobs", content=b'{"iterations": 3,', headers={"content-type": "application/json"})
+    assert r.status_code == 422 and r.json()["detail"].startswith("body:")
+
+
+def test_delete_extend_and_paging(server):
+    _, url, _ = server
+    job = httpx.post(f"{url}/api/jobs", json={"iterations": 4, "seed_points": 4, "robust_samples": 1}).json()
+    wait_status(url, job["id"], {"finished"})
+    page = httpx.get(f"{url}/api/jobs/{job['id']}/evaluations", params={"after": 0, "limit": 2}).json()
+    assert [e["index"] for e in page] == [1, 2]
+    assert httpx.patch(f"{url}/api/jobs/{job['id']}", json={"iterations": 2}).status_code == 422  # below n_done
+    extended = httpx.patch(f"{url}/api/jobs/{job['id']}", json={"iterations": 7})
+    assert extended.status_code == 200 and extended.json()["iterations"] == 7
+    done = wait_status(url, job["id"], {"finished"})
+    evals = httpx.get(f"{url}/api/jobs/{job['id']}/evaluations").json()
+    assert done["n_done"] == 7 and [e["index"] for e in evals] == list(range(7))
+    running = httpx.post(f"{url}/api/jobs", json={"iterations": 300, "seed_points": 5}).json()
+    _wait_done(url, running["id"], 1)
+    assert httpx.delete(f"{url}/api/jobs/{running['id']}").status_code == 409
+    httpx.post(f"{url}/api/jobs/{running['id']}/pause")
+    wait_status(url, running["id"], {"paused"})
+    time.sleep(0.5)
+    assert httpx.delete(f"{url}/api/jobs/{running['id']}").status_code == 204
+    assert httpx.get(f"{url}/api/jobs/{running['id']}").status_code == 404
+    assert httpx.get(f"{url}/api/evaluations/{evals[0]['id']}").status_code == 200  # other jobs untouched
+    assert httpx.delete(f"{url}/api/jobs/{running['id']}").status_code == 404
+
+
+def test_tune_extends_a_finished_job_and_tools_share_the_default_database(tmp_path):
+    env = {"XDG_DATA_HOME": str(tmp_path / "data"), "DRIFTLAB_DATABASE_URL": ""}
+    first = _cli("tune", "--iterations", "3", "--seed-points", "3", "--robust-samples", "1", "--name", "t1", env=env)
+    assert first.returncode == 0, first.stderr
+    assert (tmp_path / "data" / "driftlab" / "driftlab.db").exists()
+    more = _cli("tune", "--iterations", "5", "--name", "t1", env=env)
+    assert more.returncode == 0, more.stderr
+    assert json.loads(more.stdout)["n_done"] == 5 and json.loads(more.stdout)["status"] == "finished"
+    rescored = _cli("rescore", "--name", "t1", "--samples", "2", env=env)  # no --db: the same default file
+    assert rescored.returncode == 0, rescored.stderr
+
+
+@pytest.mark.parametrize(("args", "needle"), [
+    (("episode", "--theta", "c_lr=abc"), "theta.c_lr"),
+    (("episode", "--plot", "/nonexistent/dir/ep.png"), "--plot"),
+    (("serve", "--port", "99999"), "--port"),
+    (("tune", "--workers", "0"), "--workers"),
+])
+def test_cli_errors_are_one_line_with_exit_2(args, needle):
+    out = _cli(*args)
+    assert out.returncode == 2 and needle in out.stderr
+    assert len(out.stderr.strip().splitlines()) == 1 and "Traceback" not in out.stderr
+
+
+def test_schemathesis_finds_no_server_error(server, tmp_path):
+    """Property-based requests from the OpenAPI schema (real HTTP, real server): never a 5xx."""
+    _, url, _ = server
+    out = subprocess.run(["st", "run", f"{url}/openapi.json", "--checks", "not_a_server_error", "--max-examples", "25",
+                          "--seed", "1", "--workers", "1", "--no-color", "--request-timeout", "30",
+                          "--generation-database", "none"],
+                         capture_output=True, text=True, timeout=900, cwd=tmp_path,
+                         env={**os.environ, "PATH": os.path.dirname(sys.executable) + os.pathsep + os.environ["PATH"]})
+    assert out.returncode == 0, out.stdout[-4000:] + out.stderr[-2000:]

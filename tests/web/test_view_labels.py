@@ -1,0 +1,57 @@
+"""What the view writes beside the car: ids as the API has them, full-precision theta, labels that stay
+readable, axes with ticks, and a replay that says what it replays."""
+
+import math
+
+import numpy as np
+import zstandard
+
+from driftlab.core.episode import COLUMNS
+from driftlab.core.track import FigureEight
+from driftlab.web.frames import EpisodeFrames
+from driftlab.web.recording import EpisodeRecorder
+from driftlab.web.scene import TRIGGER_LABEL_Z_M, trigger_label_position
+from driftlab.web.session import padded_range
+
+THETA = {"c_lr": 0.021456711687249243, "c_rl": 0.02115249732809388, "dV": 0.027863441262698907, "k": 0.0}
+
+
+def _frames():
+    rows = np.zeros((40, len(COLUMNS)))
+    rows[:, COLUMNS.index("t_s")] = np.arange(40) * 0.05
+    rows[:, COLUMNS.index("x_m")] = np.linspace(0.0, 30.0, 40)
+    rows[:, COLUMNS.index("y_m")] = 88.0
+    return EpisodeFrames(COLUMNS, rows, evaluation_id=1234, index=7, theta=THETA, status="completed", J=-1.2345)
+
+
+def test_caption_names_the_api_id_and_the_index_and_theta_at_full_precision():
+    caption = _frames().caption()
+    assert "evaluation id 1234 (index 7 in its job)" in caption and "#" not in caption
+    for value in THETA.values():
+        assert repr(value) in caption
+    assert "lower is better" in caption
+    assert EpisodeFrames(COLUMNS, np.zeros((0, len(COLUMNS)))).name() == "what-if episode"
+
+
+def test_trigger_labels_sit_low_beside_their_post_away_from_p0():
+    for x, y in ((-3.0, 0.4), (-8.0, -1.0), (0.0, 0.0)):
+        lx, ly, lz = trigger_label_position(x, y)
+        assert lz == TRIGGER_LABEL_Z_M < 5.0
+        assert math.hypot(lx, ly) >= math.hypot(x, y) + 4.9  # pushed away from the P0 label
+
+
+def test_state_plot_ranges_are_wide_enough_for_several_ticks():
+    lo, hi = padded_range(np.array([-0.27, -0.25, -0.26]), min_span=0.4)
+    assert hi - lo >= 0.4 and lo <= -0.27 and hi >= -0.25
+    lo, hi = padded_range(np.array([18.0, 19.5]), min_span=0.4)
+    assert lo < 18.0 and hi > 19.5 and hi - lo < 2.0
+
+
+def test_a_replay_shows_its_j_and_theta():
+    recorder = EpisodeRecorder()
+    try:
+        data = recorder.viser_file(_frames(), FigureEight())
+    finally:
+        recorder.stop()
+    raw = zstandard.ZstdDecompressor().decompressobj().decompress(data[8:])  # after viser's 8-byte size header
+    assert b"evaluation id 1234" in raw and b"J -1.234" in raw and repr(THETA["c_lr"]).encode() in raw

@@ -1,0 +1,132 @@
+"""Episodes on a real Dask cluster: `dask scheduler` and `dask worker` processes on loopback."""
+
+import json
+import os
+import signal
+import socket
+import subprocess
+import sys
+import time
+
+import pytest
+
+from driftlab.db import storage
+
+BIN = os.path.dirname(sys.executable)
+ENV = {**os.environ, "OMP_NUM_THREADS": "1", "PATH": BIN + os.pathsep + os.environ["PATH"]}
+
+
+def _free_port():
+    with socket.socket() as s:
+        s.bind(("127.0.0.1", 0))
+        return s.getsockname()[1]
+
+
+def _scheduler(port):
+    proc = subprocess.Popen([os.path.join(BIN, "dask"), "scheduler", "--host", "127.0.0.1", "--port", str(port),
+                             "--no-dashboard"], env=ENV, stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
+    deadline = time.time() + 60
+    while time.time() < deadline:
+        with socket.socket() as s:
+            if s.connect_ex(("127.0.0.1", port)) == 0:
+                return proc
+        time.sleep(0.2)
+    proc.kill()
+    raise RuntimeError("the Dask scheduler did not start")
+
+
+def _worker(address):
+    # No nanny: one process per worker, so SIGKILL takes the worker down for good.
+    return subprocess.Popen([os.path.join(BIN, "dask"), "worker", address, "--nthreads", "1", "--no-nanny",
+                             "--no-dashboard", "--host", "127.0.0.1"], env=ENV, stdout=subprocess.DEVNULL,
+                            stderr=subprocess.DEVNULL)
+
+
+def _wait_workers(address, n, timeout_s=90):
+    from distributed import Client
+
+    with Client(address, timeout=30, set_as_default=False) as client:
+        client.wait_for_workers(n, timeout=timeout_s)
+
+
+def _tune(db, address, *extra):
+    return subprocess.Popen([sys.executable, "-m", "driftlab.cli", "tune", "--db", str(db), "--dask", address,
+                             "--robust-samples", "2", "--confirm-samples", "0", "--seed-points", "6", *extra],
+                            env=ENV, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+
+
+def _n_done(db, name):
+    try:
+        factory = storage.open_database(f"sqlite:///{db}")
+        with storage.transaction(factory) as session:
+            job = storage.find_job(session, name=name)
+            return 0 if job is None else storage.count_evaluations(session, job_id=job.id)
+    except Exception:
+        return 0
+
+
+@pytest.fixture
+def cluster():
+    port = _free_port()
+    address = f"tcp://127.0.0.1:{port}"
+    processes = [_scheduler(port)]
+    processes += [_worker(address) for _ in range(3)]
+    _wait_workers(address, 3)
+    yield address, processes
+    for proc in processes:
+        if proc.poll() is None:
+            proc.kill()
+            proc.wait()
+
+
+def test_a_job_survives_a_worker_killed_mid_job(cluster, tmp_path):
+    address, processes = cluster
+    db = tmp_path / "dask.db"
+    tune = _tune(db, address, "--iterations", "24", "--name", "dask")
+    deadline = time.time() + 120
+    while _n_done(db, "dask") < 6 and time.time() < deadline:
+        time.sleep(0.2)
+    assert _n_done(db, "dask") >= 6
+    processes[1].send_signal(signal.SIGKILL)  # a worker, mid-job
+    out, err = tune.communicate(timeout=300)
+    assert tune.returncode == 0, err
+    result = json.loads(out)
+    assert result["status"] == "finished" and result["n_done"] == 24
+    factory = storage.open_database(f"sqlite:///{db}")
+    with storage.transaction(factory) as session:
+        evals = storage.evaluations(session, job_id=result["id"])
+        indexes = [e.index for e in evals]
+        thetas = {tuple(sorted(e.theta.items())) for e in evals}
+        seeds = [[s["seed"] for s in e.seeds] for e in evals]
+    assert indexes == list(range(24)) and len(thetas) == 24
+    assert all(s == [0, 1] for s in seeds)  # every evaluation has each of its episodes exactly once
+
+
+def test_a_lost_scheduler_pauses_the_job_and_it_resumes_when_the_scheduler_is_back(tmp_path):
+    port = _free_port()
+    address = f"tcp://127.0.0.1:{port}"
+    db = tmp_path / "lost.db"
+    processes = [_scheduler(port), _worker(address)]
+    try:
+        _wait_workers(address, 1)
+        tune = _tune(db, address, "--iterations", "400", "--name", "lost")
+        deadline = time.time() + 120
+        while _n_done(db, "lost") < 3 and time.time() < deadline:
+            time.sleep(0.2)
+        processes[0].send_signal(signal.SIGKILL)  # the scheduler goes away
+        out, err = tune.communicate(timeout=300)
+        assert json.loads(out)["status"] == "paused", err
+        assert "paused: episode executor unreachable" in err and "Traceback" not in err
+        stopped_at = _n_done(db, "lost")
+        processes[1].kill()
+        processes = [_scheduler(port), _worker(address)]
+        _wait_workers(address, 1)
+        again = _tune(db, address, "--iterations", f"{stopped_at + 4}", "--name", "lost")
+        out, err = again.communicate(timeout=300)
+        assert again.returncode == 0, err
+        assert json.loads(out)["status"] == "finished" and json.loads(out)["n_done"] == stopped_at + 4
+    finally:
+        for proc in processes:
+            if proc.poll() is None:
+                proc.kill()
+                proc.wait()

@@ -33,12 +33,13 @@ def main() -> None:
             for theta in told:
                 opt.tell(theta, objective(theta))
             opt.ask()  # the refit at this history size, paid once whatever q is
-            for _ in range(q - 2):
-                opt.pending.append(rng.random(len(BOUNDS)))  # q - 1 points in flight besides the one above
+            opt.pending.clear()
+            for _ in range(q - 1):
+                opt.pending.append(rng.random(len(BOUNDS)))  # q - 1 points in flight, this ask makes q
             t0 = time.perf_counter()
             opt.ask()
             times.append(time.perf_counter() - t0)
-        print(f"q = {q:3d} pending: one proposal median {1e3 * statistics.median(times):7.1f} ms, "
+        print(f"q = {q:3d} in flight: one proposal median {1e3 * statistics.median(times):7.1f} ms, "
               f"max {1e3 * max(times):7.1f} ms ({args.repeats} runs, n = {args.n})", flush=True)
 
 

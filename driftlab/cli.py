@@ -213,7 +213,7 @@ def _cmd_rescore(args: argparse.Namespace) -> int:
     from driftlab.worker.scoring import rescore_job
 
     print(json.dumps(_finite(rescore_job(db_url=_db_url(args.db), name=args.name, samples=args.samples,
-                                         workers=args.workers))))
+                                         workers=args.workers, dask_address=_dask_address(args)))))
     return 0
 
 
@@ -221,7 +221,7 @@ def _cmd_report(args: argparse.Namespace) -> int:
     from driftlab.report import write_report
 
     path = write_report(db_url=_db_url(args.db), name=args.name, out_dir=args.out, baseline_samples=args.baselines,
-                        rescore_samples=args.rescore_samples)
+                        rescore_samples=args.rescore_samples, dask_address=_dask_address(args))
     print(json.dumps({"report": str(path)}))
     return 0
 
@@ -325,7 +325,9 @@ def build_parser() -> argparse.ArgumentParser:
     rs.add_argument("--db", help=DB_HELP)
     rs.add_argument("--samples", type=_int_in(1, 1000), default=30, metavar="N",
                     help="episodes, each with a seed never used in tuning (1..1000, default 30)")
-    rs.add_argument("--workers", type=_int_in(1, 64), default=2, metavar="N", help="processes (1..64)")
+    rs.add_argument("--workers", type=_int_in(1, 1024), metavar="N",
+                    help="episodes in flight, 1..1024 (default: 2 local processes, the cluster's threads with --dask)")
+    rs.add_argument("--dask", metavar="ADDRESS", help=DASK_HELP)
     rs.set_defaults(func=_cmd_rescore)
     rp = sub.add_parser("report", help="write the paper's results for a tuning job")
     rp.add_argument("--name", required=True)
@@ -333,6 +335,7 @@ def build_parser() -> argparse.ArgumentParser:
     rp.add_argument("--out", required=True, help="output directory")
     rp.add_argument("--baselines", type=int, help="random samples for the random-search baseline "
                     "(default: as many as the job's evaluations)")
+    rp.add_argument("--dask", metavar="ADDRESS", help=DASK_HELP)
     rp.add_argument("--rescore-samples", type=_int_in(1, 1000), default=20, metavar="N",
                     help="fresh seeds each theta of the table is rescored on (1..1000, default 20)")
     rp.set_defaults(func=_cmd_report)

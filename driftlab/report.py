@@ -15,7 +15,7 @@ from driftlab.core.tuning import TuningSpec
 from driftlab.core.vehicle import pack_params
 from driftlab.db import storage
 from driftlab.plotting import plot_convergence, plot_episode
-from driftlab.worker.executor import LocalProcessExecutor
+from driftlab.worker.executor import open_executor
 from driftlab.worker.scoring import score_thetas
 
 # The paper's Table I (left-hand drift at R = 44 m, beta = -0.4; REFERENCE.md section 2).
@@ -23,7 +23,7 @@ PAPER_TABLE_I = {"V": 19.1, "beta": -0.4, "r": 0.434, "delta": -0.270, "Fxr": 43
 
 
 def write_report(*, db_url: str, name: str, out_dir: str, baseline_samples: int | None = None,
-                 rescore_samples: int = 20) -> Path:
+                 rescore_samples: int = 20, dask_address: str | None = None) -> Path:
     factory = storage.open_database(db_url)
     with storage.transaction(factory) as session:
         job = storage.get_job_by_name(session, name=name)
@@ -49,7 +49,7 @@ def write_report(*, db_url: str, name: str, out_dir: str, baseline_samples: int 
     rng = np.random.default_rng(spec.seed + 12345)
     samples = [{k: float(rng.uniform(lo, hi)) for k, (lo, hi) in spec.bounds.items()} for _ in range(n_random)]
     config_doc = spec.to_dict()["config"]
-    executor = LocalProcessExecutor(workers=2)
+    executor, _ = open_executor(None if dask_address else 2, dask_address)
     try:
         # The random baseline is scored as tuning scored (the job's seeds, same aggregate); then every theta
         # of the table is rescored under fresh seeds.

@@ -14,10 +14,13 @@ from __future__ import annotations
 
 import logging
 import threading
+import time
 from concurrent.futures import Future
 from typing import Any
 
 from driftlab.worker.executor import EpisodeOutcome, evaluate_episode
+
+RECONNECT_EVERY_S = 3.0
 
 
 class SchedulerUnreachable(ConnectionError):
@@ -26,25 +29,42 @@ class SchedulerUnreachable(ConnectionError):
 
 class DaskExecutor:
     def __init__(self, address: str, *, retries: int = 2, connect_timeout_s: float = 10.0) -> None:
-        from distributed import Client
-
         # A lost scheduler is reported once, by the job (paused, with the reason); the client's own reconnect
         # attempts would print a traceback each.
         for name in ("distributed.client", "distributed.comm", "distributed.core", "distributed.batched"):
             logging.getLogger(name).setLevel(logging.CRITICAL)
-        try:
-            self.client = Client(address, timeout=connect_timeout_s, set_as_default=False)
-        except (OSError, TimeoutError) as exc:
-            raise SchedulerUnreachable(f"no Dask scheduler at {address}: {exc}") from None
         self.address = address
+        self.client = self._connect(connect_timeout_s)
+        self._last_attempt = time.monotonic()
         self.retries = retries
         self._pending: dict[int, Any] = {}
         self._lock = threading.Lock()
 
+    def _connect(self, timeout_s: float):
+        from distributed import Client
+
+        try:
+            return Client(self.address, timeout=timeout_s, set_as_default=False)
+        except (OSError, TimeoutError) as exc:
+            raise SchedulerUnreachable(f"no Dask scheduler at {self.address}: {exc}") from None
+
     @property
     def connected(self) -> bool:
-        """Whether the client talks to its scheduler now (it reconnects by itself after an outage)."""
-        return self.client.status == "running"
+        """Whether the client talks to its scheduler now. A client that gave up after an outage is replaced
+        by a new one, tried at most every RECONNECT_EVERY_S (from the job runner's thread, never the server's
+        event loop)."""
+        if self.client.status == "running":
+            return True
+        if time.monotonic() - self._last_attempt < RECONNECT_EVERY_S:
+            return False
+        self._last_attempt = time.monotonic()
+        try:
+            fresh = self._connect(2.0)
+        except SchedulerUnreachable:
+            return False
+        old, self.client = self.client, fresh
+        old.close()
+        return True
 
     @property
     def workers(self) -> int:

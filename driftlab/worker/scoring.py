@@ -11,7 +11,7 @@ from typing import Any
 from driftlab.core.robust import SampleResult, rescore_seeds, summarize
 from driftlab.core.tuning import TuningSpec
 from driftlab.db import storage
-from driftlab.worker.executor import EpisodeExecutor, LocalProcessExecutor
+from driftlab.worker.executor import EpisodeExecutor, open_executor
 
 
 def score_thetas(executor: EpisodeExecutor, thetas: list[dict[str, float]], config_doc: dict[str, Any],
@@ -22,7 +22,8 @@ def score_thetas(executor: EpisodeExecutor, thetas: list[dict[str, float]], conf
              for o in (f.result() for f in row)] for row in futures]
 
 
-def rescore_job(*, db_url: str, name: str, samples: int = 30, workers: int = 2) -> dict[str, Any]:
+def rescore_job(*, db_url: str, name: str, samples: int = 30, workers: int | None = 2,
+                dask_address: str | None = None) -> dict[str, Any]:
     """The job's best theta, exactly as stored, under ``samples`` seeds no tuning job uses."""
     factory = storage.open_database(db_url)
     with storage.transaction(factory) as session:
@@ -32,7 +33,7 @@ def rescore_job(*, db_url: str, name: str, samples: int = 30, workers: int = 2) 
         if best is None:
             raise storage.NotFound(f"job {name!r} has no evaluations yet")
         theta, stored_j, stored_status = dict(best.theta), best.J, best.status
-    executor = LocalProcessExecutor(workers)
+    executor, _ = open_executor(workers or (None if dask_address else 2), dask_address)
     try:
         [results] = score_thetas(executor, [theta], spec.to_dict()["config"], rescore_seeds(samples))
     finally:

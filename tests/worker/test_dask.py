@@ -130,3 +130,56 @@ def test_a_lost_scheduler_pauses_the_job_and_it_resumes_when_the_scheduler_is_ba
             if proc.poll() is None:
                 proc.kill()
                 proc.wait()
+
+
+def test_the_server_resumes_a_job_by_itself_when_its_scheduler_returns(tmp_path):
+    import httpx
+
+    from tests.server_process import free_port, start_server, wait_status
+
+    port = _free_port()
+    address = f"tcp://127.0.0.1:{port}"
+    processes = [_scheduler(port), _worker(address)]
+    server = None
+    try:
+        _wait_workers(address, 1)
+        server, url = start_server(tmp_path / "srv.db", free_port(), {"DRIFTLAB_DASK_ADDRESS": address})
+        job = httpx.post(f"{url}/api/jobs", json={"iterations": 400, "seed_points": 5, "robust_samples": 1}).json()
+        deadline = time.time() + 120
+        while httpx.get(f"{url}/api/jobs/{job['id']}").json()["n_done"] < 3 and time.time() < deadline:
+            time.sleep(0.2)
+        processes[0].send_signal(signal.SIGKILL)
+        paused = wait_status(url, job["id"], {"paused"}, timeout_s=120)
+        assert paused["error"].startswith("episode executor unreachable")
+        assert httpx.get(f"{url}/api/health").json() == {"status": "ok"}  # the API never waits on Dask
+        n_paused = paused["n_done"]
+        processes[1].kill()
+        processes = [_scheduler(port), _worker(address)]
+        deadline = time.time() + 120
+        while httpx.get(f"{url}/api/jobs/{job['id']}").json()["n_done"] <= n_paused + 2 and time.time() < deadline:
+            time.sleep(0.5)
+        now = httpx.get(f"{url}/api/jobs/{job['id']}").json()
+        assert now["n_done"] > n_paused + 2 and now["status"] == "running" and now["error"] is None
+        httpx.post(f"{url}/api/jobs/{job['id']}/pause")
+        wait_status(url, job["id"], {"paused"})
+    finally:
+        if server is not None:
+            server.terminate()
+            server.wait(timeout=30)
+        for proc in processes:
+            if proc.poll() is None:
+                proc.kill()
+                proc.wait()
+
+
+def test_rescore_runs_on_the_cluster_with_the_same_result_as_locally(cluster, tmp_path):
+    address, _ = cluster
+    db = tmp_path / "rescore.db"
+    tuned = _tune(db, address, "--iterations", "3", "--name", "r")
+    tuned.communicate(timeout=300)
+    args = [sys.executable, "-m", "driftlab.cli", "rescore", "--name", "r", "--db", str(db), "--samples", "4"]
+    on_dask = subprocess.run([*args, "--dask", address], env=ENV, capture_output=True, text=True, timeout=300)
+    local = subprocess.run(args, env=ENV, capture_output=True, text=True, timeout=300)
+    assert on_dask.returncode == 0 and local.returncode == 0, on_dask.stderr + local.stderr
+    a, b = json.loads(on_dask.stdout), json.loads(local.stdout)
+    assert a["J_mean"] == b["J_mean"] and a["seeds"] == b["seeds"]  # pure episodes: the executor does not matter

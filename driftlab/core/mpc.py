@@ -87,6 +87,7 @@ class MpcConfig:
     path_states: bool = True
     q_lateral_error: float = 0.05
     q_course_error: float = 6.6
+    terminal_cost: bool = False
 
     @classmethod
     def paper(cls) -> MpcConfig:
@@ -107,6 +108,8 @@ class MpcConfig:
             raise ConfigError(f"mpc.discretization must be 'euler' or 'zoh', got {self.discretization!r}")
         weights = {f.name: (0.0, 1e7) for f in fields(self) if f.name.startswith(("q_", "r_"))}
         check_ranges(self, "mpc", {**weights, **ranges})
+        if not isinstance(self.terminal_cost, bool):
+            raise ConfigError(f"mpc.terminal_cost must be true or false, got {self.terminal_cost!r}")
         if not isinstance(self.path_states, bool):
             raise ConfigError(f"mpc.path_states must be true or false, got {self.path_states!r}")
         if not isinstance(self.horizon, int):
@@ -180,6 +183,17 @@ def _with_actuator_lag(a_c: np.ndarray, b_c: np.ndarray, config: MpcConfig) -> t
     return a_sys, b_sys
 
 
+def _terminal_weight(a_mat: np.ndarray, b_mat: np.ndarray, q_mat: np.ndarray, r_mat: np.ndarray) -> np.ndarray:
+    """The infinite-horizon cost-to-go P of the unconstrained problem (discrete Riccati equation): as the last
+    stage's weight it makes the finite-horizon MPC equal the LQR where no limit is active, which stabilizes
+    the drift's saddle (an MPC without it on a 1 s horizon need not)."""
+    try:
+        p_mat = scipy.linalg.solve_discrete_are(a_mat, b_mat, q_mat + 1e-9 * np.eye(len(q_mat)), r_mat)
+    except (np.linalg.LinAlgError, ValueError):
+        return q_mat
+    return 0.5 * (p_mat + p_mat.T)
+
+
 def discretize(a_mat: np.ndarray, b_mat: np.ndarray, dt_s: float, method: str):
     """Discrete (Ad, Bd, Gd) for x+ = Ad x + Bd u + Gd d, with d an additive disturbance on xdot."""
     n, m = b_mat.shape
@@ -251,6 +265,8 @@ class ReferenceQp:
         weights = np.concatenate([config.state_weights, *lag_part])
         q_bar = np.kron(np.eye(n_h), np.diag(weights))
         r_bar = np.kron(np.eye(n_h), np.diag(config.input_weights))
+        if config.terminal_cost:
+            q_bar[-n_z:, -n_z:] = _terminal_weight(aa, ba, np.diag(weights), np.diag(config.input_weights))
         hessian = gamma.T @ q_bar @ gamma + r_bar
         hessian = 0.5 * (hessian + hessian.T)
         self.hessian = hessian

@@ -106,3 +106,27 @@ def test_at_the_reference_the_mpc_holds_the_equilibrium_inputs():
     sol = qp.session().solve(_packed(qp, LEFT), z, np.zeros(3))
     assert sol.steer_rad == pytest.approx(LEFT.steer_rad, abs=1e-12)
     assert sol.drive_force_n == pytest.approx(LEFT.drive_force_n, abs=1e-8)
+
+
+def test_terminal_cost_makes_the_unconstrained_mpc_the_lqr():
+    """With the Riccati cost-to-go as the last stage's weight, the MPC's first move is the infinite-horizon LQR
+    gain (dynamic programming), whatever the horizon; without it a 20-step MPC's gain differs."""
+    import scipy.linalg
+
+    for terminal, horizon in ((True, 20), (True, 5), (False, 20)):
+        qp = ReferenceQp(replace(MpcConfig(), terminal_cost=terminal, horizon=horizon), LEFT, P)
+        n_sys, n_z = qp.ad.shape[0], qp.n_z
+        aa = np.zeros((n_z, n_z))
+        aa[:n_sys, :n_sys], aa[:n_sys, n_sys:], aa[n_sys:, n_sys:] = qp.ad, qp.bd, np.eye(2)
+        ba = np.vstack([qp.bd, np.eye(2)])
+        cfg = qp.config
+        q_mat = np.diag(np.concatenate([cfg.state_weights, cfg.actuator_weights, np.zeros(2)]))
+        r_mat = np.diag(cfg.input_weights)
+        p_mat = scipy.linalg.solve_discrete_are(aa, ba, q_mat + 1e-9 * np.eye(n_z), r_mat)
+        k_lqr = np.linalg.solve(r_mat + ba.T @ p_mat @ ba, ba.T @ p_mat @ aa)
+        k_mpc = qp.gain_state[:2]
+        if terminal:
+            np.testing.assert_allclose(k_mpc, k_lqr, rtol=1e-5, atol=1e-6 * np.abs(k_lqr).max())
+            assert np.abs(np.linalg.eigvals(aa - ba @ k_mpc)).max() < 1.0
+        else:
+            assert np.abs(k_mpc - k_lqr).max() > 1e-3 * np.abs(k_lqr).max()

@@ -86,3 +86,17 @@ def test_pending_points_give_distinct_proposals():
 def test_bad_bounds_name_the_field(bounds, field):
     with pytest.raises(ConfigError, match=field):
         BayesianOptimizer(bounds)
+
+
+def test_success_probability_equals_sklearns_predict_proba():
+    from sklearn.gaussian_process import GaussianProcessClassifier
+    from sklearn.gaussian_process.kernels import RBF, ConstantKernel
+
+    from driftlab.core.optimizer import SuccessProbability
+
+    rng = np.random.default_rng(3)
+    x = rng.random((300, 4))
+    ok = (x[:, 0] + x[:, 3] < 1.2).astype(int)
+    clf = GaussianProcessClassifier(ConstantKernel(4.0) * RBF(np.full(4, 0.3)), optimizer=None).fit(x, ok)
+    query = rng.random((500, 4))
+    np.testing.assert_allclose(SuccessProbability(clf)(query), clf.predict_proba(query)[:, 1], atol=1e-10)

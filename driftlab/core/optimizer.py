@@ -241,7 +241,10 @@ class BayesianOptimizer:
             else:
                 self._clf_kernel = ConstantKernel(4.0) * RBF(np.full(self.dim, 0.3))
             self._clf_at = boundary
-        return SuccessProbability(GaussianProcessClassifier(self._clf_kernel, optimizer=None).fit(x, ok.astype(int)))
+        # warm_start: sklearn searches the Laplace mode twice in one fit (for the likelihood, then for
+        # prediction); the second search starts from the first one's mode. Nothing carries over between fits.
+        classifier = GaussianProcessClassifier(self._clf_kernel, optimizer=None, warm_start=True)
+        return SuccessProbability(classifier.fit(x, ok.astype(int)))
 
     def _acquisition(self, gp, classifier, best: float, x: np.ndarray) -> np.ndarray:
         mean, std = gp.predict(x, return_std=True)

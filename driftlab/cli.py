@@ -11,6 +11,8 @@ import sys
 import time
 from typing import Any
 
+from sqlalchemy.exc import SQLAlchemyError
+
 from driftlab.core.config import EpisodeConfig, Theta, apply_overrides
 from driftlab.core.equilibrium import drift_equilibrium
 from driftlab.core.errors import ConfigError, NoEquilibriumError
@@ -59,12 +61,28 @@ def _finite(value: Any) -> Any:
     return value
 
 
+PLOT_SUFFIXES = (".png", ".pdf", ".svg")
+
+
+def _check_output_file(option: str, path: str | None) -> None:
+    """A file we may write: not a folder, in a folder that exists."""
+    if not path:
+        return
+    folder = os.path.dirname(os.path.abspath(path))
+    if os.path.isdir(path):
+        raise ConfigError(f"{option} {path}: is a folder; give a file name")
+    if not os.path.isdir(folder):
+        raise ConfigError(f"{option} {path}: the folder {folder} does not exist")
+
+
 def _key_values(items: list[str], what: str) -> dict[str, str]:
     pairs = {}
     for item in items:
         key, sep, value = item.partition("=")
         if not sep or not key.strip():
             raise ConfigError(f"{what} expects key=value, got {item!r}")
+        if key.strip() in pairs:
+            raise ConfigError(f"{what} sets {key.strip()!r} twice")
         pairs[key.strip()] = value.strip()
     return pairs
 
@@ -102,8 +120,9 @@ def _cmd_episode(args: argparse.Namespace) -> int:
     config = _config(args)
     theta = Theta.from_mapping(_key_values(args.theta.split(",") if args.theta else [], "--theta"))
     for option, path in (("--csv", args.csv), ("--plot", args.plot)):  # before the episode runs, not after
-        if path and not os.path.isdir(os.path.dirname(os.path.abspath(path))):
-            raise ConfigError(f"{option} {path}: the folder {os.path.dirname(os.path.abspath(path))} does not exist")
+        _check_output_file(option, path)
+    if args.plot and os.path.splitext(args.plot)[1].lower() not in PLOT_SUFFIXES:
+        raise ConfigError(f"--plot {args.plot}: the file name must end in one of {', '.join(PLOT_SUFFIXES)}")
     result = run_episode(theta, config, seed=args.seed)
     print(json.dumps(_finite(result.summary())))
     if args.csv:
@@ -148,17 +167,20 @@ def _open_tuning_job(factory, args: argparse.Namespace, runner: str) -> tuple[in
             spec = _tuning_spec(args)
             name = args.name or storage.unique_job_name(session, "tune")
             job = storage.create_job(session, name=name, spec=spec.to_dict(), seed=spec.seed)
-            sys.stderr.write(f"job {job.name} (id {job.id}): {spec.iterations} iterations\n")
+            message = f"job {job.name} (id {job.id}): {spec.iterations} iterations"
         else:
+            if lifecycle.lease_is_live(job):  # refuse before changing anything
+                lifecycle.claim(session, job_id=job.id, runner=runner)
             if args.iterations is not None and args.iterations != job.spec["iterations"]:
                 lifecycle.extend(session, job_id=job.id, iterations=args.iterations)
             done = storage.count_evaluations(session, job_id=job.id)
-            sys.stderr.write(f"resuming job {job.name} (id {job.id}) at {done} of {job.spec['iterations']}\n")
+            message = f"resuming job {job.name} (id {job.id}) at {done} of {job.spec['iterations']}"
         job_id, name, status = job.id, job.name, job.status
     if status != JobStatus.FINISHED:
         with storage.transaction(factory) as session:
             lifecycle.claim(session, job_id=job_id, runner=runner,
                             from_statuses=(JobStatus.QUEUED, JobStatus.PAUSED, JobStatus.FAILED))
+    sys.stderr.write(message + "\n")
     return job_id, name
 
 
@@ -220,6 +242,8 @@ def _cmd_rescore(args: argparse.Namespace) -> int:
 def _cmd_report(args: argparse.Namespace) -> int:
     from driftlab.report import write_report
 
+    if os.path.exists(args.out) and not os.path.isdir(args.out):
+        raise ConfigError(f"--out {args.out}: is a file; give a folder (created if missing)")
     path = write_report(db_url=_db_url(args.db), name=args.name, out_dir=args.out, baseline_samples=args.baselines,
                         rescore_samples=args.rescore_samples, dask_address=_dask_address(args))
     print(json.dumps({"report": str(path)}))
@@ -333,8 +357,8 @@ def build_parser() -> argparse.ArgumentParser:
     rp.add_argument("--name", required=True)
     rp.add_argument("--db", help=DB_HELP)
     rp.add_argument("--out", required=True, help="output directory")
-    rp.add_argument("--baselines", type=int, help="random samples for the random-search baseline "
-                    "(default: as many as the job's evaluations)")
+    rp.add_argument("--baselines", type=_int_in(1, 100000), metavar="N",
+                    help="random samples for the random-search baseline (default: as many as the job's evaluations)")
     rp.add_argument("--dask", metavar="ADDRESS", help=DASK_HELP)
     rp.add_argument("--rescore-samples", type=_int_in(1, 1000), default=20, metavar="N",
                     help="fresh seeds each theta of the table is rescored on (1..1000, default 20)")
@@ -349,8 +373,12 @@ def main(argv: list[str] | None = None) -> int:
     except (ConfigError, LookupError, TransitionError) as exc:  # bad input, no such job, job held elsewhere
         sys.stderr.write(f"driftlab: error: {exc}\n")
         return 2
-    except OSError as exc:  # a file that cannot be written, a database that cannot be opened
+    except (OSError, ImportError) as exc:  # a file that cannot be written, a database driver not installed
         sys.stderr.write(f"driftlab: error: {exc}\n")
+        return 2
+    except SQLAlchemyError as exc:  # a database that cannot be opened
+        sys.stderr.write(f"driftlab: error: database {getattr(args, 'db', None) or '(default)'}: "
+                         f"{str(exc.orig if getattr(exc, 'orig', None) else exc).splitlines()[0]}\n")
         return 2
 
 

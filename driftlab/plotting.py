@@ -36,7 +36,8 @@ def plot_episode(result: EpisodeResult, track: FigureEight, path: str | Path, ti
     ax_xy.set_xlabel("x [m]")
     ax_xy.set_ylabel("y [m]")
     ax_xy.legend(loc="upper right", fontsize=8)
-    ax_xy.set_title(title or f"{result.status}, J = {result.J:.3f}")
+    # Over the whole figure: a long title (theta at full precision) above the narrow x-y axes ran off its left.
+    fig.suptitle(title or f"{result.status}, J = {result.J:.3f}", fontsize=9)
     t = result.column("t_s")
     panels = (("V_mps", "V_ref_mps", "V [m/s]"), ("beta_rad", "beta_ref_rad", "beta [rad]"),
               ("r_radps", "r_ref_radps", "r [rad/s]"), ("delta_rad", "delta_ref_rad", "delta [rad]"))

@@ -39,8 +39,8 @@ def write_report(*, db_url: str, name: str, out_dir: str, baseline_samples: int 
     shown_seed = best.trajectory_seed or 0
     best_result = run_episode(Theta.from_mapping(best.theta), config, seed=shown_seed)
     plot_episode(best_result, track, str(out / "best_episode.png"),
-                 title=f"{name}: best evaluation #{best.index}, {best.status}, J = {best.J:.3f} "
-                       f"(episode of seed {shown_seed}: J = {best_result.J:.3f})")
+                 title=f"{name}: best, evaluation id {best.id} (index {best.index}), {best.status}\n"
+                       f"J = {best.J:.3f} over its seeds; shown: seed {shown_seed}, J = {best_result.J:.3f}")
     values = np.array([e.J for e in evals])
     failed = np.array([not e.completed for e in evals])
     plot_convergence(values, failed, str(out / "convergence.png"), title=f"{name}: J per iteration")
@@ -72,7 +72,7 @@ def write_report(*, db_url: str, name: str, out_dir: str, baseline_samples: int 
              "Lower J is better.", "",
              "## Drift equilibria (R = 44 m) and learned parameters", "",
              "| | V (m/s) | beta (rad) | r (rad/s) | delta (rad) | Fxr (N) |", "|---|---|---|---|---|---|",
-             "| paper Table I | {V} | {beta} | {r} | {delta} | {Fxr} |".format(**PAPER_TABLE_I),
+             "| paper Table I | {V:.3f} | {beta:.4f} | {r:.4f} | {delta:.4f} | {Fxr:.0f} |".format(**PAPER_TABLE_I),
              "| DriftLab model | {V:.3f} | {beta:.4f} | {r:.4f} | {delta:.4f} | {Fxr:.0f} |".format(**eq), "",
              f"Theta at full precision. 'Tuning J': on the job's {spec.robust_samples} seeds (mean J over them, "
              f"an evaluation completes only if all do). 'Rescore': {rescore_samples} fresh seeds never used in "
@@ -85,14 +85,14 @@ def write_report(*, db_url: str, name: str, out_dir: str, baseline_samples: int 
         lines.append(f"| {label} | {theta['c_lr']!r} | {theta['c_rl']!r} | {theta['dV']!r} | {theta['k']!r} | "
                      f"{tuning[0]} | {tuning[1]} | {summary['completed']}/{summary['samples']} | "
                      f"{summary['J_mean']:.3f} | {summary['J_worst']:.3f} |")
-    lines += _verdict(summaries[0], summaries[1], len(evals))
+    lines += _verdict(summaries[0], summaries[1], len(evals), spec.seed_points)
     lines += ["", "![best episode](best_episode.png)", "", "![convergence](convergence.png)", ""]
     path = out / "report.md"
     path.write_text("\n".join(lines))
     return path
 
 
-def _verdict(learned: dict, untuned: dict, n_evaluations: int) -> list[str]:
+def _verdict(learned: dict, untuned: dict, n_evaluations: int, seed_points: int = 20) -> list[str]:
     """Say plainly when the learned theta does not beat the untuned one on fresh seeds."""
     worse_j = learned["J_mean"] > untuned["J_mean"]
     less_robust = learned["completion_rate"] < untuned["completion_rate"]
@@ -101,6 +101,6 @@ def _verdict(learned: dict, untuned: dict, n_evaluations: int) -> list[str]:
                     f"{untuned['J_mean']:.3f}; lower is better)."]
     what = " and ".join(w for w, bad in (("a worse J", worse_j), ("fewer completed episodes", less_robust)) if bad)
     return ["", f"**Note:** the learned theta scores {what} than the untuned one on fresh seeds. After "
-                f"{n_evaluations} evaluations the optimizer has mostly explored (the first 20 are space-filling "
-                "points); the paper runs 500. Continue the job (`driftlab tune --name NAME --iterations 500`) "
-                "and report again."]
+                f"{n_evaluations} evaluations the optimizer has mostly explored (the first {seed_points} are "
+                "space-filling points); the paper runs 500. Continue the job "
+                "(`driftlab tune --name NAME --iterations 500`) and report again."]

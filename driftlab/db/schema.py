@@ -45,9 +45,17 @@ def upgrade(engine: Engine) -> None:
     """Bring the database to the head revision (a no-op when it is there)."""
     if current_revision(engine) == head_revision():
         return
-    with engine.begin() as connection:
-        config = _config(connection)
-        tables = set(inspect(connection).get_table_names())
-        if "alembic_version" not in tables and "jobs" in tables:
-            command.stamp(config, _revision_of_meta(connection))
-        command.upgrade(config, "head")
+    with engine.connect() as connection:
+        # SQLite rebuilds a table to alter it; with foreign keys enforced, dropping the old jobs table would
+        # fail. The pragma only takes effect outside a transaction, hence on the driver's connection first.
+        sqlite = engine.dialect.name == "sqlite"
+        if sqlite:
+            connection.connection.driver_connection.execute("PRAGMA foreign_keys=OFF")
+        with connection.begin():
+            config = _config(connection)
+            tables = set(inspect(connection).get_table_names())
+            if "alembic_version" not in tables and "jobs" in tables:
+                command.stamp(config, _revision_of_meta(connection))
+            command.upgrade(config, "head")
+        if sqlite:
+            connection.connection.driver_connection.execute("PRAGMA foreign_keys=ON")

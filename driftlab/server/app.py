@@ -77,7 +77,10 @@ def create_app(db_url: str, *, workers: int | None = 2, start_worker: bool = Tru
 
     @app.exception_handler(ConfigError)
     async def _config_error(_request: Request, exc: ConfigError):
-        return JSONResponse({"detail": str(exc)}, status_code=422)
+        # The same shape as a schema error: ConfigError messages start with the field they are about.
+        message = str(exc)
+        field = message.split(" ", 1)[0].strip("'\"")
+        return JSONResponse({"detail": message, "errors": [{"field": field, "message": message}]}, status_code=422)
 
     @app.exception_handler(storage.NotFound)
     async def _not_found(_request: Request, exc: storage.NotFound):

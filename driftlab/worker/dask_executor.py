@@ -29,6 +29,8 @@ class SchedulerUnreachable(ConnectionError):
 
 class DaskExecutor:
     def __init__(self, address: str, *, retries: int = 2, connect_timeout_s: float = 10.0) -> None:
+        import distributed  # noqa: F401  (its import configures its loggers: quiet them after it)
+
         # A lost scheduler is reported once, by the job (paused, with the reason); the client's own reconnect
         # attempts would print a traceback each.
         for name in ("distributed.client", "distributed.comm", "distributed.core", "distributed.batched"):

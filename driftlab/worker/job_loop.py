@@ -80,10 +80,11 @@ class _PendingEvaluation:
         return score, samples, ordered[score.representative]
 
 
-def _store(factory: sessionmaker[Session], job_id: int, runner: str,
-           evaluation: _PendingEvaluation) -> tuple[RobustScore, int] | None:
+def _store(factory: sessionmaker[Session], job_id: int, runner: str, evaluation: _PendingEvaluation,
+           lease: _Lease) -> RobustScore | None:
     """Commit the evaluation if this runner still holds the job (None if the job was taken over or deleted:
-    its new runner asks again, and no index is stored twice)."""
+    its new runner asks again, and no index is stored twice). Reads the job's status and budget in the same
+    transaction, so a pause or a new budget takes effect at the next evaluation, not the next heartbeat."""
     score, samples, shown = evaluation.score()
     metrics = {**shown.metrics, "n_samples": len(samples), "n_completed": score.n_completed,
                "J_samples_mean": score.J}
@@ -91,13 +92,13 @@ def _store(factory: sessionmaker[Session], job_id: int, runner: str,
         job = session.get(Job, job_id)
         if job is None or job.runner_id != runner:
             return None
-        stored = storage.add_evaluation(session, job_id=job_id, theta=evaluation.theta, J=score.J,
+        lease.observe(job)
+        storage.add_evaluation(session, job_id=job_id, theta=evaluation.theta, J=score.J,
                                         status=score.status, metrics=metrics, trigger_points=shown.trigger_points,
                                         wall_ms=sum(o.wall_ms for o in evaluation.outcomes.values()),
                                         columns=shown.columns, trajectory=shown.trajectory,
                                         seeds=[s.as_dict() for s in samples], trajectory_seed=shown.seed)
-        index = stored.index
-    return score, index
+    return score
 
 
 def claim_job(factory: sessionmaker[Session], job_id: int, runner: str,
@@ -116,14 +117,20 @@ class _Lease:
         self.held = True
         self._last = time.monotonic()
 
-    def renew_if_due(self) -> None:
-        if not self.held or time.monotonic() - self._last < lifecycle.HEARTBEAT_S:
+    def observe(self, job: Job) -> None:
+        """What the stored job says now: paused (by a request) means stop; the budget may have changed."""
+        self.iterations = int(job.spec["iterations"])
+        if job.status != JobStatus.RUNNING:
+            self.held = False
+
+    def renew_if_due(self, force: bool = False) -> None:
+        if not self.held or (not force and time.monotonic() - self._last < lifecycle.HEARTBEAT_S):
             return
         with storage.transaction(self.factory) as session:
             self.held = lifecycle.heartbeat(session, job_id=self.job_id, runner=self.runner)
             job = session.get(Job, self.job_id)
             if job is not None:
-                self.iterations = int(job.spec["iterations"])  # PATCH on a running job takes effect here
+                self.observe(job)
         self._last = time.monotonic()
 
 
@@ -157,7 +164,11 @@ def run_job(factory: sessionmaker[Session], job_id: int, executor: EpisodeExecut
     n_at_start = n_done
     shutting_down = False
     try:
-        while n_done < lease.iterations:
+        while True:
+            if n_done >= lease.iterations and not episodes:
+                lease.renew_if_due(force=True)  # a budget raised at the last moment still counts
+                if n_done >= lease.iterations or not lease.held:
+                    break
             lease.renew_if_due()
             shutting_down = shutting_down or should_stop()
             stopping = shutting_down or not lease.held
@@ -185,9 +196,8 @@ def run_job(factory: sessionmaker[Session], job_id: int, executor: EpisodeExecut
                         episodes[executor.submit(evaluation.theta, config_doc, seed)] = evaluation
                     continue
                 evaluations.remove(evaluation)
-                stored_as = _store(factory, job_id, runner, evaluation)
-                if stored_as is None:  # taken over: stop at once, the new runner owns the job
-                    lease.held = False
+                if _store(factory, job_id, runner, evaluation, lease) is None:
+                    lease.held = False  # taken over: stop at once, the new runner owns the job
                     continue
                 completed = score.status == "completed"
                 optimizer.tell(evaluation.theta, score.J if completed else None)

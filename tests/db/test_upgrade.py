@@ -58,7 +58,7 @@ def test_schema_1_database_upgrades_and_its_results_still_reproduce(tmp_path):
     with storage.transaction(factory) as session:
         job = session.get(Job, 1)
         evaluation = session.get(Evaluation, 1)
-        assert session.get(storage.Meta, "schema_version").value == "3"
+        assert session.get(storage.Meta, "schema_version").value == "4"
         spec = TuningSpec.from_dict(job.spec)
         assert spec.robust_samples == 1 and spec.confirm_samples == 0 and not spec.config.plant.varies
         assert evaluation.seeds == [{"seed": 0, "status": old.status, "J": old.J,
@@ -73,7 +73,21 @@ def test_schema_1_database_upgrades_and_its_results_still_reproduce(tmp_path):
 
 def test_a_new_database_is_created_at_the_head_revision(tmp_path):
     factory = storage.open_database(f"sqlite:///{tmp_path / 'new.db'}")
-    assert schema.current_revision(storage.engine_of(factory)) == schema.head_revision() == "0003"
+    assert schema.current_revision(storage.engine_of(factory)) == schema.head_revision() == "0004"
     with storage.transaction(factory) as session:
         job = storage.create_job(session, name="fresh", spec=TuningSpec().to_dict(), seed=0)
         assert job.runner_id is None and job.heartbeat_at is None
+
+
+def test_a_deleted_jobs_id_is_never_reused(tmp_path):
+    from driftlab.db import lifecycle
+
+    factory = storage.open_database(f"sqlite:///{tmp_path / 'ids.db'}")
+    with storage.transaction(factory) as session:
+        first = storage.create_job(session, name="a", spec=TuningSpec().to_dict(), seed=0).id
+        second = storage.create_job(session, name="b", spec=TuningSpec().to_dict(), seed=0).id
+    with storage.transaction(factory) as session:
+        lifecycle.delete_job(session, job_id=second)
+    with storage.transaction(factory) as session:
+        third = storage.create_job(session, name="c", spec=TuningSpec().to_dict(), seed=0).id
+    assert first < second < third

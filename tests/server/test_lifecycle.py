@@ -67,7 +67,8 @@ def test_a_second_runner_on_a_running_job_is_refused(server):
     _wait_done(url, job["id"], 2)
     other = _cli("tune", "--name", "race", "--db", str(db))
     assert other.returncode == 2
-    assert "being run by server@" in other.stderr and "Traceback" not in other.stderr
+    assert other.stderr.startswith("driftlab: error: job 'race' is being run by server@")
+    assert len(other.stderr.strip().splitlines()) == 1
     assert httpx.get(f"{url}/api/jobs/{job['id']}").json()["status"] == "running"
     httpx.post(f"{url}/api/jobs/{job['id']}/pause")
     paused = wait_status(url, job["id"], {"paused"})
@@ -146,6 +147,37 @@ def test_numbers_are_strict(server, body, field):
     assert r.status_code == 422 and field in r.json()["detail"]
 
 
+def test_a_budget_changed_on_a_running_job_is_honoured(server):
+    _, url, _ = server
+    raised = httpx.post(f"{url}/api/jobs", json={"iterations": 8, "seed_points": 8, "robust_samples": 1}).json()
+    _wait_done(url, raised["id"], 6)
+    assert httpx.patch(f"{url}/api/jobs/{raised['id']}", json={"iterations": 14}).status_code == 200
+    assert wait_status(url, raised["id"], {"finished"})["n_done"] == 14  # raised near the end: not lost
+    lowered = httpx.post(f"{url}/api/jobs", json={"iterations": 60, "seed_points": 60, "robust_samples": 1}).json()
+    _wait_done(url, lowered["id"], 5)
+    now = httpx.get(f"{url}/api/jobs/{lowered['id']}").json()["n_done"]
+    httpx.patch(f"{url}/api/jobs/{lowered['id']}", json={"iterations": now + 1})
+    done = wait_status(url, lowered["id"], {"finished"})
+    assert now + 1 <= done["n_done"] <= now + 3  # at most what was in flight (2 workers) beyond the new budget
+
+
+def test_a_pause_stops_after_the_evaluations_in_flight(server):
+    _, url, _ = server
+    job = httpx.post(f"{url}/api/jobs", json={"iterations": 300, "seed_points": 100, "robust_samples": 1}).json()
+    _wait_done(url, job["id"], 3)
+    at_pause = httpx.post(f"{url}/api/jobs/{job['id']}/pause").json()["n_done"]
+    time.sleep(1.0)
+    after = httpx.get(f"{url}/api/jobs/{job['id']}").json()
+    assert after["status"] == "paused" and after["runner_id"] is None
+    assert at_pause <= after["n_done"] <= at_pause + 2  # 2 workers: two in flight at most
+
+
+def test_config_errors_have_the_same_shape_as_schema_errors(server):
+    _, url, _ = server
+    r = httpx.post(f"{url}/api/jobs", json={"iterations": 5, "bounds": {"k": [0.0, 5.0]}})
+    assert r.status_code == 422 and r.json()["errors"][0]["field"] == "bounds.k"
+
+
 def test_invalid_json_is_a_422_naming_the_body(server):
     _, url, _ = server
     r = httpx.post(f"{url}/api/jobs", content=b'{"iterations": 3,', headers={"content-type": "application/json"})
@@ -190,9 +222,16 @@ def test_tune_extends_a_finished_job_and_tools_share_the_default_database(tmp_pa
 
 @pytest.mark.parametrize(("args", "needle"), [
     (("episode", "--theta", "c_lr=abc"), "theta.c_lr"),
+    (("episode", "--theta", "k=0.05,k=0.1"), "'k' twice"),
     (("episode", "--plot", "/nonexistent/dir/ep.png"), "--plot"),
+    (("episode", "--plot", "/tmp/ep.txt"), "--plot"),
+    (("episode", "--plot", "/tmp"), "--plot"),
+    (("episode", "--csv", "/tmp"), "--csv"),
     (("serve", "--port", "99999"), "--port"),
     (("tune", "--workers", "0"), "--workers"),
+    (("tune", "--iterations", "2", "--db", "/nonexistent/dir/x.db"), "database /nonexistent/dir/x.db"),
+    (("report", "--name", "x", "--out", "/tmp/r", "--baselines", "0"), "--baselines"),
+    (("report", "--name", "x", "--out", "/etc/hostname"), "--out"),
 ])
 def test_cli_errors_are_one_line_with_exit_2(args, needle):
     out = _cli(*args)

@@ -11,15 +11,12 @@ import sys
 import time
 from typing import Any
 
-from sqlalchemy.exc import SQLAlchemyError
-
 from driftlab.core.config import EpisodeConfig, Theta, apply_overrides
 from driftlab.core.equilibrium import drift_equilibrium
 from driftlab.core.errors import ConfigError, NoEquilibriumError
 from driftlab.core.robust import MAX_ROBUST_SAMPLES
 from driftlab.core.tuning import DEFAULT_CONFIRM_SAMPLES, DEFAULT_ROBUST_SAMPLES
 from driftlab.core.vehicle import pack_params
-from driftlab.db.lifecycle import TransitionError
 
 DB_HELP = ("SQLite file or SQLAlchemy URL (default: DRIFTLAB_DATABASE_URL, else the shared "
            "~/.local/share/driftlab/driftlab.db)")
@@ -370,16 +367,28 @@ def main(argv: list[str] | None = None) -> int:
     args = build_parser().parse_args(argv)
     try:
         return args.func(args)
-    except (ConfigError, LookupError, TransitionError) as exc:  # bad input, no such job, job held elsewhere
-        sys.stderr.write(f"driftlab: error: {exc}\n")
+    except Exception as exc:
+        message = _user_error(exc, args)
+        if message is None:
+            raise
+        sys.stderr.write(f"driftlab: error: {message}\n")
         return 2
-    except (OSError, ImportError) as exc:  # a file that cannot be written, a database driver not installed
-        sys.stderr.write(f"driftlab: error: {exc}\n")
-        return 2
-    except SQLAlchemyError as exc:  # a database that cannot be opened
-        sys.stderr.write(f"driftlab: error: database {getattr(args, 'db', None) or '(default)'}: "
-                         f"{str(exc.orig if getattr(exc, 'orig', None) else exc).splitlines()[0]}\n")
-        return 2
+
+
+def _user_error(exc: Exception, args: argparse.Namespace) -> str | None:
+    """The one line for an error the user can act on (bad input, no such job, a job held elsewhere, a file or
+    database that cannot be used); None for a bug. The database and lifecycle modules are only consulted when
+    already imported, so that `driftlab episode` does not load SQLAlchemy to start."""
+    if isinstance(exc, (ConfigError, LookupError, OSError, ImportError)):
+        return str(exc)
+    lifecycle = sys.modules.get("driftlab.db.lifecycle")
+    if lifecycle is not None and isinstance(exc, lifecycle.TransitionError):
+        return str(exc)
+    sqlalchemy_exc = sys.modules.get("sqlalchemy.exc")
+    if sqlalchemy_exc is not None and isinstance(exc, sqlalchemy_exc.SQLAlchemyError):
+        reason = str(getattr(exc, "orig", None) or exc).splitlines()[0]
+        return f"database {getattr(args, 'db', None) or '(default)'}: {reason}"
+    return None
 
 
 if __name__ == "__main__":

@@ -23,7 +23,7 @@ from sqlalchemy import delete, or_, select, update
 from sqlalchemy.orm import Session
 
 from driftlab.db.models import Evaluation, Job, Trajectory, utcnow
-from driftlab.db.storage import NotFound, count_evaluations, get_job
+from driftlab.db.storage import count_evaluations, get_job
 
 LEASE_TIMEOUT_S = 15.0  # a runner renews every HEARTBEAT_S; three missed renewals and more mean it is gone
 HEARTBEAT_S = 2.0
@@ -58,6 +58,11 @@ def _stale_before(now: datetime) -> datetime:
     return _naive(now - timedelta(seconds=LEASE_TIMEOUT_S))
 
 
+def _lease_is_stale(now: datetime):
+    """SQL: the job's heartbeat is missing or older than the lease timeout (its runner is gone)."""
+    return or_(Job.heartbeat_at.is_(None), Job.heartbeat_at < _stale_before(now))
+
+
 def lease_is_live(job: Job, now: datetime | None = None) -> bool:
     now = now or utcnow()
     return (job.status == JobStatus.RUNNING and job.runner_id is not None and job.heartbeat_at is not None
@@ -74,8 +79,8 @@ def claim(session: Session, *, job_id: int, runner: str, from_statuses: tuple[Jo
         TransitionError: the job's status allows no claim.
     """
     now = utcnow()
-    stale = or_(Job.heartbeat_at.is_(None), Job.heartbeat_at < _stale_before(now))
-    claimable = or_(Job.status.in_([str(s) for s in from_statuses]), (Job.status == JobStatus.RUNNING) & stale)
+    claimable = or_(Job.status.in_([str(s) for s in from_statuses]),
+                    (Job.status == JobStatus.RUNNING) & _lease_is_stale(now))
     result = session.execute(update(Job).where(Job.id == job_id, claimable)
                              .values(status=JobStatus.RUNNING, runner_id=runner, heartbeat_at=_naive(now), error=None)
                              .execution_options(synchronize_session=False))
@@ -151,13 +156,7 @@ def delete_job(session: Session, *, job_id: int) -> None:
 
 def next_claimable(session: Session) -> int | None:
     """The oldest queued job, or one whose runner died."""
-    now = utcnow()
-    stale = or_(Job.heartbeat_at.is_(None), Job.heartbeat_at < _stale_before(now))
-    query = (select(Job.id).where(or_(Job.status == JobStatus.QUEUED, (Job.status == JobStatus.RUNNING) & stale))
-             .order_by(Job.id).limit(1))
+    stale = (Job.status == JobStatus.RUNNING) & _lease_is_stale(utcnow())
+    query = select(Job.id).where(or_(Job.status == JobStatus.QUEUED, stale)).order_by(Job.id).limit(1)
     return session.scalar(query)
 
-
-__all__ = ["HEARTBEAT_S", "LEASE_TIMEOUT_S", "JobStatus", "LeaseHeld", "NotFound", "TransitionError", "claim",
-           "delete_job", "extend", "heartbeat", "lease_is_live", "new_runner_id", "next_claimable", "release",
-           "request_pause", "requeue"]

@@ -16,7 +16,7 @@ from sqlalchemy import Engine, create_engine, event, func, select
 from sqlalchemy.orm import Session, sessionmaker
 
 from driftlab.db import schema
-from driftlab.db.models import Evaluation, Job, Meta, Trajectory  # noqa: F401  (Meta: re-exported)
+from driftlab.db.models import Evaluation, Job, Trajectory
 
 _BUSY_TIMEOUT_MS = 30_000
 

@@ -16,6 +16,8 @@ from typing import Any, Protocol
 
 import numpy as np
 
+from driftlab.core.robust import SampleResult
+
 
 @dataclass
 class EpisodeOutcome:
@@ -34,6 +36,10 @@ class EpisodeOutcome:
     @property
     def completed(self) -> bool:
         return self.status == "completed"
+
+    def sample(self) -> SampleResult:
+        """This episode as one sample of a robust evaluation."""
+        return SampleResult(self.seed, self.status, float(self.J), float(self.metrics.get("completed_fraction", 0.0)))
 
 
 class EpisodeExecutor(Protocol):

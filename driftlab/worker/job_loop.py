@@ -9,7 +9,7 @@ from __future__ import annotations
 
 import time
 from collections.abc import Callable
-from concurrent.futures import FIRST_COMPLETED, Future, wait
+from concurrent.futures import FIRST_COMPLETED, CancelledError, Future, wait
 from dataclasses import dataclass, field
 
 from sqlalchemy.orm import Session, sessionmaker
@@ -53,8 +53,6 @@ EXECUTOR_LOST = "episode executor unreachable"
 def is_executor_lost(exc: BaseException) -> bool:
     """A cluster that went away (connection closed or refused, timed out, futures cancelled by a lost client),
     as opposed to an episode that raised."""
-    from concurrent.futures import CancelledError
-
     return isinstance(exc, (ConnectionError, TimeoutError, CancelledError)) or type(exc).__name__ in (
         "CommClosedError", "FutureCancelledError", "SchedulerUnreachable")
 
@@ -74,31 +72,30 @@ class _PendingEvaluation:
 
     def score(self) -> tuple[RobustScore, list[SampleResult], EpisodeOutcome]:
         ordered = [self.outcomes[s] for s in self.seeds]
-        samples = [SampleResult(o.seed, o.status, float(o.J), float(o.metrics.get("completed_fraction", 0.0)))
-                   for o in ordered]
+        samples = [o.sample() for o in ordered]
         score = aggregate(samples)
         return score, samples, ordered[score.representative]
 
 
-def _store(factory: sessionmaker[Session], job_id: int, runner: str, evaluation: _PendingEvaluation,
-           lease: _Lease) -> RobustScore | None:
-    """Commit the evaluation if this runner still holds the job (None if the job was taken over or deleted:
+def _store(factory: sessionmaker[Session], lease: _Lease, evaluation: _PendingEvaluation,
+           scored: tuple[RobustScore, list[SampleResult], EpisodeOutcome]) -> bool:
+    """Commit the evaluation if this runner still holds the job (False if the job was taken over or deleted:
     its new runner asks again, and no index is stored twice). Reads the job's status and budget in the same
     transaction, so a pause or a new budget takes effect at the next evaluation, not the next heartbeat."""
-    score, samples, shown = evaluation.score()
+    score, samples, shown = scored
     metrics = {**shown.metrics, "n_samples": len(samples), "n_completed": score.n_completed,
                "J_samples_mean": score.J}
     with storage.transaction(factory) as session:
-        job = session.get(Job, job_id)
-        if job is None or job.runner_id != runner:
-            return None
+        job = session.get(Job, lease.job_id)
+        if job is None or job.runner_id != lease.runner:
+            return False
         lease.observe(job)
-        storage.add_evaluation(session, job_id=job_id, theta=evaluation.theta, J=score.J,
-                                        status=score.status, metrics=metrics, trigger_points=shown.trigger_points,
-                                        wall_ms=sum(o.wall_ms for o in evaluation.outcomes.values()),
-                                        columns=shown.columns, trajectory=shown.trajectory,
-                                        seeds=[s.as_dict() for s in samples], trajectory_seed=shown.seed)
-    return score
+        storage.add_evaluation(session, job_id=lease.job_id, theta=evaluation.theta, J=score.J, status=score.status,
+                               metrics=metrics, trigger_points=shown.trigger_points,
+                               wall_ms=sum(o.wall_ms for o in evaluation.outcomes.values()),
+                               columns=shown.columns, trajectory=shown.trajectory,
+                               seeds=[s.as_dict() for s in samples], trajectory_seed=shown.seed)
+    return True
 
 
 def claim_job(factory: sessionmaker[Session], job_id: int, runner: str,
@@ -185,7 +182,8 @@ def run_job(factory: sessionmaker[Session], job_id: int, executor: EpisodeExecut
                 outcome = future.result()
                 episodes.pop(future).outcomes[outcome.seed] = outcome
             for evaluation in [e for e in evaluations if e.done]:
-                score, _, _ = evaluation.score()
+                scored = evaluation.score()
+                score = scored[0]
                 if (confirm_seeds and not evaluation.confirming and score.status == "completed"
                         and (best is None or score.J < best)):
                     # A would-be best must hold on more seeds before it counts (the winner's curse: among
@@ -196,7 +194,7 @@ def run_job(factory: sessionmaker[Session], job_id: int, executor: EpisodeExecut
                         episodes[executor.submit(evaluation.theta, config_doc, seed)] = evaluation
                     continue
                 evaluations.remove(evaluation)
-                if _store(factory, job_id, runner, evaluation, lease) is None:
+                if not _store(factory, lease, evaluation, scored):
                     lease.held = False  # taken over: stop at once, the new runner owns the job
                     continue
                 completed = score.status == "completed"

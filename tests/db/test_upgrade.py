@@ -12,7 +12,7 @@ from driftlab.core.episode import run_episode
 from driftlab.core.plant import VARIATION_LIMITS
 from driftlab.core.tuning import TuningSpec
 from driftlab.db import schema, storage
-from driftlab.db.models import Evaluation, Job
+from driftlab.db.models import Evaluation, Job, Meta
 
 SCHEMA_1 = """
 CREATE TABLE jobs ( id INTEGER NOT NULL, name VARCHAR(200) NOT NULL, spec JSON NOT NULL, seed INTEGER NOT NULL,
@@ -58,7 +58,7 @@ def test_schema_1_database_upgrades_and_its_results_still_reproduce(tmp_path):
     with storage.transaction(factory) as session:
         job = session.get(Job, 1)
         evaluation = session.get(Evaluation, 1)
-        assert session.get(storage.Meta, "schema_version").value == "4"
+        assert session.get(Meta, "schema_version").value == "4"
         spec = TuningSpec.from_dict(job.spec)
         assert spec.robust_samples == 1 and spec.confirm_samples == 0 and not spec.config.plant.varies
         assert evaluation.seeds == [{"seed": 0, "status": old.status, "J": old.J,

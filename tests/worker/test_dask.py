@@ -42,6 +42,13 @@ def _worker(address):
                             stderr=subprocess.DEVNULL)
 
 
+def _kill_all(processes):
+    for proc in processes:
+        if proc.poll() is None:
+            proc.kill()
+            proc.wait()
+
+
 def _wait_workers(address, n, timeout_s=90):
     from distributed import Client
 
@@ -73,10 +80,7 @@ def cluster():
     processes += [_worker(address) for _ in range(3)]
     _wait_workers(address, 3)
     yield address, processes
-    for proc in processes:
-        if proc.poll() is None:
-            proc.kill()
-            proc.wait()
+    _kill_all(processes)
 
 
 def test_a_job_survives_a_worker_killed_mid_job(cluster, tmp_path):
@@ -126,10 +130,7 @@ def test_a_lost_scheduler_pauses_the_job_and_it_resumes_when_the_scheduler_is_ba
         assert again.returncode == 0, err
         assert json.loads(out)["status"] == "finished" and json.loads(out)["n_done"] == stopped_at + 4
     finally:
-        for proc in processes:
-            if proc.poll() is None:
-                proc.kill()
-                proc.wait()
+        _kill_all(processes)
 
 
 def test_the_server_resumes_a_job_by_itself_when_its_scheduler_returns(tmp_path):
@@ -166,10 +167,7 @@ def test_the_server_resumes_a_job_by_itself_when_its_scheduler_returns(tmp_path)
         if server is not None:
             server.terminate()
             server.wait(timeout=30)
-        for proc in processes:
-            if proc.poll() is None:
-                proc.kill()
-                proc.wait()
+        _kill_all(processes)
 
 
 def test_rescore_runs_on_the_cluster_with_the_same_result_as_locally(cluster, tmp_path):

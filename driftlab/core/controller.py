@@ -124,8 +124,12 @@ class DriftController:
         # One-step prediction of the *nonlinear* model under the inputs the actuators actually applied
         # (measured at both ends of the step, shaped by the model's lag): the innovation is the plant-model
         # mismatch, neither the linearization error of the MPC nor the actuators' lag.
-        predicted = _model_step(self.last_state, self.last_actuators, actuators, self.mpc.model_steer_lag_s,
-                                self.model.params, self.mpc.dt_s)
+        if self.mpc.estimator_uses_actuators:
+            predicted = _model_step(self.last_state, self.last_actuators, actuators, self.mpc.model_steer_lag_s,
+                                    self.model.params, self.mpc.dt_s)
+        else:
+            predicted = _model_step(self.last_state, self.last_applied, self.last_applied, 0.0, self.model.params,
+                                    self.mpc.dt_s)
         # The estimate is kept in left-hand form; a right-hand drift sees it mirrored (paper eq. 9).
         return self.estimator.update((state - predicted) * _mirror(self.direction)) * _mirror(self.direction)
 

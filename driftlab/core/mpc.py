@@ -68,6 +68,8 @@ class MpcConfig:
             :class:`DisturbanceEstimator`); 0 starts at ``disturbance_gain``.
         estimator_hold_s: the disturbance estimate stays frozen this long after an inertia phase ends [s]
             (the flick's aftermath is far from the drift whose mismatch it estimates).
+        estimator_uses_actuators: the estimate's one-step prediction takes the measured actuator positions
+            (False: the commands sent, as releases before schema 5 did).
         feedback_in_model: the MPC's model knows that k e_la is added to its steering (needs path_states);
             without it the MPC sees that feedback as a disturbance and steers against it.
     """
@@ -97,6 +99,7 @@ class MpcConfig:
     terminal_cost: bool = False
     disturbance_start_gain: float = 0.19
     estimator_hold_s: float = 1.75
+    estimator_uses_actuators: bool = True
     feedback_in_model: bool = True
 
     @classmethod
@@ -121,8 +124,9 @@ class MpcConfig:
         check_ranges(self, "mpc", {**weights, **ranges})
         if not isinstance(self.terminal_cost, bool):
             raise ConfigError(f"mpc.terminal_cost must be true or false, got {self.terminal_cost!r}")
-        if not isinstance(self.feedback_in_model, bool):
-            raise ConfigError(f"mpc.feedback_in_model must be true or false, got {self.feedback_in_model!r}")
+        for name in ("feedback_in_model", "estimator_uses_actuators"):
+            if not isinstance(getattr(self, name), bool):
+                raise ConfigError(f"mpc.{name} must be true or false, got {getattr(self, name)!r}")
         if not isinstance(self.path_states, bool):
             raise ConfigError(f"mpc.path_states must be true or false, got {self.path_states!r}")
         if not isinstance(self.horizon, int):

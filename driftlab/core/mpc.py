@@ -76,29 +76,29 @@ class MpcConfig:
 
     dt_s: float = 0.05
     horizon: int = 20
-    q_speed: float = 2.5
-    q_sideslip: float = 1020.0
-    q_yaw_rate: float = 1.08
-    q_steer: float = 48.9
-    q_drive_kn: float = 0.31
-    r_steer_step: float = 1.82
-    r_drive_step_kn: float = 0.0039
+    q_speed: float = 1.62
+    q_sideslip: float = 602.0
+    q_yaw_rate: float = 0.685
+    q_steer: float = 63.5
+    q_drive_kn: float = 0.16
+    r_steer_step: float = 3.22
+    r_drive_step_kn: float = 0.004
     steer_limit_rad: float = 0.6
     drive_min_n: float = -6000.0
     drive_max_n: float = 8000.0
-    steer_rate_radps: float = 12.7
+    steer_rate_radps: float = 12.0
     drive_rate_nps: float = 20000.0
     discretization: str = "zoh"
-    disturbance_gain: float = 0.051
-    model_steer_lag_s: float = 0.033
+    disturbance_gain: float = 0.04
+    model_steer_lag_s: float = 0.018
     model_drive_lag_s: float = 0.05
     osqp_eps: float = 1e-5
     path_states: bool = True
-    q_lateral_error: float = 0.065
-    q_course_error: float = 10.4
-    terminal_cost: bool = False
-    disturbance_start_gain: float = 0.19
-    estimator_hold_s: float = 1.75
+    q_lateral_error: float = 0.77
+    q_course_error: float = 12.1
+    terminal_cost: bool = True
+    disturbance_start_gain: float = 0.1
+    estimator_hold_s: float = 1.15
     estimator_uses_actuators: bool = True
     feedback_in_model: bool = True
 
@@ -108,7 +108,7 @@ class MpcConfig:
         return cls(q_speed=1.0, q_sideslip=417.0, q_yaw_rate=26.0, q_steer=5.5, q_drive_kn=0.2,
                    r_steer_step=56.0, r_drive_step_kn=0.024, steer_rate_radps=3.0, discretization="euler",
                    model_steer_lag_s=0.0, model_drive_lag_s=0.0, path_states=False, q_lateral_error=0.0,
-                   q_course_error=0.0, disturbance_gain=0.0, feedback_in_model=False)
+                   q_course_error=0.0, disturbance_gain=0.0, feedback_in_model=False, terminal_cost=False)
 
     def __post_init__(self) -> None:
         ranges = {

@@ -48,7 +48,8 @@ def test_estimate_is_held_through_a_flick_and_its_aftermath():
 @pytest.mark.parametrize("friction", [0.9, 1.1])
 def test_reference_moves_to_the_plants_own_drift(friction):
     """On the nominal car with other friction, the drift at R 44, beta 0.4 is slower or faster than the
-    model's: the reference speed and the car settle at the plant's equilibrium in the first sustained drift."""
+    model's: the reference speed settles at the plant's equilibrium in the first sustained drift, and the car
+    drives nearer the plant's drift than the model's (it trades some speed error for the path, not settled)."""
     config = apply_overrides(EpisodeConfig.preset(plant="nominal"), {"plant.friction_scale": friction})
     plant_eq = drift_equilibrium(44.0, -0.4, config.plant.packed_params(config.vehicle))
     model_eq = drift_equilibrium(44.0, -0.4, pack_params(config.vehicle))
@@ -59,7 +60,8 @@ def test_reference_moves_to_the_plants_own_drift(friction):
     late_first_drift = (t > 4.0) & (phase == Phase.LEFT_DRIFT)
     assert late_first_drift.sum() > 10
     assert np.all(np.abs(r.column("V_ref_mps")[late_first_drift] - plant_eq.speed_mps) < 0.1)
-    assert np.all(np.abs(r.column("V_mps")[late_first_drift] - plant_eq.speed_mps) < 0.15)
+    shift = abs(plant_eq.speed_mps - model_eq.speed_mps)
+    assert np.all(np.abs(r.column("V_mps")[late_first_drift] - plant_eq.speed_mps) < 0.5 * shift)
     assert np.all(np.abs(r.column("beta_rad")[late_first_drift] - plant_eq.sideslip_rad) < 0.02)
 
 

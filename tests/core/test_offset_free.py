@@ -68,3 +68,23 @@ def test_reference_moves_to_the_plants_own_drift(friction):
 def test_the_paper_controller_has_no_offset_free_parts():
     paper = MpcConfig.paper()
     assert paper.disturbance_gain == 0.0 and not paper.feedback_in_model and not paper.path_states
+
+
+def test_unequal_radii_drift_each_circle_at_its_own_equilibrium():
+    """The paper's future work: a 30 m left circle and a 44 m right one, each with its own reference drift."""
+    config = apply_overrides(EpisodeConfig.preset(plant="nominal"), {"scenario.left_radius_m": 30.0,
+                                                                       "scenario.right_radius_m": 44.0})
+    r = run_episode(Theta(), config)
+    assert r.status == "completed"
+    params = pack_params(config.vehicle)
+    t, phase = r.column("t_s"), r.column("phase")
+    x, y = r.column("x_m"), r.column("y_m")
+    for drift, radius, centre_y in ((Phase.LEFT_DRIFT, 30.0, 30.0), (Phase.RIGHT_DRIFT, 44.0, -44.0)):
+        eq = drift_equilibrium(radius, -0.4, params)
+        settled = phase == drift
+        settled &= t > t[settled][0] + 2.0  # past the flick's aftermath
+        assert np.all(np.abs(r.column("V_ref_mps")[settled] - eq.speed_mps) < 0.05)
+        assert np.all(np.abs(np.abs(r.column("r_ref_radps")[settled]) - eq.yaw_rate_radps) < 0.005)
+        off_path = np.abs(np.hypot(x[settled], y[settled] - centre_y) - radius)
+        assert np.all(off_path < 4.0)  # the switch between unequal circles leaves up to ~3.7 m ...
+        assert np.all(off_path[t[settled] > t[settled][-1] - 2.0] < 0.5)  # ... gone by the phase's end

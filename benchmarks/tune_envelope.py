@@ -54,8 +54,8 @@ def perturb(rng: np.random.Generator, center: dict) -> dict:
 
 
 def evaluate(args):
-    i, base_overrides, center = args
-    rng = np.random.default_rng(9000 + i)
+    i, base_overrides, center, seed_base = args
+    rng = np.random.default_rng(seed_base + i)
     settings = {**(perturb(rng, center) if center and i > 0 else center or sample(rng)), **base_overrides}
     results = []
     for plant, change in TRAINING:
@@ -71,12 +71,13 @@ def main() -> None:
     parser = argparse.ArgumentParser()
     parser.add_argument("n_sets", type=int, nargs="?", default=160)
     parser.add_argument("--base", action="append", default=[], metavar="KEY=VALUE")
+    parser.add_argument("--seed", type=int, default=9000, help="the settings drawn are those of seeds SEED + i")
     parser.add_argument("--around", type=json.loads, default=None, metavar="JSON",
                         help="search the neighbourhood of these settings (the first set is the centre itself)")
     args = parser.parse_args()
     base = dict(item.split("=", 1) for item in args.base)
     with Pool(2) as pool:
-        out = pool.map(evaluate, [(i, base, args.around) for i in range(args.n_sets)], chunksize=2)
+        out = pool.map(evaluate, [(i, base, args.around, args.seed) for i in range(args.n_sets)], chunksize=2)
     out.sort(key=lambda o: (-o[0], o[1]))
     print(f"{len(TRAINING)} training plants")
     for completed, mean_j, settings in out[:10]:

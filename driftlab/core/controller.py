@@ -86,6 +86,7 @@ class DriftController:
         self.last_state: np.ndarray | None = None
         self.last_actuators: np.ndarray | None = None
         self.direction = LEFT
+        self.last_direction = LEFT
         self.hold_steps = 0
         # Disturbances beyond these are not a model mismatch the linear MPC can use.
         limit = np.array([5.0, 2.0, 5.0])
@@ -121,15 +122,24 @@ class DriftController:
     def _update_disturbance(self, state: np.ndarray, actuators: np.ndarray) -> np.ndarray:
         if self.last_state is None or self.mpc.disturbance_gain == 0.0:
             return self.estimator.value
-        # One-step prediction of the *nonlinear* model under the inputs the actuators actually applied
-        # (measured at both ends of the step, shaped by the model's lag): the innovation is the plant-model
-        # mismatch, neither the linearization error of the MPC nor the actuators' lag.
+        # One-step prediction under the inputs the actuators actually applied (measured at both ends of the
+        # step, shaped by the model's lag). With the MPC's own linear model the estimate also absorbs the
+        # linearization error, so the target it implies is a steady state of the MPC's prediction: offset-free.
+        # (With the nonlinear model the car settled off its target, metres off its circle.)
         if self.mpc.estimator_uses_actuators:
-            predicted = _model_step(self.last_state, self.last_actuators, actuators, self.mpc.model_steer_lag_s,
-                                    self.model.params, self.mpc.dt_s)
+            start, end, lag = self.last_actuators, actuators, self.mpc.model_steer_lag_s
         else:
-            predicted = _model_step(self.last_state, self.last_applied, self.last_applied, 0.0, self.model.params,
-                                    self.mpc.dt_s)
+            start, end, lag = self.last_applied, self.last_applied, 0.0
+        if self.mpc.estimator_model == "linear":
+            qp = self.model.qp(self.last_direction)
+            x_eq, u_eq = qp.equilibrium.state, scale_inputs(qp.equilibrium.inputs)
+
+            def derivatives(x, u):
+                return qp.a_cont @ (x - x_eq) + qp.b_cont @ (scale_inputs(u) - u_eq)
+        else:
+            def derivatives(x, u):
+                return drift_derivatives_vec(x, u, self.model.params)
+        predicted = _rk4_step(derivatives, self.last_state, start, end, lag, self.mpc.dt_s)
         # The estimate is kept in left-hand form; a right-hand drift sees it mirrored (paper eq. 9).
         return self.estimator.update((state - predicted) * _mirror(self.direction)) * _mirror(self.direction)
 
@@ -137,6 +147,7 @@ class DriftController:
              course_error_rad: float) -> tuple[float, float, MpcSolution]:
         """Commands (steer rad, drive N) for the measured state [V, beta, r] and actuator positions
         [delta rad, Fxr N] (used where the controller models actuator lag)."""
+        self.last_direction = self.direction
         self.direction = direction
         disturbance = self._update_disturbance(state, actuators)
         qp = self.model.qp(direction)
@@ -173,17 +184,17 @@ def steady_state_target(qp: ReferenceQp, disturbance: np.ndarray) -> np.ndarray:
     return z_eq + np.array([dv, 0.0, dv / radius, dsteer, ddrive])
 
 
-def _model_step(state: np.ndarray, inputs_start: np.ndarray, inputs_end: np.ndarray, lag_s: float,
-                params: np.ndarray, dt_s: float) -> np.ndarray:
-    """RK4 step of the controller's 3-state model (one step; its modes are slow against dt) with the inputs
-    moving from ``inputs_start`` to ``inputs_end`` as a first-order actuator of time constant ``lag_s`` does
-    (at once when 0)."""
+def _rk4_step(derivatives, state: np.ndarray, inputs_start: np.ndarray, inputs_end: np.ndarray, lag_s: float,
+              dt_s: float) -> np.ndarray:
+    """RK4 step of a 3-state model xdot = derivatives(x, u) (one step; its modes are slow against dt) with the
+    inputs moving from ``inputs_start`` to ``inputs_end`` as a first-order actuator of time constant ``lag_s``
+    does (at once when 0)."""
     mid = inputs_end + (inputs_start - inputs_end) * _lag_shape(0.5 * dt_s, lag_s, dt_s)
     start = inputs_start if lag_s > 0.0 else inputs_end
-    k1 = drift_derivatives_vec(state, start, params)
-    k2 = drift_derivatives_vec(state + 0.5 * dt_s * k1, mid, params)
-    k3 = drift_derivatives_vec(state + 0.5 * dt_s * k2, mid, params)
-    k4 = drift_derivatives_vec(state + dt_s * k3, inputs_end, params)
+    k1 = derivatives(state, start)
+    k2 = derivatives(state + 0.5 * dt_s * k1, mid)
+    k3 = derivatives(state + 0.5 * dt_s * k2, mid)
+    k4 = derivatives(state + dt_s * k3, inputs_end)
     return state + dt_s / 6.0 * (k1 + 2 * k2 + 2 * k3 + k4)
 
 

@@ -70,6 +70,8 @@ class MpcConfig:
             (the flick's aftermath is far from the drift whose mismatch it estimates).
         estimator_uses_actuators: the estimate's one-step prediction takes the measured actuator positions
             (False: the commands sent, as releases before schema 5 did).
+        estimator_model: "linear" (the MPC's own linearization: the estimate absorbs its linearization error
+            too, which makes the tracking offset-free) or "nonlinear" (the 3-state model, schema < 5).
         feedback_in_model: the MPC's model knows that k e_la is added to its steering (needs path_states);
             without it the MPC sees that feedback as a disturbance and steers against it.
     """
@@ -100,6 +102,7 @@ class MpcConfig:
     disturbance_start_gain: float = 0.1
     estimator_hold_s: float = 1.15
     estimator_uses_actuators: bool = True
+    estimator_model: str = "linear"
     feedback_in_model: bool = True
 
     @classmethod
@@ -118,6 +121,8 @@ class MpcConfig:
             "model_steer_lag_s": (0.0, 0.5), "model_drive_lag_s": (0.0, 1.0), "estimator_hold_s": (0.0, 10.0),
             "disturbance_start_gain": (0.0, 1.0),
         }
+        if self.estimator_model not in ("linear", "nonlinear"):
+            raise ConfigError(f"mpc.estimator_model must be 'linear' or 'nonlinear', got {self.estimator_model!r}")
         if self.discretization not in ("euler", "zoh"):
             raise ConfigError(f"mpc.discretization must be 'euler' or 'zoh', got {self.discretization!r}")
         weights = {f.name: (0.0, 1e7) for f in fields(self) if f.name.startswith(("q_", "r_"))}
@@ -263,7 +268,14 @@ class ReferenceQp:
             a_sys = _with_steer_feedback(a_sys, b_sys, feedback_gain_radpm, lookahead_m)
         n_sys = a_sys.shape[0]  # model states (3 or 5) plus 2 actuator states [delta_a, Fxr_a kN] if modelled
         ad, bd, gd = discretize(a_sys, b_sys, config.dt_s, config.discretization)
-        gd = gd[:, :N_X]  # the disturbance acts on (Vdot, betadot, rdot) only
+        # The disturbance acts on (Vdot, betadot, rdot); the course error's rate holds -betadot, so a sideslip
+        # disturbance moves it too (without this the MPC, believing the course drifts, held the car metres
+        # off its circle in a steady drift).
+        entry = np.zeros((gd.shape[0], N_X))
+        entry[:N_X, :N_X] = np.eye(N_X)
+        if self.path_states:
+            entry[N_X + 1, 1] = -1.0
+        gd = gd @ entry
         self.ad, self.bd, self.gd = ad, bd, gd
         self.n_z = n_z = n_sys + N_U
         self.z_lin = self.augmented_reference(to_scaled(equilibrium.state, equilibrium.inputs))

@@ -60,7 +60,8 @@ def test_schema_1_database_upgrades_and_its_results_still_reproduce(tmp_path):
                                                                "mpc.feedback_in_model": False,
                                                                "mpc.disturbance_start_gain": 0.0,
                                                                "mpc.estimator_hold_s": 0.0,
-                                                               "mpc.estimator_uses_actuators": False}))
+                                                               "mpc.estimator_uses_actuators": False,
+                                                               "mpc.estimator_model": "nonlinear"}))
     assert old.J == RELEASE_J
     with sqlite3.connect(path) as db:
         db.executescript(SCHEMA_1)

@@ -1,7 +1,7 @@
 """Offset-free controller settings: jobs stored before this revision ran the controller without them.
 
 Revision 5 adds mpc.feedback_in_model, mpc.disturbance_start_gain, mpc.estimator_hold_s and
-mpc.estimator_uses_actuators, on by default for new jobs. A stored job's spec holds every key of its time, so a
+mpc.estimator_uses_actuators and mpc.estimator_model, on by default for new jobs. A stored job's spec holds every key of its time, so a
 missing key means the job ran without that part: it is pinned off here (which reproduces the earlier code bit for
 bit), so that resuming or rescoring the job keeps its objective. Its other settings, the old default weights
 included, are stored explicitly and stay.
@@ -21,7 +21,7 @@ branch_labels = None
 depends_on = None
 
 AS_BEFORE = {"feedback_in_model": False, "disturbance_start_gain": 0.0, "estimator_hold_s": 0.0,
-             "estimator_uses_actuators": False}
+             "estimator_uses_actuators": False, "estimator_model": "nonlinear"}
 
 
 def _loads(value):

@@ -26,7 +26,7 @@ def test_estimate_starts_as_a_capped_running_mean_then_filters_at_the_gain():
         np.testing.assert_allclose(est.update(measured * dt), expected, rtol=1e-12)
     uncapped = DisturbanceEstimator(0.0001, dt, LIMIT, start_gain=1.0)
     samples = [np.array([v, 0.0, -v]) for v in (0.1, 0.4, -0.2, 0.3)]
-    for n, sample in enumerate(samples, start=1):
+    for sample in samples:
         value = uncapped.update(sample * dt)
     np.testing.assert_allclose(value, np.mean(samples, axis=0), rtol=1e-12)  # n = 4 <= 1 / gain: the mean
 

@@ -1,10 +1,10 @@
 """Offset-free controller settings: jobs stored before this revision ran the controller without them.
 
-Revision 5 adds mpc.feedback_in_model, mpc.disturbance_start_gain, mpc.estimator_hold_s and
-mpc.estimator_uses_actuators and mpc.estimator_model, on by default for new jobs. A stored job's spec holds every key of its time, so a
-missing key means the job ran without that part: it is pinned off here (which reproduces the earlier code bit for
-bit), so that resuming or rescoring the job keeps its objective. Its other settings, the old default weights
-included, are stored explicitly and stay.
+Revision 5 adds mpc.feedback_in_model, mpc.disturbance_start_gain, mpc.estimator_hold_s,
+mpc.estimator_uses_actuators and mpc.estimator_model, on by default for new jobs. A stored job's spec holds every
+key of its time, so a missing key means the job ran without that part: it is pinned off here (which reproduces
+the earlier code bit for bit), so that resuming or rescoring the job keeps its objective. Its other settings,
+the old default weights included, are stored explicitly and stay.
 
 Revision ID: 0005
 Revises: 0004

@@ -117,10 +117,10 @@ class BayesianOptimizer:
     def ask(self) -> dict[str, float]:
         """The next point to evaluate (it stays pending until told)."""
         n_issued = len(self.x) + len(self.pending)
-        if n_issued < self.seed_points:
-            unit = self._seed_design[n_issued]
-        else:
-            unit = self._propose()
+        unused = [d for d in self._seed_design if not self._is_repeat(d)] if n_issued < self.seed_points else []
+        # The first design point not yet told or pending: after a crash, a later design point may have been
+        # stored while an earlier one was lost in flight, and design[n_issued] would then run a point twice.
+        unit = unused[0] if unused else self._propose()
         self.pending.append(unit)
         return self._to_theta(unit)
 

@@ -72,6 +72,21 @@ def test_resume_from_history_gives_the_same_next_proposal():
         resumed.tell(b, branin(b))
 
 
+def test_a_design_point_lost_in_a_crash_is_run_once_and_none_twice():
+    """Two design points in flight, the later one stored, then a crash: the resumed optimizer runs the lost one
+    and never the stored one again (it used to ask design[n_issued], i.e. the stored point a second time)."""
+    before = BayesianOptimizer(BRANIN_BOUNDS, seed_points=5, seed=0)
+    design = [before.ask() for _ in range(5)]
+    stored = design[:3] + design[4:]  # design[3] was in flight when the runner died
+    resumed = BayesianOptimizer(BRANIN_BOUNDS, seed_points=5, seed=0)
+    for theta in stored:
+        resumed.tell(theta, branin(theta))
+    assert resumed.ask() == design[3]
+    later = [resumed.ask() for _ in range(3)]
+    told = {tuple(sorted(t.items())) for t in stored + [design[3]] + later}
+    assert len(told) == len(stored) + 1 + len(later)
+
+
 def test_pending_points_give_distinct_proposals():
     opt = BayesianOptimizer(BRANIN_BOUNDS, seed_points=5, seed=0)
     for _ in range(8):

@@ -157,3 +157,38 @@ def study_spec_from_dict(data: dict[str, Any]) -> SeedsStudySpec | RobustnessStu
     if kind == "robustness":
         return RobustnessStudySpec.from_dict(data)
     raise ConfigError(f"kind must be one of {', '.join(STUDY_KINDS)}, got {kind!r}")
+
+
+@dataclass(frozen=True)
+class GridTable:
+    """A robustness study's cells laid out as a table: rows are the first grid key's values, columns every
+    combination of the others (one column when the grid has one key).
+
+    Attributes:
+        row_key: the first grid key; row_values its values.
+        column_labels: "key=value, ..." of each column ("" for a one-key grid).
+        J: rows x columns, NaN where a cell is pending.
+        status: rows x columns of the cells' statuses ("pending", "completed", or how it failed).
+    """
+
+    row_key: str
+    row_values: tuple[Any, ...]
+    column_labels: tuple[str, ...]
+    J: tuple[tuple[float, ...], ...]
+    status: tuple[tuple[str, ...], ...]
+
+
+def grid_table(grid: dict[str, list[Any]], cells: list[dict[str, Any]]) -> GridTable:
+    """Cells (``{"index", "status", "J"}``, indexed in the cartesian order of :meth:`RobustnessStudySpec.cells`)
+    as a :class:`GridTable`."""
+    keys = list(grid)
+    rest = [dict(zip(keys[1:], values, strict=True)) for values in itertools.product(*(grid[k] for k in keys[1:]))]
+    n_columns = len(rest)
+    by_index = {c["index"]: c for c in cells}
+    values, statuses = [], []
+    for r in range(len(grid[keys[0]])):
+        row = [by_index.get(r * n_columns + c, {}) for c in range(n_columns)]
+        values.append(tuple(math.nan if cell.get("J") is None else float(cell["J"]) for cell in row))
+        statuses.append(tuple(cell.get("status", "pending") for cell in row))
+    labels = tuple(", ".join(f"{k}={v}" for k, v in combo.items()) for combo in rest)
+    return GridTable(keys[0], tuple(grid[keys[0]]), labels, tuple(values), tuple(statuses))

@@ -111,6 +111,7 @@ def plot_heatmap(table, path: str | Path, title: str = "") -> None:
     ax.set_yticks(range(len(table.row_values)), [str(v) for v in table.row_values])
     ax.set_ylabel(table.row_key)
     ax.set_xticks(range(len(table.column_labels)), table.column_labels, rotation=30, ha="right", fontsize=8)
+    ax.set_xlabel(table.column_key)
     fig.colorbar(image, ax=ax, label="J (completed cells; lower is better)")
     ax.set_title(title, fontsize=9)
     fig.tight_layout()

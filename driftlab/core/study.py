@@ -166,13 +166,15 @@ class GridTable:
 
     Attributes:
         row_key: the first grid key; row_values its values.
-        column_labels: "key=value, ..." of each column ("" for a one-key grid).
+        column_key: the other keys, comma-separated ("" for a one-key grid).
+        column_labels: their values in each column, comma-separated ("" for a one-key grid).
         J: rows x columns, NaN where a cell is pending.
         status: rows x columns of the cells' statuses ("pending", "completed", or how it failed).
     """
 
     row_key: str
     row_values: tuple[Any, ...]
+    column_key: str
     column_labels: tuple[str, ...]
     J: tuple[tuple[float, ...], ...]
     status: tuple[tuple[str, ...], ...]
@@ -190,5 +192,5 @@ def grid_table(grid: dict[str, list[Any]], cells: list[dict[str, Any]]) -> GridT
         row = [by_index.get(r * n_columns + c, {}) for c in range(n_columns)]
         values.append(tuple(math.nan if cell.get("J") is None else float(cell["J"]) for cell in row))
         statuses.append(tuple(cell.get("status", "pending") for cell in row))
-    labels = tuple(", ".join(f"{k}={v}" for k, v in combo.items()) for combo in rest)
-    return GridTable(keys[0], tuple(grid[keys[0]]), labels, tuple(values), tuple(statuses))
+    labels = tuple(", ".join(str(v) for v in combo.values()) for combo in rest)
+    return GridTable(keys[0], tuple(grid[keys[0]]), ", ".join(keys[1:]), labels, tuple(values), tuple(statuses))

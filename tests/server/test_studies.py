@@ -60,7 +60,7 @@ def seeds_study(server):
 
 def test_a_seeds_study_runs_one_job_per_seed_and_its_band_is_the_jobs_best_so_far(server, seeds_study):
     jobs = [httpx.get(f"{server}/api/jobs/{i}").json() for i in seeds_study["job_ids"]]
-    assert [j["seed"] for j in jobs] == [0, 1, 2]
+    assert [j["seed"] for j in jobs] == [0, 1, 2] and {j["study_id"] for j in jobs} == {seeds_study["id"]}
     assert all(j["status"] == "finished" and j["n_done"] == 5 for j in jobs)
     assert all(j["spec"]["iterations"] == 5 and j["spec"]["robust_samples"] == 1 for j in jobs)
     curves = [_best_so_far(httpx.get(f"{server}/api/jobs/{i}/evaluations").json()) for i in seeds_study["job_ids"]]

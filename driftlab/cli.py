@@ -12,6 +12,7 @@ import time
 from typing import Any
 
 from driftlab.core.config import EpisodeConfig, Theta, apply_overrides
+from driftlab.core.drivability import check_drivable
 from driftlab.core.equilibrium import drift_equilibrium
 from driftlab.core.errors import ConfigError, NoEquilibriumError
 from driftlab.core.robust import MAX_ROBUST_SAMPLES
@@ -120,6 +121,7 @@ def _cmd_episode(args: argparse.Namespace) -> int:
         _check_output_file(option, path)
     if args.plot and os.path.splitext(args.plot)[1].lower() not in PLOT_SUFFIXES:
         raise ConfigError(f"--plot {args.plot}: the file name must end in one of {', '.join(PLOT_SUFFIXES)}")
+    check_drivable(config)
     result = run_episode(theta, config, seed=args.seed)
     print(json.dumps(_finite(result.summary())))
     if args.csv:
@@ -140,7 +142,8 @@ def _cmd_episode(args: argparse.Namespace) -> int:
 def _tuning_spec(args: argparse.Namespace):
     from driftlab.core.tuning import TuningSpec
 
-    config = apply_overrides(EpisodeConfig(), _key_values(args.set or [], "--set"))
+    config = _config(args)
+    check_drivable(config)
     bounds = {}
     for item in args.bound or []:
         name, _, pair = item.partition("=")
@@ -317,6 +320,9 @@ def _add_job_options(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--confirm-samples", type=int, default=DEFAULT_CONFIRM_SAMPLES, metavar="N",
                         help=f"more seeds an evaluation must also complete before it counts as the best so far "
                              f"(0..64, default {DEFAULT_CONFIRM_SAMPLES}; 0: off)")
+    parser.add_argument("--plant", choices=("default", "nominal"), default="default",
+                        help="the plant preset the --set overrides start from")
+    parser.add_argument("--controller", choices=("default", "paper"), default="default")
     parser.add_argument("--set", action="append", metavar="KEY=VALUE",
                         help="config override, e.g. plant.steer_lag_s=0.02")
     parser.add_argument("--bound", action="append", metavar="NAME=LO:HI", help="theta bound, e.g. k=0:0.1")

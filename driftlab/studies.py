@@ -14,6 +14,7 @@ from sqlalchemy import select
 from sqlalchemy.orm import Session
 
 from driftlab.core.convergence import band, best_so_far
+from driftlab.core.drivability import check_drivable
 from driftlab.core.errors import ConfigError
 from driftlab.core.study import RobustnessStudySpec, SeedsStudySpec
 from driftlab.core.tuning import TuningSpec
@@ -69,6 +70,7 @@ def start_study(session: Session, *, doc: dict[str, Any], name: str | None = Non
     if kind == "seeds":
         _refuse_fields(doc, kind, ("theta", "evaluation_id", "grid", "config", "robust_samples", "seed"))
         seeds_spec = SeedsStudySpec.from_dict(doc)
+        check_drivable(seeds_spec.job.config)  # NotDrivableError (a ConfigError), as for a job
         study = studies.create_study(session, name=name or studies.unique_study_name(session, "study"), kind=kind,
                                      spec=seeds_spec.to_dict(), status="jobs")
         for seed, spec in zip(seeds_spec.seeds, seeds_spec.job_specs(), strict=True):

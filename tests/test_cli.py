@@ -29,6 +29,30 @@ def test_equilibrium_without_drift_reports_error_with_exit_2():
     assert "beta" in out.stderr and len(out.stderr.strip().splitlines()) == 1
 
 
+def test_a_plant_without_a_drift_is_refused_before_any_episode(tmp_path):
+    episode = _run("episode", "--set", "plant.friction_scale=1.2")
+    db = tmp_path / "jobs.db"
+    tune = _run("tune", "--iterations", "2", "--db", str(db), "--set", "plant.friction_scale=1.2")
+    for out in (episode, tune):
+        assert out.returncode == 2 and out.stdout == ""
+        assert "not drivable" in out.stderr and "plant" in out.stderr and len(out.stderr.strip().splitlines()) == 1
+
+
+def test_tune_takes_the_plant_preset(tmp_path):
+    db = tmp_path / "jobs.db"
+    out = _run("tune", "--plant", "nominal", "--iterations", "2", "--seed-points", "2", "--robust-samples", "1",
+               "--confirm-samples", "0", "--workers", "1", "--db", str(db), "--name", "nominal-job")
+    assert out.returncode == 0, out.stderr
+    from driftlab.core.plant import PlantConfig
+    from driftlab.core.tuning import TuningSpec
+    from driftlab.db import storage
+
+    factory = storage.open_database(f"sqlite:///{db}")
+    with storage.transaction(factory) as session:
+        spec = TuningSpec.from_dict(storage.get_job_by_name(session, name="nominal-job").spec)
+    assert spec.config.plant == PlantConfig.nominal()
+
+
 def test_episode_json_has_the_documented_keys(tmp_path):
     csv_file = tmp_path / "traj.csv"
     out = _run("episode", "--plant", "nominal", "--theta", "c_lr=0.02,c_rl=0.02,dV=0,k=0.05",

@@ -139,7 +139,7 @@ def run_episode(theta: Theta, config: EpisodeConfig, *, seed: int = 0) -> Episod
     track = FigureEight(scenario.left_radius_m, scenario.right_radius_m)
     try:
         model = build_controller_model(config.vehicle, config.mpc, scenario.left_radius_m,
-                                       scenario.right_radius_m, scenario.sideslip_rad)
+                                       scenario.right_radius_m, scenario.sideslip_rad, theta.k, scenario.lookahead_m)
     except NoEquilibriumError:
         empty = np.zeros((0, len(COLUMNS)))
         return EpisodeResult("diverged", failure_penalty(0.0), compute_metrics(empty, [], track, COL), empty,

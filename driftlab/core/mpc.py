@@ -63,31 +63,47 @@ class MpcConfig:
         osqp_eps: OSQP absolute and relative tolerance.
         path_states: add e [m] and dpsi [rad] to the model (False: the paper).
         q_lateral_error, q_course_error: weights on e and dpsi when path_states is on.
+        terminal_cost: weigh the last predicted state with the Riccati cost-to-go.
+        disturbance_start_gain: the estimate starts as a running mean whose gain is capped at this (see
+            :class:`DisturbanceEstimator`); 0 starts at ``disturbance_gain``.
+        estimator_hold_s: the disturbance estimate stays frozen this long after an inertia phase ends [s]
+            (the flick's aftermath is far from the drift whose mismatch it estimates).
+        estimator_uses_actuators: the estimate's one-step prediction takes the measured actuator positions
+            (False: the commands sent, as releases before schema 5 did).
+        estimator_model: "linear" (the MPC's own linearization: the estimate absorbs its linearization error
+            too, which makes the tracking offset-free) or "nonlinear" (the 3-state model, schema < 5).
+        feedback_in_model: the MPC's model knows that k e_la is added to its steering (needs path_states);
+            without it the MPC sees that feedback as a disturbance and steers against it.
     """
 
     dt_s: float = 0.05
     horizon: int = 20
-    q_speed: float = 4.2
-    q_sideslip: float = 1800.0
-    q_yaw_rate: float = 17.8
-    q_steer: float = 16.6
-    q_drive_kn: float = 0.72
-    r_steer_step: float = 5.9
-    r_drive_step_kn: float = 0.037
+    q_speed: float = 2.49
+    q_sideslip: float = 548.0
+    q_yaw_rate: float = 0.872
+    q_steer: float = 122.5
+    q_drive_kn: float = 0.276
+    r_steer_step: float = 3.79
+    r_drive_step_kn: float = 0.0047
     steer_limit_rad: float = 0.6
     drive_min_n: float = -6000.0
     drive_max_n: float = 8000.0
-    steer_rate_radps: float = 4.1
+    steer_rate_radps: float = 9.7
     drive_rate_nps: float = 20000.0
     discretization: str = "zoh"
-    disturbance_gain: float = 0.0
-    model_steer_lag_s: float = 0.03
+    disturbance_gain: float = 0.0294
+    model_steer_lag_s: float = 0.027
     model_drive_lag_s: float = 0.05
     osqp_eps: float = 1e-5
     path_states: bool = True
-    q_lateral_error: float = 0.05
-    q_course_error: float = 6.6
-    terminal_cost: bool = False
+    q_lateral_error: float = 0.707
+    q_course_error: float = 6.54
+    terminal_cost: bool = True
+    disturbance_start_gain: float = 0.175
+    estimator_hold_s: float = 0.61
+    estimator_uses_actuators: bool = True
+    estimator_model: str = "linear"
+    feedback_in_model: bool = True
 
     @classmethod
     def paper(cls) -> MpcConfig:
@@ -95,21 +111,27 @@ class MpcConfig:
         return cls(q_speed=1.0, q_sideslip=417.0, q_yaw_rate=26.0, q_steer=5.5, q_drive_kn=0.2,
                    r_steer_step=56.0, r_drive_step_kn=0.024, steer_rate_radps=3.0, discretization="euler",
                    model_steer_lag_s=0.0, model_drive_lag_s=0.0, path_states=False, q_lateral_error=0.0,
-                   q_course_error=0.0)
+                   q_course_error=0.0, disturbance_gain=0.0, feedback_in_model=False, terminal_cost=False)
 
     def __post_init__(self) -> None:
         ranges = {
             "dt_s": (0.005, 0.5), "horizon": (1, 100), "steer_limit_rad": (0.05, 1.2),
             "drive_min_n": (-30000.0, 0.0), "drive_max_n": (0.0, 30000.0), "steer_rate_radps": (0.05, 50.0),
             "drive_rate_nps": (100.0, 1e6), "disturbance_gain": (0.0, 1.0), "osqp_eps": (1e-10, 1e-2),
-            "model_steer_lag_s": (0.0, 0.5), "model_drive_lag_s": (0.0, 1.0),
+            "model_steer_lag_s": (0.0, 0.5), "model_drive_lag_s": (0.0, 1.0), "estimator_hold_s": (0.0, 10.0),
+            "disturbance_start_gain": (0.0, 1.0),
         }
+        if self.estimator_model not in ("linear", "nonlinear"):
+            raise ConfigError(f"mpc.estimator_model must be 'linear' or 'nonlinear', got {self.estimator_model!r}")
         if self.discretization not in ("euler", "zoh"):
             raise ConfigError(f"mpc.discretization must be 'euler' or 'zoh', got {self.discretization!r}")
         weights = {f.name: (0.0, 1e7) for f in fields(self) if f.name.startswith(("q_", "r_"))}
         check_ranges(self, "mpc", {**weights, **ranges})
         if not isinstance(self.terminal_cost, bool):
             raise ConfigError(f"mpc.terminal_cost must be true or false, got {self.terminal_cost!r}")
+        for name in ("feedback_in_model", "estimator_uses_actuators"):
+            if not isinstance(getattr(self, name), bool):
+                raise ConfigError(f"mpc.{name} must be true or false, got {getattr(self, name)!r}")
         if not isinstance(self.path_states, bool):
             raise ConfigError(f"mpc.path_states must be true or false, got {self.path_states!r}")
         if not isinstance(self.horizon, int):
@@ -183,6 +205,15 @@ def _with_actuator_lag(a_c: np.ndarray, b_c: np.ndarray, config: MpcConfig) -> t
     return a_sys, b_sys
 
 
+def _with_steer_feedback(a_sys: np.ndarray, b_sys: np.ndarray, gain_radpm: float, lookahead_m: float) -> np.ndarray:
+    """Closes the paper's steering feedback delta_f = delta_mpc + k (e + x_la dpsi) (eq. 11, sin linearized)
+    inside the model: the steering command becomes the MPC's input plus k [0 0 0 1 x_la 0 ...] x."""
+    row = np.zeros(a_sys.shape[0])
+    row[N_X] = gain_radpm
+    row[N_X + 1] = gain_radpm * lookahead_m
+    return a_sys + np.outer(b_sys[:, 0], row)
+
+
 def _terminal_weight(a_mat: np.ndarray, b_mat: np.ndarray, q_mat: np.ndarray, r_mat: np.ndarray) -> np.ndarray:
     """The infinite-horizon cost-to-go P of the unconstrained problem (discrete Riccati equation): as the last
     stage's weight it makes the finite-horizon MPC equal the LQR where no limit is active, which stabilizes
@@ -221,7 +252,8 @@ class MpcSolution:
 class ReferenceQp:
     """The condensed QP for one reference equilibrium (built once, reused every step)."""
 
-    def __init__(self, config: MpcConfig, equilibrium: Equilibrium, p_model: np.ndarray) -> None:
+    def __init__(self, config: MpcConfig, equilibrium: Equilibrium, p_model: np.ndarray,
+                 feedback_gain_radpm: float = 0.0, lookahead_m: float = 0.0) -> None:
         self.config = config
         self.equilibrium = equilibrium
         a_c, b_c = jacobians(equilibrium.state, equilibrium.inputs, p_model)
@@ -232,9 +264,18 @@ class ReferenceQp:
         self.path_states = config.path_states
         a_sys, b_sys = _with_path_errors(a_c, b_c, equilibrium) if self.path_states else (a_c, b_c)
         a_sys, b_sys = _with_actuator_lag(a_sys, b_sys, config) if self.models_lag else (a_sys, b_sys)
+        if config.feedback_in_model and self.path_states:
+            a_sys = _with_steer_feedback(a_sys, b_sys, feedback_gain_radpm, lookahead_m)
         n_sys = a_sys.shape[0]  # model states (3 or 5) plus 2 actuator states [delta_a, Fxr_a kN] if modelled
         ad, bd, gd = discretize(a_sys, b_sys, config.dt_s, config.discretization)
-        gd = gd[:, :N_X]  # the disturbance acts on (Vdot, betadot, rdot) only
+        # The disturbance acts on (Vdot, betadot, rdot); the course error's rate holds -betadot, so a sideslip
+        # disturbance moves it too (without this the MPC, believing the course drifts, held the car metres
+        # off its circle in a steady drift).
+        entry = np.zeros((gd.shape[0], N_X))
+        entry[:N_X, :N_X] = np.eye(N_X)
+        if self.path_states:
+            entry[N_X + 1, 1] = -1.0
+        gd = gd @ entry
         self.ad, self.bd, self.gd = ad, bd, gd
         self.n_z = n_z = n_sys + N_U
         self.z_lin = self.augmented_reference(to_scaled(equilibrium.state, equilibrium.inputs))
@@ -383,18 +424,26 @@ class DisturbanceEstimator:
     """Offset-free MPC's disturbance estimate d on (Vdot, betadot, rdot), a first-order filter.
 
     The measurement d_meas = (x_meas - x_pred) / dt, x_pred being the controller model's one-step
-    prediction without disturbance; d follows it through d += gain (d_meas - d).
+    prediction without disturbance; d follows it through d += g (d_meas - d). The gain starts as a running
+    mean capped at ``start_gain``, g = max(gain, min(start_gain, 1 / n)) over the first n measurements: the
+    episode starts at the *model's* drift, so the mismatch matters most then, and a plain small gain leaves
+    the car metres off its circle; an uncapped running mean takes the first, transient, measurements at
+    full weight and throws the car out of the drift.
     """
 
-    def __init__(self, gain: float, dt_s: float, limit: np.ndarray) -> None:
+    def __init__(self, gain: float, dt_s: float, limit: np.ndarray, start_gain: float = 0.0) -> None:
         self.gain = gain
+        self.start_gain = start_gain
         self.dt_s = dt_s
         self.limit = limit
         self.value = np.zeros(N_X)
         self.frozen = False
+        self.n_updates = 0
 
     def update(self, innovation: np.ndarray) -> np.ndarray:
         if self.gain > 0.0 and not self.frozen:
+            self.n_updates += 1
+            gain = max(self.gain, min(self.start_gain, 1.0 / self.n_updates))
             measured = innovation / self.dt_s
-            self.value = np.clip(self.value + self.gain * (measured - self.value), -self.limit, self.limit)
+            self.value = np.clip(self.value + gain * (measured - self.value), -self.limit, self.limit)
         return self.value

@@ -78,10 +78,10 @@ class PlantConfig:
     Per-episode variation, drawn from the episode's seed (:mod:`driftlab.core.variation`); a real car never
     drives the same episode twice. Spreads are half-widths of uniform draws, noise levels standard deviations
     of Gaussian measurement noise (an RTK GNSS/INS with an optical slip sensor). All zero in :meth:`nominal`.
-    The defaults are modest because the default controller's basin on the default plant is small: with friction
-    +-1%, mass +-2%, sideslip noise 0.001 rad and a 0.003 rad start spread together, none of 28 theta in the
-    default bounds completed 95% of 16 seeds (benchmarks/variation_sweep.py); widening that basin is the
-    mismatch-envelope work.
+    The defaults are modest because they were set when the controller's basin was small (before the offset-free
+    controller, with friction +-1%, mass +-2%, sideslip noise 0.001 rad and a 0.003 rad start spread together,
+    none of 28 theta in the default bounds completed 95% of 16 seeds, benchmarks/variation_sweep.py); they
+    are kept so that stored jobs and their figures stay comparable.
         friction_spread: relative spread of friction, mu x (1 + U(-s, s)) [-].
         mass_spread: relative spread of mass (and with it yaw inertia) [-].
         steer_lag_spread_s: spread of the steering time constant [s].

@@ -45,6 +45,7 @@ class SampleResult:
     status: str
     J: float
     completed_fraction: float
+    mean_abs_e_m: float | None = None  # mean |lateral error| over the episode (as far as it got) [m]
 
     @property
     def completed(self) -> bool:
@@ -93,5 +94,10 @@ def summarize(samples: Sequence[SampleResult]) -> dict:
             "J_std": math.sqrt(sum((v - mean) ** 2 for v in values) / (n - 1)) if n > 1 else 0.0,
             "J_worst": max(values),
             "J_mean_completed": sum(completed) / len(completed) if completed else None,
+            "mean_abs_e_m": _mean([s.mean_abs_e_m for s in samples if s.completed and s.mean_abs_e_m is not None]),
             "statuses": {status: sum(s.status == status for s in samples)
                          for status in sorted({s.status for s in samples})}}
+
+
+def _mean(values: list[float]) -> float | None:
+    return sum(values) / len(values) if values else None

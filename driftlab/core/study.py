@@ -124,9 +124,12 @@ class RobustnessStudySpec:
         keys = list(self.grid)
         return [dict(zip(keys, values, strict=True)) for values in itertools.product(*self.grid.values())]
 
+    def cell_episode_config(self, settings: dict[str, Any]) -> EpisodeConfig:
+        return apply_overrides(self.config, settings)
+
     def cell_config(self, settings: dict[str, Any]) -> dict[str, Any]:
         """A cell's full episode configuration as a plain document (what the executor takes)."""
-        return config_to_dict(apply_overrides(self.config, settings))
+        return config_to_dict(self.cell_episode_config(settings))
 
     def to_dict(self) -> dict[str, Any]:
         return {"kind": "robustness", "theta": self.theta, "grid": {k: list(v) for k, v in self.grid.items()},

@@ -21,6 +21,7 @@ from driftlab.db.lifecycle import JobStatus, TransitionError
 from driftlab.db.models import Job, Study, StudyCell, utcnow
 
 PENDING = "pending"
+NOT_DRIVABLE = "not_drivable"  # a cell whose plant has no drift at the scenario's radius: not run
 
 
 def create_study(session: Session, *, name: str, kind: str, spec: dict[str, Any], status: str = JobStatus.QUEUED
@@ -74,7 +75,7 @@ def cells(session: Session, *, study_id: int) -> list[StudyCell]:
     return list(session.scalars(select(StudyCell).where(StudyCell.study_id == study_id).order_by(StudyCell.index)))
 
 
-def store_cell(session: Session, *, cell_id: int, status: str, J: float, n_completed: int,
+def store_cell(session: Session, *, cell_id: int, status: str, J: float | None, n_completed: int,
                seeds: list[dict[str, Any]], wall_ms: float) -> StudyCell:
     cell = session.get(StudyCell, cell_id)
     cell.status, cell.J, cell.n_completed, cell.seeds, cell.wall_ms = status, J, n_completed, seeds, wall_ms

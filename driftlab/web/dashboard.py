@@ -17,6 +17,7 @@ import viser
 from sqlalchemy.orm import Session, sessionmaker
 
 from driftlab.core.config import apply_overrides, config_from_dict, config_to_dict
+from driftlab.core.drivability import check_drivable
 from driftlab.core.errors import ConfigError
 from driftlab.db import storage
 from driftlab.web.frames import EpisodeFrames
@@ -61,6 +62,7 @@ class WhatIfRunner:
     def _submit(self, session: ClientSession, theta: dict, config_doc: dict, overrides: dict) -> None:
         try:
             config = apply_overrides(config_from_dict(config_doc), overrides)
+            check_drivable(config)
             future = self.run_episode(theta, config_to_dict(config))
         except (ConfigError, ValueError) as exc:
             session.on_what_if_result(None, str(exc), 0.0)

@@ -1,5 +1,6 @@
 """A robustness study's heatmap as an HTML table for the view's panel: completed cells coloured by J (the
-lowest, best, yellow; the highest purple), failed cells light red with how they failed, pending cells grey."""
+lowest, best, yellow; the highest purple), failed cells light red with how they failed (or `not_drivable`:
+not run), pending cells grey."""
 
 from __future__ import annotations
 
@@ -26,10 +27,11 @@ def j_color(value: float, lo: float, hi: float) -> str:
 
 
 def _cell(status: str, value: float, lo: float, hi: float) -> str:
-    if status == "pending" or math.isnan(value):
+    if status == "pending":
         return f'<td style="background:{PENDING_COLOR};color:#888">…</td>'
     if status != "completed":
-        return f'<td style="background:{FAILED_COLOR};color:#a61e1e" title="J {value:.3f}">{html.escape(status)}</td>'
+        title = "" if math.isnan(value) else f' title="J {value:.3f}"'
+        return f'<td style="background:{FAILED_COLOR};color:#a61e1e"{title}>{html.escape(status)}</td>'
     text_color = "#000" if value <= 0.5 * (lo + hi) else "#fff"
     return f'<td style="background:{j_color(value, lo, hi)};color:{text_color}">{value:.3f}</td>'
 

@@ -6,6 +6,7 @@ A distributed engine (Dask's ``Client.submit`` returns compatible futures) can t
 
 from __future__ import annotations
 
+import math
 import multiprocessing
 import os
 import threading
@@ -39,7 +40,9 @@ class EpisodeOutcome:
 
     def sample(self) -> SampleResult:
         """This episode as one sample of a robust evaluation."""
-        return SampleResult(self.seed, self.status, float(self.J), float(self.metrics.get("completed_fraction", 0.0)))
+        error = self.metrics.get("mean_abs_e_m")
+        return SampleResult(self.seed, self.status, float(self.J), float(self.metrics.get("completed_fraction", 0.0)),
+                            float(error) if error is not None and math.isfinite(error) else None)
 
 
 class EpisodeExecutor(Protocol):

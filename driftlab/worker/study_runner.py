@@ -1,5 +1,6 @@
 """Runs a robustness study: its theta on every pending cell of the grid, one episode per seed on the executor
-(the local pool or Dask, as a job's episodes), each cell stored as soon as its episodes are back.
+(the local pool or Dask, as a job's episodes), each cell stored as soon as its episodes are back; a cell whose
+plant cannot drift the scenario is stored as not drivable without running.
 
 The runner holds the study's lease (driftlab.db.studies) as a job's runner holds the job's: a pause request,
 a delete or a takeover ends the lease, and the runner stops after the episodes in flight. A study that was
@@ -16,6 +17,7 @@ from typing import Any
 
 from sqlalchemy.orm import Session, sessionmaker
 
+from driftlab.core.drivability import drivable_reason
 from driftlab.core.robust import aggregate
 from driftlab.core.study import RobustnessStudySpec
 from driftlab.db import lifecycle, storage, studies
@@ -50,6 +52,19 @@ def _store_cell(factory: sessionmaker[Session], study_id: int, runner: str, cell
     return True
 
 
+def _store_not_drivable(factory: sessionmaker[Session], study_id: int, runner: str, cell_ids: list[int]) -> None:
+    """Cells whose plant has no drift at the scenario's radius and sideslip: stored as such, never run (an
+    episode there says nothing about the controller, driftlab.core.drivability)."""
+    if not cell_ids:
+        return
+    with storage.transaction(factory) as session:
+        if not studies.heartbeat_study(session, study_id=study_id, runner=runner):
+            return
+        for cell_id in cell_ids:
+            studies.store_cell(session, cell_id=cell_id, status=studies.NOT_DRIVABLE, J=None, n_completed=0,
+                               seeds=[], wall_ms=0.0)
+
+
 def run_study(factory: sessionmaker[Session], study_id: int, executor: EpisodeExecutor, *, runner: str,
               workers: int = 1, should_stop: Callable[[], bool] = lambda: False) -> str:
     """Runs a study whose lease ``runner`` holds (:func:`driftlab.db.studies.claim_study`) until every cell is
@@ -59,7 +74,10 @@ def run_study(factory: sessionmaker[Session], study_id: int, executor: EpisodeEx
         spec = RobustnessStudySpec.from_dict(study.spec)
         todo = [(c.id, c.settings) for c in studies.cells(session, study_id=study_id) if c.status == studies.PENDING]
     seeds = spec.episode_seeds
-    queue = [_PendingCell(cell_id, spec.cell_config(settings), seeds) for cell_id, settings in todo]
+    queue = [_PendingCell(cell_id, spec.cell_config(settings), seeds) for cell_id, settings in todo
+             if drivable_reason(spec.cell_episode_config(settings)) is None]
+    _store_not_drivable(factory, study_id, runner, [cell_id for cell_id, _ in todo
+                                                    if cell_id not in {c.cell_id for c in queue}])
     episodes: dict[Future[EpisodeOutcome], _PendingCell] = {}
     held, shutting_down, last_beat = True, False, time.monotonic()
     try:

@@ -29,10 +29,22 @@ CREATE TABLE trajectories ( evaluation_id INTEGER NOT NULL, columns JSON NOT NUL
 """
 
 
+# The controller section as releases before schema 5 stored it (their default weights, no offset-free keys), and
+# the J such a release (commit 1d28ccc) computed for Theta() on that config with the variation off.
+RELEASE_MPC = {"dt_s": 0.05, "horizon": 20, "q_speed": 4.2, "q_sideslip": 1800.0, "q_yaw_rate": 17.8,
+               "q_steer": 16.6, "q_drive_kn": 0.72, "r_steer_step": 5.9, "r_drive_step_kn": 0.037,
+               "steer_limit_rad": 0.6, "drive_min_n": -6000.0, "drive_max_n": 8000.0, "steer_rate_radps": 4.1,
+               "drive_rate_nps": 20000.0, "discretization": "zoh", "disturbance_gain": 0.0, "model_steer_lag_s": 0.03,
+               "model_drive_lag_s": 0.05, "osqp_eps": 1e-05, "path_states": True, "q_lateral_error": 0.05,
+               "q_course_error": 6.6, "terminal_cost": False}
+RELEASE_J = -0.7103497996442939
+
+
 def _schema_1_spec() -> dict:
-    """TuningSpec.to_dict() as schema 1 wrote it: no robust_samples, no variation keys."""
+    """TuningSpec.to_dict() as schema 1 wrote it: no robust_samples, no variation keys, the release's MPC."""
     config = config_to_dict(EpisodeConfig())
     config["plant"] = {k: v for k, v in config["plant"].items() if k not in VARIATION_LIMITS}
+    config["mpc"] = dict(RELEASE_MPC)
     return {"iterations": 10, "seed_points": 3, "active_set": 400, "seed": 0,
             "bounds": {"c_lr": [0.005, 0.04], "c_rl": [0.005, 0.04], "dV": [-0.3, 0.3], "k": [0.0, 0.12]},
             "config": config}
@@ -41,9 +53,16 @@ def _schema_1_spec() -> dict:
 def test_schema_1_database_upgrades_and_its_results_still_reproduce(tmp_path):
     path = tmp_path / "old.db"
     theta = Theta()
-    # What the schema-1 release computed: one episode, no variation (bit-identical to today's code with
-    # the spreads at zero).
-    old = run_episode(theta, apply_overrides(EpisodeConfig(), {f"plant.{k}": 0.0 for k in VARIATION_LIMITS}))
+    # What the old release computed: one episode, no variation, its controller (RELEASE_J); the trajectory and
+    # metrics stored beside it come from today's code with the same settings.
+    old = run_episode(theta, apply_overrides(EpisodeConfig(), {**{f"plant.{k}": 0.0 for k in VARIATION_LIMITS},
+                                                               **{f"mpc.{k}": v for k, v in RELEASE_MPC.items()},
+                                                               "mpc.feedback_in_model": False,
+                                                               "mpc.disturbance_start_gain": 0.0,
+                                                               "mpc.estimator_hold_s": 0.0,
+                                                               "mpc.estimator_uses_actuators": False,
+                                                               "mpc.estimator_model": "nonlinear"}))
+    assert old.J == RELEASE_J
     with sqlite3.connect(path) as db:
         db.executescript(SCHEMA_1)
         db.execute("INSERT INTO meta VALUES ('schema_version', '1')")
@@ -58,14 +77,15 @@ def test_schema_1_database_upgrades_and_its_results_still_reproduce(tmp_path):
     with storage.transaction(factory) as session:
         job = session.get(Job, 1)
         evaluation = session.get(Evaluation, 1)
-        assert session.get(Meta, "schema_version").value == "5"
+        assert session.get(Meta, "schema_version").value == "6"
         spec = TuningSpec.from_dict(job.spec)
         assert spec.robust_samples == 1 and spec.confirm_samples == 0 and not spec.config.plant.varies
+        assert not spec.config.mpc.feedback_in_model and spec.config.mpc.estimator_hold_s == 0.0  # pinned by 0005
         assert evaluation.seeds == [{"seed": 0, "status": old.status, "J": old.J,
                                      "completed_fraction": old.metrics.completed_fraction}]
         assert evaluation.trajectory_seed == 0
     again = run_episode(theta, spec.config, seed=evaluation.trajectory_seed)
-    assert again.J == old.J
+    assert again.J == RELEASE_J
     engine = storage.engine_of(factory)
     assert schema.current_revision(engine) == schema.head_revision()
     storage.open_database(f"sqlite:///{path}")  # a second open is a no-op
@@ -73,7 +93,7 @@ def test_schema_1_database_upgrades_and_its_results_still_reproduce(tmp_path):
 
 def test_a_new_database_is_created_at_the_head_revision(tmp_path):
     factory = storage.open_database(f"sqlite:///{tmp_path / 'new.db'}")
-    assert schema.current_revision(storage.engine_of(factory)) == schema.head_revision() == "0005"
+    assert schema.current_revision(storage.engine_of(factory)) == schema.head_revision() == "0006"
     with storage.transaction(factory) as session:
         job = storage.create_job(session, name="fresh", spec=TuningSpec().to_dict(), seed=0)
         assert job.runner_id is None and job.heartbeat_at is None
@@ -93,20 +113,20 @@ def test_a_deleted_jobs_id_is_never_reused(tmp_path):
     assert first < second < third
 
 
-def test_revision_0005_adds_studies_to_a_database_with_jobs(tmp_path):
-    """A 0004 database with a job upgrades: the job keeps its id and gets no study; studies and cells store."""
+def test_revision_0006_adds_studies_to_a_database_with_jobs(tmp_path):
+    """A 0005 database with a job upgrades: the job keeps its id and gets no study; studies and cells store."""
     from sqlalchemy import create_engine, inspect
 
     from driftlab.db import studies
     from driftlab.db.models import Job as JobRow
 
-    url = f"sqlite:///{tmp_path / 'v4.db'}"
+    url = f"sqlite:///{tmp_path / 'v5.db'}"
     engine = create_engine(url)
     with engine.connect() as connection, connection.begin():
         config = schema._config(connection)
         from alembic import command
 
-        command.upgrade(config, "0004")
+        command.upgrade(config, "0005")
         connection.exec_driver_sql(
             "INSERT INTO jobs (id, name, spec, seed, status, created_at, updated_at) "
             "VALUES (7, 'old', '{}', 0, 'finished', '2026-11-01', '2026-11-01')")
@@ -123,4 +143,4 @@ def test_revision_0005_adds_studies_to_a_database_with_jobs(tmp_path):
         assert [c.settings for c in studies.cells(session, study_id=study.id)] == [{"plant.mass_scale": 1.0},
                                                                                   {"plant.mass_scale": 1.1}]
         assert [j.name for j in studies.study_jobs(session, study_id=study.id)] == ["member"]
-        assert session.get(Meta, "schema_version").value == "5"
+        assert session.get(Meta, "schema_version").value == "6"

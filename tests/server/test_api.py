@@ -125,6 +125,7 @@ def test_pause_and_resume(server):
     ({"iterations": 5, "config": {"plant.no_such_key": 1}}, "plant.no_such_key"),
     ({"iterations": 5, "config": {"plant.friction_scale": 9.0}}, "plant.friction_scale"),
     ({"iterations": 5, "colour": "red"}, "colour"),
+    ({"iterations": 5, "config": {"plant.friction_scale": 1.2}}, "not drivable"),
 ])
 def test_bad_requests_name_the_field_and_store_nothing(server, body, field):
     url, _ = server

@@ -110,11 +110,13 @@ def test_a_robustness_cell_reproduces_with_driftlab_episode(server):
     assert [c["settings"] for c in cells] == [
         {"plant.friction_scale": f, "plant.mass_scale": m} for f in (1.0, 1.2) for m in (0.95, 1.05)]
     assert study["n_done"] == study["n_cells"] == 4 and study["job_ids"] == []
-    for cell in cells:
+    for cell in cells[:2]:  # friction 1.0: run on each seed
         assert [s["seed"] for s in cell["seeds"]] == tuning_seeds(3, 2)
         assert cell["J"] == pytest.approx(sum(s["J"] for s in cell["seeds"]) / 2, abs=1e-12)
         assert (cell["status"] == "completed") == all(s["status"] == "completed" for s in cell["seeds"])
-    cell = cells[3]
+    for cell in cells[2:]:  # friction 1.2: the plant has no drift at the scenario's radius, nothing ran
+        assert cell["status"] == "not_drivable" and cell["J"] is None and cell["seeds"] == []
+    cell = cells[1]
     seed = cell["seeds"][1]
     out = subprocess.run([sys.executable, "-m", "driftlab.cli", "episode", "--theta",
                           ",".join(f"{k}={v!r}" for k, v in theta.items()), "--seed", str(seed["seed"]),
@@ -155,7 +157,9 @@ def test_pause_resume_and_delete_a_robustness_study(server):
     assert httpx.post(f"{url}/pause").status_code == 409
     assert httpx.post(f"{url}/resume").status_code == 200
     done = _wait_study(server, study["id"], {"finished"})
-    assert done["n_done"] == 12 and all(c["J"] is not None for c in done["cells"])
+    assert done["n_done"] == 12 and all(c["status"] != "pending" for c in done["cells"])
+    not_drivable = [c["settings"]["plant.friction_scale"] > 1.1 for c in done["cells"]]  # no drift at 44 m
+    assert [c["J"] is None for c in done["cells"]] == not_drivable
     assert httpx.post(f"{url}/resume").status_code == 409
     assert httpx.delete(url).status_code == 204
     assert httpx.get(url).status_code == 404
@@ -203,6 +207,7 @@ def test_pause_resume_and_delete_a_seeds_study_apply_to_its_jobs(server):
     ({"kind": "robustness", "theta": {"k": 0.05}, "grid": {"plant.mass_scale": [1.0]}, "robust_samples": 65},
      "robust_samples"),
     ({"kind": "sweep"}, "kind"),
+    ({"kind": "seeds", "seeds": [1], "spec": {**JOB_SPEC, "config": {"plant.friction_scale": 1.2}}}, "not drivable"),
 ])
 def test_bad_studies_are_a_422_naming_the_field_and_store_nothing(server, body, field):
     before = httpx.get(f"{server}/api/studies").json()

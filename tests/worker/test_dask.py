@@ -185,7 +185,7 @@ def test_rescore_runs_on_the_cluster_with_the_same_result_as_locally(cluster, tm
 
 def test_a_robustness_study_on_dask_stores_the_same_cells_as_the_local_pool(cluster, tmp_path):
     address, _ = cluster
-    args = ["study", "robustness", "--theta", "c_lr=0.021,k=0.06", "--grid", "plant.friction_scale=1.0,1.15",
+    args = ["study", "robustness", "--theta", "c_lr=0.021,k=0.06", "--grid", "plant.friction_scale=1.0,1.1",
             "--grid", "plant.mass_scale=0.95,1.05", "--robust-samples", "2", "--seed", "5", "--name", "grid"]
     results = []
     for db, extra in ((tmp_path / "dask.db", ["--dask", address]), (tmp_path / "local.db", ["--workers", "1"])):

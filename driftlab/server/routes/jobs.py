@@ -8,6 +8,7 @@ from typing import Annotated, Any
 from fastapi import APIRouter, Depends, HTTPException, Query, Request, Response
 from sqlalchemy.orm import Session, sessionmaker
 
+from driftlab.core.drivability import check_drivable
 from driftlab.core.tuning import TuningSpec
 from driftlab.db import lifecycle, storage
 from driftlab.server.routes.deps import factory, require_token, wake_runner
@@ -29,6 +30,7 @@ def create_job(body: JobCreate, db: Factory, request: Request) -> dict[str, Any]
     if "bounds" in doc:
         doc["bounds"] = {k: list(v) for k, v in doc["bounds"].items()}
     spec = TuningSpec.from_dict(doc)  # ConfigError -> 422 naming the field
+    check_drivable(spec.config)  # NotDrivableError (a ConfigError) -> 422 with the reason
     with storage.transaction(db) as session:
         if body.name and storage.find_job(session, name=body.name) is not None:
             raise HTTPException(409, f"name: a job named {body.name!r} exists")

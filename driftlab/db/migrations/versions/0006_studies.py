@@ -1,14 +1,14 @@
 """Studies: a seeds study links its jobs (jobs.study_id); a robustness study stores its grid's cells.
 
-Revision ID: 0005
-Revises: 0004
+Revision ID: 0006
+Revises: 0005
 """
 
 import sqlalchemy as sa
 from alembic import op
 
-revision = "0005"
-down_revision = "0004"
+revision = "0006"
+down_revision = "0005"
 branch_labels = None
 depends_on = None
 
@@ -47,4 +47,4 @@ def upgrade() -> None:
     with op.batch_alter_table("jobs") as batch:
         batch.add_column(sa.Column("study_id", sa.Integer))
     op.create_index("ix_jobs_study_id", "jobs", ["study_id"])
-    op.execute("UPDATE meta SET value = '5' WHERE key = 'schema_version'")
+    op.execute("UPDATE meta SET value = '6' WHERE key = 'schema_version'")

@@ -1,0 +1,57 @@
+"""Whether a configuration can drift the scenario at all, decided before any episode runs.
+
+A plant without a countersteer drift equilibrium at a circle's radius and the scenario's sideslip cannot hold
+the sustained drift whatever the controller does (e.g. the default plant with 15% more friction: its front
+tyre cannot make the countersteer force), so an episode on it is not a result about the controller. Such a
+configuration is refused with the reason instead of being run as a failed episode. The same holds for the
+controller's own model (it has nothing to linearize about).
+"""
+
+from __future__ import annotations
+
+from functools import lru_cache
+
+from driftlab.core.config import EpisodeConfig
+from driftlab.core.equilibrium import drift_equilibrium
+from driftlab.core.errors import ConfigError, NoEquilibriumError
+from driftlab.core.plant import PlantConfig
+from driftlab.core.vehicle import VehicleParams, pack_params
+
+
+class NotDrivableError(ConfigError):
+    """The plant or the controller's model has no drift equilibrium at the scenario's radius and sideslip."""
+
+
+def check_drivable(config: EpisodeConfig) -> None:
+    """Raises :class:`NotDrivableError` naming the circle, the radius, the sideslip and what lacks a drift."""
+    s = config.scenario
+    reason = _reason(config.vehicle, config.plant, s.left_radius_m, s.right_radius_m, s.sideslip_rad)
+    if reason is not None:
+        raise NotDrivableError(reason)
+
+
+def drivable_reason(config: EpisodeConfig) -> str | None:
+    """None when the configuration is drivable, else why not (the message of :func:`check_drivable`)."""
+    try:
+        check_drivable(config)
+    except NotDrivableError as exc:
+        return str(exc)
+    return None
+
+
+@lru_cache(maxsize=256)
+def _reason(vehicle: VehicleParams, plant: PlantConfig, left_radius_m: float, right_radius_m: float,
+            sideslip_rad: float) -> str | None:
+    # A right-hand drift mirrors a left-hand one (same V, delta, Fxr): one solve per radius is enough.
+    for label, params in (("the controller's model", pack_params(vehicle)),
+                          ("the plant", plant.packed_params(vehicle))):
+        for circle, radius in (("left", left_radius_m), ("right", right_radius_m)):
+            try:
+                drift_equilibrium(radius, -abs(sideslip_rad), params)
+            except NoEquilibriumError:
+                return (f"config is not drivable: {label} has no countersteer drift equilibrium on the {circle} circle "
+                        f"(scenario radius {radius:g} m, sideslip {abs(sideslip_rad):g} rad); change the plant "
+                        f"(e.g. plant.friction_scale, plant.tyre_c_scale, plant.cg_height_m) or the scenario")
+            if left_radius_m == right_radius_m:
+                break
+    return None

@@ -1,0 +1,90 @@
+"""Offset-free drift control: the disturbance estimate, its freezing around flicks, and a reference that moves
+to the plant's own drift (checked against the plant's equilibrium, solved independently)."""
+
+import numpy as np
+import pytest
+
+from driftlab.core.config import EpisodeConfig, Theta, apply_overrides
+from driftlab.core.controller import DriftController, build_controller_model
+from driftlab.core.episode import run_episode
+from driftlab.core.equilibrium import drift_equilibrium
+from driftlab.core.mpc import DisturbanceEstimator, MpcConfig
+from driftlab.core.planner import Phase
+from driftlab.core.vehicle import pack_params
+
+LIMIT = np.array([5.0, 2.0, 5.0])
+
+
+def test_estimate_starts_as_a_capped_running_mean_then_filters_at_the_gain():
+    dt = 0.05
+    est = DisturbanceEstimator(0.05, dt, LIMIT, start_gain=0.2)
+    measured = np.array([0.3, -0.1, 0.2])
+    expected = np.zeros(3)
+    for n in range(1, 40):
+        gain = max(0.05, min(0.2, 1.0 / n))
+        expected = expected + gain * (measured - expected)
+        np.testing.assert_allclose(est.update(measured * dt), expected, rtol=1e-12)
+    uncapped = DisturbanceEstimator(0.0001, dt, LIMIT, start_gain=1.0)
+    samples = [np.array([v, 0.0, -v]) for v in (0.1, 0.4, -0.2, 0.3)]
+    for n, sample in enumerate(samples, start=1):
+        value = uncapped.update(sample * dt)
+    np.testing.assert_allclose(value, np.mean(samples, axis=0), rtol=1e-12)  # n = 4 <= 1 / gain: the mean
+
+
+def test_estimate_is_held_through_a_flick_and_its_aftermath():
+    mpc = MpcConfig(disturbance_gain=0.1, estimator_hold_s=0.5)
+    config = EpisodeConfig(mpc=mpc)
+    s = config.scenario
+    model = build_controller_model(config.vehicle, mpc, s.left_radius_m, s.right_radius_m, s.sideslip_rad)
+    controller = DriftController(model, mpc, 0.0, 0.05, s.lookahead_m)
+    controller.freeze_estimate(False)
+    assert not controller.estimator.frozen
+    controller.freeze_estimate(True)  # the inertia phase
+    assert controller.estimator.frozen
+    held = [controller.freeze_estimate(False) or controller.estimator.frozen for _ in range(12)]
+    assert held == [True] * 9 + [False] * 3  # 0.5 s at 0.05 s: the first 9 steps after the flick, then free
+
+
+@pytest.mark.parametrize("friction", [0.9, 1.1])
+def test_reference_moves_to_the_plants_own_drift(friction):
+    """On the nominal car with other friction, the drift at R 44, beta 0.4 is slower or faster than the
+    model's: the reference speed settles at the plant's equilibrium in the first sustained drift, and the car
+    drives nearer the plant's drift than the model's (it trades some speed error for the path, not settled)."""
+    config = apply_overrides(EpisodeConfig.preset(plant="nominal"), {"plant.friction_scale": friction})
+    plant_eq = drift_equilibrium(44.0, -0.4, config.plant.packed_params(config.vehicle))
+    model_eq = drift_equilibrium(44.0, -0.4, pack_params(config.vehicle))
+    assert abs(plant_eq.speed_mps - model_eq.speed_mps) > 0.9  # a real shift, not a rounding
+    r = run_episode(Theta(), config)
+    assert r.status == "completed"
+    t, phase = r.column("t_s"), r.column("phase")
+    late_first_drift = (t > 4.0) & (phase == Phase.LEFT_DRIFT)
+    assert late_first_drift.sum() > 10
+    assert np.all(np.abs(r.column("V_ref_mps")[late_first_drift] - plant_eq.speed_mps) < 0.1)
+    shift = abs(plant_eq.speed_mps - model_eq.speed_mps)
+    assert np.all(np.abs(r.column("V_mps")[late_first_drift] - plant_eq.speed_mps) < 0.5 * shift)
+    assert np.all(np.abs(r.column("beta_rad")[late_first_drift] - plant_eq.sideslip_rad) < 0.02)
+
+
+def test_the_paper_controller_has_no_offset_free_parts():
+    paper = MpcConfig.paper()
+    assert paper.disturbance_gain == 0.0 and not paper.feedback_in_model and not paper.path_states
+
+
+def test_unequal_radii_drift_each_circle_at_its_own_equilibrium():
+    """The paper's future work: a 30 m left circle and a 44 m right one, each with its own reference drift."""
+    config = apply_overrides(EpisodeConfig.preset(plant="nominal"), {"scenario.left_radius_m": 30.0,
+                                                                       "scenario.right_radius_m": 44.0})
+    r = run_episode(Theta(), config)
+    assert r.status == "completed"
+    params = pack_params(config.vehicle)
+    t, phase = r.column("t_s"), r.column("phase")
+    x, y = r.column("x_m"), r.column("y_m")
+    for drift, radius, centre_y in ((Phase.LEFT_DRIFT, 30.0, 30.0), (Phase.RIGHT_DRIFT, 44.0, -44.0)):
+        eq = drift_equilibrium(radius, -0.4, params)
+        settled = phase == drift
+        settled &= t > t[settled][0] + 2.0  # past the flick's aftermath
+        assert np.all(np.abs(r.column("V_ref_mps")[settled] - eq.speed_mps) < 0.05)
+        assert np.all(np.abs(np.abs(r.column("r_ref_radps")[settled]) - eq.yaw_rate_radps) < 0.005)
+        off_path = np.abs(np.hypot(x[settled], y[settled] - centre_y) - radius)
+        assert np.all(off_path < 4.0)  # the switch between unequal circles leaves up to ~3.7 m ...
+        assert np.all(off_path[t[settled] > t[settled][-1] - 2.0] < 0.5)  # ... gone by the phase's end

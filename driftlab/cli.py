@@ -244,10 +244,23 @@ def _cmd_report(args: argparse.Namespace) -> int:
 
     if os.path.exists(args.out) and not os.path.isdir(args.out):
         raise ConfigError(f"--out {args.out}: is a file; give a folder (created if missing)")
+    if args.study:
+        from driftlab.study_report import write_study_report
+
+        print(json.dumps({"report": str(write_study_report(db_url=_db_url(args.db), name=args.study,
+                                                           out_dir=args.out))}))
+        return 0
     path = write_report(db_url=_db_url(args.db), name=args.name, out_dir=args.out, baseline_samples=args.baselines,
                         rescore_samples=args.rescore_samples, dask_address=_dask_address(args))
     print(json.dumps({"report": str(path)}))
     return 0
+
+
+def _cmd_study(args: argparse.Namespace) -> int:
+    from driftlab.study_command import cmd_study
+
+    dask = _dask_address(args) if hasattr(args, "dask") else None
+    return cmd_study(args, _tuning_spec, _db_url(args.db), dask)
 
 
 def _cmd_serve(args: argparse.Namespace) -> int:
@@ -294,6 +307,27 @@ def _db_url(db: str | None) -> str:
     return database_url(db)
 
 
+def _add_job_options(parser: argparse.ArgumentParser) -> None:
+    """The options of a tuning job's specification (shared by `tune` and `study seeds`), but its seed."""
+    parser.add_argument("--iterations", type=int, help="evaluations in total (default 500 for a new job); on a "
+                        "stored job a new budget: a finished job continues to it")
+    parser.add_argument("--seed-points", type=int, default=20)
+    parser.add_argument("--active-set", type=int, default=400)
+    parser.add_argument("--robust-samples", type=int, default=DEFAULT_ROBUST_SAMPLES, metavar="N",
+                        help=f"seeded episodes per evaluation, 1..{MAX_ROBUST_SAMPLES} (default "
+                             f"{DEFAULT_ROBUST_SAMPLES}): J is their mean and an evaluation completes only if all "
+                             "of them do")
+    parser.add_argument("--confirm-samples", type=int, default=DEFAULT_CONFIRM_SAMPLES, metavar="N",
+                        help=f"more seeds an evaluation must also complete before it counts as the best so far "
+                             f"(0..64, default {DEFAULT_CONFIRM_SAMPLES}; 0: off)")
+    parser.add_argument("--plant", choices=("default", "nominal"), default="default",
+                        help="the plant preset the --set overrides start from")
+    parser.add_argument("--controller", choices=("default", "paper"), default="default")
+    parser.add_argument("--set", action="append", metavar="KEY=VALUE",
+                        help="config override, e.g. plant.steer_lag_s=0.02")
+    parser.add_argument("--bound", action="append", metavar="NAME=LO:HI", help="theta bound, e.g. k=0:0.1")
+
+
 def build_parser() -> argparse.ArgumentParser:
     parser = _Parser(prog="driftlab", description="Learning-based inertia drift (Zhou et al. 2025).")
     sub = parser.add_subparsers(dest="command", required=True, parser_class=_Parser)
@@ -315,24 +349,10 @@ def build_parser() -> argparse.ArgumentParser:
     ep.add_argument("--plot", help="write the paper's figures to this PNG file")
     ep.set_defaults(func=_cmd_episode)
     tu = sub.add_parser("tune", help="run (or resume) a Bayesian-optimization tuning job headless")
-    tu.add_argument("--iterations", type=int, help="evaluations in total (default 500 for a new job); on a stored "
-                    "job a new budget: a finished job continues to it")
-    tu.add_argument("--seed-points", type=int, default=20)
-    tu.add_argument("--active-set", type=int, default=400)
+    _add_job_options(tu)
     tu.add_argument("--seed", type=int, default=0, help="optimizer seed; also picks the episode seeds")
-    tu.add_argument("--robust-samples", type=int, default=DEFAULT_ROBUST_SAMPLES, metavar="N",
-                    help=f"seeded episodes per evaluation, 1..{MAX_ROBUST_SAMPLES} (default {DEFAULT_ROBUST_SAMPLES}): "
-                         "J is their mean and an evaluation completes only if all of them do")
-    tu.add_argument("--confirm-samples", type=int, default=DEFAULT_CONFIRM_SAMPLES, metavar="N",
-                    help=f"more seeds an evaluation must also complete before it counts as the best so far "
-                         f"(0..64, default {DEFAULT_CONFIRM_SAMPLES}; 0: off)")
     tu.add_argument("--db", help=DB_HELP)
     tu.add_argument("--name", help="job name; an existing name resumes that job")
-    tu.add_argument("--plant", choices=("default", "nominal"), default="default",
-                    help="the plant preset the --set overrides start from")
-    tu.add_argument("--controller", choices=("default", "paper"), default="default")
-    tu.add_argument("--set", action="append", metavar="KEY=VALUE", help="config override, e.g. plant.steer_lag_s=0.02")
-    tu.add_argument("--bound", action="append", metavar="NAME=LO:HI", help="theta bound, e.g. k=0:0.1")
     tu.add_argument("--dask", metavar="ADDRESS", help=DASK_HELP)
     tu.add_argument("--workers", type=_int_in(1, 1024), metavar="N",
                     help="episodes in flight at once, 1..1024 (default: 1 locally, the cluster's threads with --dask)")
@@ -356,8 +376,14 @@ def build_parser() -> argparse.ArgumentParser:
                     help="episodes in flight, 1..1024 (default: 2 local processes, the cluster's threads with --dask)")
     rs.add_argument("--dask", metavar="ADDRESS", help=DASK_HELP)
     rs.set_defaults(func=_cmd_rescore)
-    rp = sub.add_parser("report", help="write the paper's results for a tuning job")
-    rp.add_argument("--name", required=True)
+    from driftlab.study_command import add_study_parser
+
+    st = add_study_parser(sub, DB_HELP, DASK_HELP, _int_in, _add_job_options)
+    st.set_defaults(func=_cmd_study, seed=0)
+    rp = sub.add_parser("report", help="write the paper's results for a tuning job, or a study's figures")
+    target = rp.add_mutually_exclusive_group(required=True)
+    target.add_argument("--name", help="a tuning job's name")
+    target.add_argument("--study", help="a study's name: its band plot (seeds) or heatmap (robustness)")
     rp.add_argument("--db", help=DB_HELP)
     rp.add_argument("--out", required=True, help="output directory")
     rp.add_argument("--baselines", type=_int_in(1, 100000), metavar="N",

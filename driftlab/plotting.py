@@ -10,6 +10,7 @@ import matplotlib
 matplotlib.use("Agg")
 import matplotlib.pyplot as plt  # noqa: E402
 import numpy as np  # noqa: E402
+from matplotlib.colors import ListedColormap  # noqa: E402
 
 from driftlab.core.episode import EpisodeResult  # noqa: E402
 from driftlab.core.track import FigureEight  # noqa: E402
@@ -69,6 +70,50 @@ def plot_convergence(values: np.ndarray, failed: np.ndarray, path: str | Path, t
     ax.set_ylabel("J")
     ax.set_title(title)
     ax.legend()
+    fig.tight_layout()
+    fig.savefig(path, dpi=110)
+    plt.close(fig)
+
+
+def plot_band(curves: list[list[float | None]], band: dict[str, list], labels: list[str], path: str | Path,
+              title: str = "") -> None:
+    """Best completed J so far of each job (thin lines), their median (thick) and interquartile band (shaded)."""
+    fig, ax = plt.subplots(figsize=(9, 4.5))
+    for curve, label in zip(curves, labels, strict=True):
+        values = np.array([np.nan if v is None else v for v in curve], dtype=float)
+        ax.plot(np.arange(len(values)), values, "-", lw=1.0, alpha=0.7, drawstyle="steps-post", label=label)
+    ax.fill_between(band["iterations"], band["q25"], band["q75"], color="tab:blue", alpha=0.25, step="post",
+                    label="25-75 % of seeds")
+    ax.plot(band["iterations"], band["median"], "-", color="k", lw=2, drawstyle="steps-post", label="median")
+    ax.set_xlabel("iteration")
+    ax.set_ylabel("best J so far (completed)")
+    ax.set_title(title)
+    ax.legend(fontsize=8)
+    fig.tight_layout()
+    fig.savefig(path, dpi=110)
+    plt.close(fig)
+
+
+def plot_heatmap(table, path: str | Path, title: str = "") -> None:
+    """A robustness study's J over its grid (a :class:`driftlab.core.study.GridTable`): completed cells coloured
+    by J, failed cells light red and labelled with how they failed, pending cells blank."""
+    values = np.array(table.J, dtype=float)
+    failed = np.array([[s not in ("completed", "pending") for s in row] for row in table.status])
+    fig, ax = plt.subplots(figsize=(max(5.0, 1.1 * values.shape[1] + 3), max(3.5, 0.6 * values.shape[0] + 2)))
+    shown = np.where(failed, np.nan, values)
+    finite = shown[np.isfinite(shown)]
+    image = ax.imshow(shown, cmap="viridis_r", aspect="auto",
+                      vmin=finite.min() if finite.size else None, vmax=finite.max() if finite.size else None)
+    ax.imshow(np.where(failed, 1.0, np.nan), cmap=ListedColormap(["#f4c7c3"]), aspect="auto")
+    for (r, c), bad in np.ndenumerate(failed):
+        text = table.status[r][c] if bad else ("" if np.isnan(values[r, c]) else f"{values[r, c]:.2f}")
+        ax.text(c, r, text, ha="center", va="center", fontsize=8, color="tab:red" if bad else "w")
+    ax.set_yticks(range(len(table.row_values)), [str(v) for v in table.row_values])
+    ax.set_ylabel(table.row_key)
+    ax.set_xticks(range(len(table.column_labels)), table.column_labels, rotation=30, ha="right", fontsize=8)
+    ax.set_xlabel(table.column_key)
+    fig.colorbar(image, ax=ax, label="J (completed cells; lower is better)")
+    ax.set_title(title, fontsize=9)
     fig.tight_layout()
     fig.savefig(path, dpi=110)
     plt.close(fig)

@@ -17,12 +17,12 @@ def free_port() -> int:
         return s.getsockname()[1]
 
 
-def start_server(db_path, port, env_extra=None):
+def start_server(db_path, port, env_extra=None, extra_args=()):
     env = {**os.environ, "OMP_NUM_THREADS": "1", **(env_extra or {})}
     # The server's log goes to a file: an undrained pipe would block the server once it fills.
     log = tempfile.NamedTemporaryFile(prefix="driftlab-serve-", suffix=".log", delete=False)
-    proc = subprocess.Popen([sys.executable, "-m", "driftlab.cli", "serve", "--port", str(port), "--db", str(db_path)],
-                            env=env, stdout=subprocess.DEVNULL, stderr=log)
+    proc = subprocess.Popen([sys.executable, "-m", "driftlab.cli", "serve", "--port", str(port), "--db", str(db_path),
+                             *extra_args], env=env, stdout=subprocess.DEVNULL, stderr=log)
     url = f"http://127.0.0.1:{port}"
     for _ in range(150):
         try:

@@ -1,4 +1,5 @@
-"""SQLAlchemy 2.x tables: jobs, their evaluations, and each evaluation's compressed trajectory. The schema
+"""SQLAlchemy 2.x tables: jobs, their evaluations, each evaluation's compressed trajectory, and studies (a
+seeds study's jobs point at it; a robustness study's cells are rows of their own). The schema
 changes only through a revision in driftlab/db/migrations (see driftlab.db.schema)."""
 
 from __future__ import annotations
@@ -34,6 +35,7 @@ class Job(Base):
     # The lease (driftlab.db.lifecycle): the runner that holds the job and its last heartbeat.
     runner_id: Mapped[str | None] = mapped_column(String(100), default=None)
     heartbeat_at: Mapped[datetime | None] = mapped_column(default=None)
+    study_id: Mapped[int | None] = mapped_column(Integer, default=None, index=True)  # a seeds study's job
 
     evaluations: Mapped[list[Evaluation]] = relationship(back_populates="job", order_by="Evaluation.index")
 
@@ -81,3 +83,44 @@ class Meta(Base):
 
     key: Mapped[str] = mapped_column(String(50), primary_key=True)
     value: Mapped[str] = mapped_column(String(200))
+
+
+class Study(Base):
+    """A seeds study (its jobs carry its id) or a robustness study (its cells below). A robustness study is run
+    like a job: queued, claimed with a lease, paused, resumed (driftlab.db.study_lifecycle)."""
+
+    __tablename__ = "studies"
+    __table_args__ = {"sqlite_autoincrement": True}
+
+    id: Mapped[int] = mapped_column(primary_key=True)
+    name: Mapped[str] = mapped_column(String(200), unique=True)
+    kind: Mapped[str] = mapped_column(String(20))  # "seeds" | "robustness"
+    spec: Mapped[dict[str, Any]] = mapped_column(JSON)  # SeedsStudySpec / RobustnessStudySpec .to_dict()
+    status: Mapped[str] = mapped_column(String(20), default="queued")  # robustness only; seeds: from its jobs
+    error: Mapped[str | None] = mapped_column(String(2000), default=None)
+    runner_id: Mapped[str | None] = mapped_column(String(100), default=None)
+    heartbeat_at: Mapped[datetime | None] = mapped_column(default=None)
+    created_at: Mapped[datetime] = mapped_column(default=utcnow)
+    updated_at: Mapped[datetime] = mapped_column(default=utcnow, onupdate=utcnow)
+
+    cells: Mapped[list[StudyCell]] = relationship(back_populates="study", order_by="StudyCell.index")
+
+
+class StudyCell(Base):
+    """One cell of a robustness study's grid: its settings and, once its episodes are back, its result."""
+
+    __tablename__ = "study_cells"
+    __table_args__ = (UniqueConstraint("study_id", "index"), {"sqlite_autoincrement": True})
+
+    id: Mapped[int] = mapped_column(primary_key=True)
+    study_id: Mapped[int] = mapped_column(ForeignKey("studies.id"), index=True)
+    index: Mapped[int] = mapped_column(Integer)  # position in the grid's cartesian product
+    settings: Mapped[dict[str, Any]] = mapped_column(JSON)  # {dotted config key: value}
+    status: Mapped[str] = mapped_column(String(20), default="pending")  # pending, or the aggregate's status
+    J: Mapped[float | None] = mapped_column(Float, default=None)  # mean over seeds, failed at their penalty
+    n_completed: Mapped[int | None] = mapped_column(Integer, default=None)
+    seeds: Mapped[list[dict[str, Any]] | None] = mapped_column(JSON, default=None)  # {seed, status, J, ...}
+    wall_ms: Mapped[float | None] = mapped_column(Float, default=None)
+    completed_at: Mapped[datetime | None] = mapped_column(default=None)
+
+    study: Mapped[Study] = relationship(back_populates="cells")

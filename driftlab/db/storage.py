@@ -54,8 +54,8 @@ def transaction(factory: sessionmaker[Session]) -> Iterator[Session]:
 
 
 # -- jobs --------------------------------------------------------------------------------------------------
-def create_job(session: Session, *, name: str, spec: dict[str, Any], seed: int) -> Job:
-    job = Job(name=name, spec=spec, seed=seed, status="queued")
+def create_job(session: Session, *, name: str, spec: dict[str, Any], seed: int, study_id: int | None = None) -> Job:
+    job = Job(name=name, spec=spec, seed=seed, status="queued", study_id=study_id)
     session.add(job)
     session.flush()
     return job

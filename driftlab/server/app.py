@@ -11,7 +11,7 @@ from fastapi.responses import JSONResponse
 
 from driftlab.core.errors import ConfigError
 from driftlab.db import storage
-from driftlab.server.routes import evaluations, jobs, pages
+from driftlab.server.routes import evaluations, jobs, pages, studies
 from driftlab.server.view import RecordingCache, add_view_routes
 from driftlab.settings import Settings
 from driftlab.web.dashboard import Dashboard
@@ -65,6 +65,7 @@ def create_app(db_url: str, *, workers: int | None = 2, start_worker: bool = Tru
     app.include_router(pages.router)
     app.include_router(jobs.router)
     app.include_router(evaluations.router)
+    app.include_router(studies.router)
     add_view_routes(app, lambda: app.state.dashboard.port if hasattr(app.state, "dashboard") else None,
                     app.state.recordings,
                     lambda: len(app.state.dashboard.sessions) if hasattr(app.state, "dashboard") else 0)
@@ -79,7 +80,7 @@ def create_app(db_url: str, *, workers: int | None = 2, start_worker: bool = Tru
     async def _config_error(_request: Request, exc: ConfigError):
         # The same shape as a schema error: ConfigError messages start with the field they are about.
         message = str(exc)
-        field = message.split(" ", 1)[0].strip("'\"")
+        field = message.split(" ", 1)[0].strip("'\":")
         return JSONResponse({"detail": message, "errors": [{"field": field, "message": message}]}, status_code=422)
 
     @app.exception_handler(storage.NotFound)

@@ -3,7 +3,7 @@ and their ranges come from the one table in :mod:`driftlab.core.limits`."""
 
 from __future__ import annotations
 
-from typing import Annotated, Any
+from typing import Annotated, Any, Literal
 
 from fastapi import Path, Query
 from pydantic import BaseModel, ConfigDict, Field
@@ -52,3 +52,28 @@ class JobPatch(BaseModel):
     model_config = ConfigDict(extra="forbid")
 
     iterations: int = _limited("iterations")
+
+
+StudyId = Annotated[int, Path(ge=1, le=MAX_ID, description="a study's id")]
+
+
+class StudyCreate(BaseModel):
+    """A seeds study (``seeds`` and a job ``spec``) or a robustness study (``theta`` or ``evaluation_id``, and
+    a ``grid`` of config values); driftlab.core.study validates the rest and names the field it refuses."""
+
+    model_config = ConfigDict(extra="forbid")
+
+    kind: Literal["seeds", "robustness"]
+    name: str | None = Field(default=None, min_length=1, max_length=200)
+    seeds: list[Annotated[int, Field(strict=True)]] | None = Field(
+        default=None, description="seeds study: one job per seed, distinct, 1 to 32 of them")
+    spec: dict[str, Any] | None = Field(default=None, description="seeds study: a job spec as POST /api/jobs takes")
+    theta: dict[str, float] | None = Field(default=None, description="robustness study: the theta scored")
+    evaluation_id: int | None = Field(default=None, ge=1, le=MAX_ID, strict=True,
+                                      description="robustness study: score this stored evaluation's theta, with "
+                                                  "its job's config, seed and robust_samples")
+    grid: dict[str, list[Any]] | None = Field(default=None, description="robustness study: config key -> values; "
+                                              "at most 400 cells in their cartesian product")
+    config: dict[str, Any] | None = Field(default=None, description="robustness study: the base config")
+    robust_samples: int | None = Field(default=None, ge=1, le=JOB_LIMITS["robust_samples"][1], strict=True)
+    seed: int | None = Field(default=None, ge=0, le=JOB_LIMITS["seed"][1], strict=True)

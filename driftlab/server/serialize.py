@@ -46,5 +46,5 @@ def job_dict(session, job: Job) -> dict[str, Any]:
             "iterations": iterations, "progress": n_done / iterations, "eta_s": eta, "error": job.error,
             "best": None if best is None else {"evaluation_id": best.id, "index": best.index, "theta": best.theta,
                                                "J": best.J, "status": best.status, "seeds": best.seeds},
-            "runner_id": job.runner_id, "spec": job.spec,
+            "runner_id": job.runner_id, "study_id": job.study_id, "spec": job.spec,
             "created_at": job.created_at.replace(tzinfo=UTC).isoformat()}

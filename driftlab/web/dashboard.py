@@ -1,5 +1,6 @@
 """The viser app behind ``/viser/``: one :class:`ClientSession` per browser tab, a poller that reads new
-evaluations from storage, and the what-if runner that sends single episodes to a worker process.
+evaluations (and studies, and what a tab compares) from storage, and the what-if runner that sends single
+episodes to a worker process.
 
 The dashboard draws what it is given: stored trajectories, or episodes a worker ran. It runs no physics.
 """
@@ -21,11 +22,19 @@ from driftlab.core.errors import ConfigError
 from driftlab.db import storage
 from driftlab.web.frames import EpisodeFrames
 from driftlab.web.session import ClientSession
-from driftlab.web.sources import JobHistory, frames_of_evaluation, frames_of_outcome
+from driftlab.web.sources import (
+    JobHistory,
+    frames_of_evaluation,
+    frames_of_outcome,
+    read_compare,
+    read_studies,
+    read_study,
+)
 from driftlab.web.viser_server import quiet_viser_server
 
 # run_episode(theta, config_doc) -> Future of an EpisodeOutcome (see driftlab.worker.executor).
 EpisodeRunner = Callable[[dict[str, float], dict[str, Any]], Future]
+COMPARE_EVERY_POLLS = 4  # studies and comparisons every 2 s at the default 0.5 s poll
 
 
 class WhatIfRunner:
@@ -89,6 +98,8 @@ class Dashboard:
         self.sessions: dict[int, ClientSession] = {}
         self._histories: dict[int, JobHistory] = {}
         self._jobs: list[tuple[int, str, str]] = []
+        self._studies: list[tuple[int, str, str, str]] = []
+        self._polls = 0
         self._frames_cache: OrderedDict[int, EpisodeFrames] = OrderedDict()
         self._lock = threading.RLock()
         self._stop = threading.Event()
@@ -130,12 +141,26 @@ class Dashboard:
                 self._frames_cache.popitem(last=False)
         return frames
 
+    def studies(self) -> list[tuple[int, str, str, str]]:
+        return read_studies(self.factory)
+
+    def study(self, study_id: int) -> dict[str, Any]:
+        return read_study(self.factory, study_id)
+
+    def compare(self, job_ids: list[int]) -> list[dict[str, Any]]:
+        return read_compare(self.factory, job_ids)
+
+    def request_what_if(self, session: ClientSession, theta: dict[str, float], config_doc: dict[str, Any],
+                        plant_overrides: dict[str, float]) -> None:
+        self.what_if.request(session, theta, config_doc, plant_overrides)
+
     # ----- clients -----------------------------------------------------------------------------------------
     def _on_connect(self, client: viser.ClientHandle) -> None:
         session = ClientSession(client, self)
         with self._lock:
             self.sessions[client.client_id] = session
         session.set_job_options(self._read_jobs())
+        session.set_study_options(self.studies())
 
     def _on_disconnect(self, client: viser.ClientHandle) -> None:
         with self._lock:
@@ -171,3 +196,17 @@ class Dashboard:
                 session.set_job_options(jobs)
             for history in changed:
                 session.on_history(history)
+        self._polls += 1
+        if self._polls % COMPARE_EVERY_POLLS == 0:
+            self._poll_studies(sessions)
+
+    def _poll_studies(self, sessions: list[ClientSession]) -> None:
+        """The study list, and each shown comparison read again (every few polls: it reads whole jobs)."""
+        studies = self.studies()
+        with self._lock:
+            studies_changed = studies != self._studies
+            self._studies = studies
+        for session in sessions:
+            if studies_changed:
+                session.set_study_options(studies)
+            session.compare.refresh()

@@ -1,4 +1,4 @@
-"""Plays stored episodes onto a scene: the car (and a ghost car), trail, trigger markers, tracked circle.
+"""Plays stored episodes onto a scene: the car (and ghost cars), trail, trigger markers, tracked circle.
 
 The player owns no clock: callers move it with :meth:`EpisodePlayer.seek` (a live view's 30 Hz loop, or a
 recording's fixed steps), so live viewing and recording draw identically.
@@ -12,7 +12,11 @@ from driftlab.core.track import FigureEight
 from driftlab.web.frames import EpisodeFrames
 from driftlab.web.scene import CarModel, Trail, TriggerMarkers, draw_track
 
+CAR_COLOR = (220, 40, 40)
 GHOST_COLOR = (60, 150, 255)
+# Further ghost cars (the compare mode plays several jobs' best episodes together), in order.
+MORE_GHOST_COLORS = ((40, 170, 90), (150, 80, 200), (230, 150, 30), (20, 160, 160), (200, 60, 120),
+                     (120, 120, 120), (110, 70, 30))
 
 
 class EpisodePlayer:
@@ -21,7 +25,7 @@ class EpisodePlayer:
         self.track = track or FigureEight()
         self._highlights = draw_track(scene, self.track)
         self._tracked: int | None = None
-        self.car = CarModel(scene, "car")
+        self.car = CarModel(scene, "car", color=CAR_COLOR)
         self.ghost = CarModel(scene, "ghost", color=GHOST_COLOR, opacity=0.45)
         self.ghost.visible = False
         self.trail = Trail(scene, "trail")
@@ -29,6 +33,8 @@ class EpisodePlayer:
         self.markers = TriggerMarkers(scene)
         self.frames: EpisodeFrames | None = None
         self.ghost_frames: EpisodeFrames | None = None
+        self.more_ghosts: list[tuple[CarModel, Trail]] = []  # created on first use
+        self.more_ghost_frames: list[EpisodeFrames] = []
         self.t_s = 0.0
 
     def set_track(self, track: FigureEight) -> None:
@@ -39,22 +45,34 @@ class EpisodePlayer:
 
     @property
     def duration_s(self) -> float:
-        spans = [f.duration_s for f in (self.frames, self.ghost_frames) if f is not None]
+        spans = [f.duration_s for f in (self.frames, self.ghost_frames, *self.more_ghost_frames) if f is not None]
         return max(spans, default=0.0)
 
     @property
     def finished(self) -> bool:
         return self.frames is not None and self.t_s >= self.duration_s
 
-    def load(self, frames: EpisodeFrames, ghost: EpisodeFrames | None = None) -> None:
-        """Start ``frames`` (and a ghost episode beside it, or none) from t = 0."""
+    def load(self, frames: EpisodeFrames, ghost: EpisodeFrames | None = None,
+             more_ghosts: tuple[EpisodeFrames, ...] = ()) -> None:
+        """Start ``frames`` (and a ghost episode beside it, or none, and up to 7 more ghosts) from t = 0."""
         self.frames, self.ghost_frames = frames, ghost
         self.trail.clear()
         self.ghost_trail.clear()
         self.markers.clear()
         self.ghost.visible = ghost is not None and ghost.n_frames > 0
         self.car.visible = True
+        self._set_more_ghosts(list(more_ghosts[: len(MORE_GHOST_COLORS)]))
         self.seek(0.0)
+
+    def _set_more_ghosts(self, frames: list[EpisodeFrames]) -> None:
+        while len(self.more_ghosts) < len(frames):
+            n = len(self.more_ghosts)
+            car = CarModel(self.scene, f"ghost{n + 2}", color=MORE_GHOST_COLORS[n], opacity=0.45)
+            self.more_ghosts.append((car, Trail(self.scene, f"ghost{n + 2}_trail", thickness_m=0.25)))
+        self.more_ghost_frames = frames
+        for n, (car, trail) in enumerate(self.more_ghosts):
+            trail.clear()
+            car.visible = n < len(frames) and frames[n].n_frames > 0
 
     def unload(self) -> None:
         """Show no episode: trail and markers cleared, the car parked out of sight."""
@@ -64,6 +82,7 @@ class EpisodePlayer:
         self.markers.clear()
         self.ghost.visible = False
         self.car.visible = False
+        self._set_more_ghosts([])
         self.t_s = 0.0
 
     def show_caption(self, text: str) -> None:
@@ -83,6 +102,11 @@ class EpisodePlayer:
             g = self.ghost_frames.index_at(self.t_s)
             self.ghost.set_pose(*self.ghost_frames.pose_at(g))
             self.ghost_trail.advance(self.ghost_frames, g, force=self.t_s >= self.ghost_frames.duration_s)
+        for (car, trail), frames in zip(self.more_ghosts, self.more_ghost_frames, strict=False):
+            if frames.n_frames > 0:
+                g = frames.index_at(self.t_s)
+                car.set_pose(*frames.pose_at(g))
+                trail.advance(frames, g, force=self.t_s >= frames.duration_s)
 
     def _highlight(self, direction: int) -> None:
         if direction != self._tracked:  # send only on change: one message per phase switch

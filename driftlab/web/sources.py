@@ -9,8 +9,9 @@ from typing import Any
 import numpy as np
 from sqlalchemy.orm import Session, sessionmaker
 
+from driftlab import studies as study_views
 from driftlab.core.track import FigureEight
-from driftlab.db import storage
+from driftlab.db import storage, studies
 from driftlab.db.models import Evaluation
 from driftlab.web.frames import EpisodeFrames
 
@@ -90,3 +91,21 @@ class JobHistory:
         top = np.nanmax(j_done) if ok.any() else 0.0
         failed = np.where(ok, np.nan, top)
         return index, j_done, best, failed
+
+
+def read_studies(factory: sessionmaker[Session]) -> list[tuple[int, str, str, str]]:
+    """(id, name, kind, status) of every study, oldest first."""
+    with storage.transaction(factory) as session:
+        return [(s.id, s.name, s.kind, studies.study_status(session, s)) for s in studies.list_studies(session)]
+
+
+def read_study(factory: sessionmaker[Session], study_id: int) -> dict[str, Any]:
+    """A study as GET /api/studies/{id} shows it (raises storage.NotFound)."""
+    with storage.transaction(factory) as session:
+        return study_views.study_summary(session, studies.get_study(session, study_id=study_id))
+
+
+def read_compare(factory: sessionmaker[Session], job_ids: list[int]) -> list[dict[str, Any]]:
+    """Each job's best, n_done and convergence, as GET /api/compare shows them (raises storage.NotFound)."""
+    with storage.transaction(factory) as session:
+        return study_views.compare_jobs(session, job_ids=job_ids)

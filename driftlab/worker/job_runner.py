@@ -1,5 +1,5 @@
 """The server's background job runner: one thread that takes the next claimable job (queued, or held by a
-dead runner) and runs it; its episodes run in worker processes.
+dead runner) and runs it, or else the next claimable robustness study; their episodes run on the executor.
 
 Exactly one runner runs a job at a time (the lease in driftlab.db.lifecycle): a `driftlab tune` on the same
 job is refused while this one holds it, and a job this server held when it died is taken over by the next
@@ -13,10 +13,11 @@ import threading
 from sqlalchemy import select
 from sqlalchemy.orm import Session, sessionmaker
 
-from driftlab.db import lifecycle, storage
-from driftlab.db.models import Job
+from driftlab.db import lifecycle, storage, studies
+from driftlab.db.models import Job, Study
 from driftlab.worker.executor import EpisodeExecutor, open_executor
 from driftlab.worker.job_loop import EXECUTOR_LOST, claim_job, run_job
+from driftlab.worker.study_runner import run_study
 
 
 class JobRunner:
@@ -32,6 +33,7 @@ class JobRunner:
         self._thread: threading.Thread | None = None
         self._executor: EpisodeExecutor | None = None
         self.current_job_id: int | None = None
+        self.current_study_id: int | None = None
 
     def start(self) -> None:
         # Below the what-if worker and the web server in priority: a slider must not wait behind a job.
@@ -58,6 +60,9 @@ class JobRunner:
             for job in session.scalars(select(Job).where(Job.status == lifecycle.JobStatus.PAUSED,
                                                          Job.error.startswith(EXECUTOR_LOST))):
                 lifecycle.requeue(session, job_id=job.id)
+            for study in session.scalars(select(Study).where(Study.status == lifecycle.JobStatus.PAUSED,
+                                                             Study.error.startswith(EXECUTOR_LOST))):
+                studies.resume_study(session, study_id=study.id)
 
     def _claim_next(self) -> int | None:
         self._requeue_jobs_waiting_for_the_cluster()
@@ -71,9 +76,31 @@ class JobRunner:
             return None
         return job_id
 
+    def _claim_next_study(self) -> int | None:
+        with storage.transaction(self.factory) as session:
+            study_id = studies.next_claimable_study(session)
+            if study_id is None or not studies.claim_study(session, study_id=study_id, runner=self.runner_id):
+                return None
+        return study_id
+
+    def _run_next_study(self) -> bool:
+        """Runs the next claimable robustness study, if any (after the jobs: a study waits for the queue)."""
+        study_id = self._claim_next_study()
+        if study_id is None:
+            return False
+        self.current_study_id = study_id
+        try:
+            run_study(self.factory, study_id, self._executor, runner=self.runner_id, workers=self.workers,
+                      should_stop=self._stop.is_set)
+        finally:
+            self.current_study_id = None
+        return True
+
     def _loop(self) -> None:
         while not self._stop.is_set():
             job_id = self._claim_next()
+            if job_id is None and self._run_next_study():
+                continue
             if job_id is None:
                 self._wake.wait(self.poll_s)
                 self._wake.clear()

@@ -77,7 +77,7 @@ def test_schema_1_database_upgrades_and_its_results_still_reproduce(tmp_path):
     with storage.transaction(factory) as session:
         job = session.get(Job, 1)
         evaluation = session.get(Evaluation, 1)
-        assert session.get(Meta, "schema_version").value == "5"
+        assert session.get(Meta, "schema_version").value == "6"
         spec = TuningSpec.from_dict(job.spec)
         assert spec.robust_samples == 1 and spec.confirm_samples == 0 and not spec.config.plant.varies
         assert not spec.config.mpc.feedback_in_model and spec.config.mpc.estimator_hold_s == 0.0  # pinned by 0005
@@ -93,7 +93,7 @@ def test_schema_1_database_upgrades_and_its_results_still_reproduce(tmp_path):
 
 def test_a_new_database_is_created_at_the_head_revision(tmp_path):
     factory = storage.open_database(f"sqlite:///{tmp_path / 'new.db'}")
-    assert schema.current_revision(storage.engine_of(factory)) == schema.head_revision() == "0005"
+    assert schema.current_revision(storage.engine_of(factory)) == schema.head_revision() == "0006"
     with storage.transaction(factory) as session:
         job = storage.create_job(session, name="fresh", spec=TuningSpec().to_dict(), seed=0)
         assert job.runner_id is None and job.heartbeat_at is None
@@ -111,3 +111,36 @@ def test_a_deleted_jobs_id_is_never_reused(tmp_path):
     with storage.transaction(factory) as session:
         third = storage.create_job(session, name="c", spec=TuningSpec().to_dict(), seed=0).id
     assert first < second < third
+
+
+def test_revision_0006_adds_studies_to_a_database_with_jobs(tmp_path):
+    """A 0005 database with a job upgrades: the job keeps its id and gets no study; studies and cells store."""
+    from sqlalchemy import create_engine, inspect
+
+    from driftlab.db import studies
+    from driftlab.db.models import Job as JobRow
+
+    url = f"sqlite:///{tmp_path / 'v5.db'}"
+    engine = create_engine(url)
+    with engine.connect() as connection, connection.begin():
+        config = schema._config(connection)
+        from alembic import command
+
+        command.upgrade(config, "0005")
+        connection.exec_driver_sql(
+            "INSERT INTO jobs (id, name, spec, seed, status, created_at, updated_at) "
+            "VALUES (7, 'old', '{}', 0, 'finished', '2026-11-01', '2026-11-01')")
+    assert "studies" not in inspect(engine).get_table_names()
+    factory = storage.open_database(url)
+    assert {"studies", "study_cells"} <= set(inspect(storage.engine_of(factory)).get_table_names())
+    with storage.transaction(factory) as session:
+        assert session.get(JobRow, 7).study_id is None
+        study = studies.create_study(session, name="s", kind="robustness", spec={})
+        studies.add_cells(session, study_id=study.id, cells=[{"plant.mass_scale": 1.0}, {"plant.mass_scale": 1.1}])
+        job = storage.create_job(session, name="member", spec={}, seed=1, study_id=study.id)
+        assert job.id == 8
+    with storage.transaction(factory) as session:
+        assert [c.settings for c in studies.cells(session, study_id=study.id)] == [{"plant.mass_scale": 1.0},
+                                                                                  {"plant.mass_scale": 1.1}]
+        assert [j.name for j in studies.study_jobs(session, study_id=study.id)] == ["member"]
+        assert session.get(Meta, "schema_version").value == "6"

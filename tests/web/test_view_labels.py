@@ -9,9 +9,9 @@ import zstandard
 from driftlab.core.episode import COLUMNS
 from driftlab.core.track import FigureEight
 from driftlab.web.frames import EpisodeFrames
+from driftlab.web.plots import padded_range
 from driftlab.web.recording import EpisodeRecorder
 from driftlab.web.scene import TRIGGER_LABEL_Z_M, trigger_label_position
-from driftlab.web.session import padded_range
 
 THETA = {"c_lr": 0.021456711687249243, "c_rl": 0.02115249732809388, "dV": 0.027863441262698907, "k": 0.0}
 

@@ -181,3 +181,19 @@ def test_rescore_runs_on_the_cluster_with_the_same_result_as_locally(cluster, tm
     assert on_dask.returncode == 0 and local.returncode == 0, on_dask.stderr + local.stderr
     a, b = json.loads(on_dask.stdout), json.loads(local.stdout)
     assert a["J_mean"] == b["J_mean"] and a["seeds"] == b["seeds"]  # pure episodes: the executor does not matter
+
+
+def test_a_robustness_study_on_dask_stores_the_same_cells_as_the_local_pool(cluster, tmp_path):
+    address, _ = cluster
+    args = ["study", "robustness", "--theta", "c_lr=0.021,k=0.06", "--grid", "plant.friction_scale=1.0,1.1",
+            "--grid", "plant.mass_scale=0.95,1.05", "--robust-samples", "2", "--seed", "5", "--name", "grid"]
+    results = []
+    for db, extra in ((tmp_path / "dask.db", ["--dask", address]), (tmp_path / "local.db", ["--workers", "1"])):
+        run = subprocess.run([sys.executable, "-m", "driftlab.cli", *args, "--db", str(db), *extra], env=ENV,
+                             capture_output=True, text=True, timeout=300)
+        assert run.returncode == 0, run.stderr
+        results.append(json.loads(run.stdout))
+    on_dask, local = results
+    assert on_dask["status"] == local["status"] == "finished"
+    assert [(c["settings"], c["status"], c["J"]) for c in on_dask["cells"]] == [
+        (c["settings"], c["status"], c["J"]) for c in local["cells"]]

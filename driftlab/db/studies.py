@@ -1,0 +1,188 @@
+"""Studies in storage (keyword-only, no HTTP): create, read, and their lifecycle.
+
+A seeds study is a set of ordinary jobs carrying its id; its status is theirs (see :func:`study_status`), and
+pause, resume and delete apply to each of them through the jobs' own lifecycle.
+
+A robustness study owns its cells and is run like a job: queued -> running (one runner holds a lease: runner id
+and heartbeat, as jobs do, see driftlab.db.lifecycle) -> finished | paused | failed; paused | failed -> queued.
+Each cell is stored as soon as its episodes are back.
+"""
+
+from __future__ import annotations
+
+from datetime import datetime, timedelta
+from typing import Any
+
+from sqlalchemy import delete, or_, select, update
+from sqlalchemy.orm import Session
+
+from driftlab.db import lifecycle, storage
+from driftlab.db.lifecycle import JobStatus, TransitionError
+from driftlab.db.models import Job, Study, StudyCell, utcnow
+
+PENDING = "pending"
+NOT_DRIVABLE = "not_drivable"  # a cell whose plant has no drift at the scenario's radius: not run
+
+
+def create_study(session: Session, *, name: str, kind: str, spec: dict[str, Any], status: str = JobStatus.QUEUED
+                 ) -> Study:
+    study = Study(name=name, kind=kind, spec=spec, status=status)
+    session.add(study)
+    session.flush()
+    return study
+
+
+def add_cells(session: Session, *, study_id: int, cells: list[dict[str, Any]]) -> None:
+    session.add_all(StudyCell(study_id=study_id, index=i, settings=s, status=PENDING) for i, s in enumerate(cells))
+    session.flush()
+
+
+def get_study(session: Session, *, study_id: int) -> Study:
+    study = session.get(Study, study_id)
+    if study is None:
+        raise storage.NotFound(f"no study with id {study_id}")
+    return study
+
+
+def find_study(session: Session, *, name: str) -> Study | None:
+    return session.scalar(select(Study).where(Study.name == name))
+
+
+def get_study_by_name(session: Session, *, name: str) -> Study:
+    study = find_study(session, name=name)
+    if study is None:
+        raise storage.NotFound(f"no study named {name!r}")
+    return study
+
+
+def unique_study_name(session: Session, base: str) -> str:
+    name, n = base, 1
+    while find_study(session, name=name) is not None:
+        n += 1
+        name = f"{base}-{n}"
+    return name
+
+
+def list_studies(session: Session) -> list[Study]:
+    return list(session.scalars(select(Study).order_by(Study.id)))
+
+
+def study_jobs(session: Session, *, study_id: int) -> list[Job]:
+    return list(session.scalars(select(Job).where(Job.study_id == study_id).order_by(Job.id)))
+
+
+def cells(session: Session, *, study_id: int) -> list[StudyCell]:
+    return list(session.scalars(select(StudyCell).where(StudyCell.study_id == study_id).order_by(StudyCell.index)))
+
+
+def store_cell(session: Session, *, cell_id: int, status: str, J: float | None, n_completed: int,
+               seeds: list[dict[str, Any]], wall_ms: float) -> StudyCell:
+    cell = session.get(StudyCell, cell_id)
+    cell.status, cell.J, cell.n_completed, cell.seeds, cell.wall_ms = status, J, n_completed, seeds, wall_ms
+    cell.completed_at = utcnow()
+    return cell
+
+
+def study_status(session: Session, study: Study) -> str:
+    """A robustness study's own status; a seeds study's from its jobs: running if any runs, else queued if
+    any waits, else paused, failed, or finished when all are."""
+    if study.kind != "seeds":
+        return study.status
+    statuses = {j.status for j in study_jobs(session, study_id=study.id)}
+    for status in (JobStatus.RUNNING, JobStatus.QUEUED, JobStatus.PAUSED, JobStatus.FAILED):
+        if status in statuses:
+            return str(status)
+    return str(JobStatus.FINISHED)
+
+
+# -- lifecycle ---------------------------------------------------------------------------------------------
+def _lease_is_stale(now: datetime):
+    stale_before = (now.replace(tzinfo=None) - timedelta(seconds=lifecycle.LEASE_TIMEOUT_S))
+    return or_(Study.heartbeat_at.is_(None), Study.heartbeat_at < stale_before)
+
+
+def _lease_is_live(study: Study) -> bool:
+    if study.status != JobStatus.RUNNING or study.runner_id is None or study.heartbeat_at is None:
+        return False
+    age_s = (utcnow().replace(tzinfo=None) - study.heartbeat_at.replace(tzinfo=None)).total_seconds()
+    return age_s <= lifecycle.LEASE_TIMEOUT_S
+
+
+def next_claimable_study(session: Session) -> int | None:
+    """The oldest queued robustness study, or one whose runner died."""
+    stale = (Study.status == JobStatus.RUNNING) & _lease_is_stale(utcnow())
+    query = (select(Study.id).where(Study.kind == "robustness", or_(Study.status == JobStatus.QUEUED, stale))
+             .order_by(Study.id).limit(1))
+    return session.scalar(query)
+
+
+def claim_study(session: Session, *, study_id: int, runner: str) -> bool:
+    """Take the study's lease (from queued, or from a dead runner); False if another runner was quicker."""
+    now = utcnow()
+    claimable = or_(Study.status == JobStatus.QUEUED, (Study.status == JobStatus.RUNNING) & _lease_is_stale(now))
+    result = session.execute(update(Study).where(Study.id == study_id, Study.kind == "robustness", claimable)
+                             .values(status=JobStatus.RUNNING, runner_id=runner, heartbeat_at=now.replace(tzinfo=None),
+                                     error=None).execution_options(synchronize_session=False))
+    return result.rowcount == 1
+
+
+def heartbeat_study(session: Session, *, study_id: int, runner: str) -> bool:
+    """Renew the lease; False when the runner no longer holds it (paused, deleted or taken over): stop."""
+    result = session.execute(update(Study).where(Study.id == study_id, Study.runner_id == runner,
+                                                 Study.status == JobStatus.RUNNING)
+                             .values(heartbeat_at=utcnow().replace(tzinfo=None))
+                             .execution_options(synchronize_session=False))
+    return result.rowcount == 1
+
+
+def release_study(session: Session, *, study_id: int, runner: str, status: str, error: str | None = None) -> None:
+    """The runner stops: the study takes ``status`` unless a pause request changed it meanwhile."""
+    session.execute(update(Study).where(Study.id == study_id, Study.runner_id == runner,
+                                        Study.status == JobStatus.RUNNING)
+                    .values(status=status, error=error).execution_options(synchronize_session=False))
+    session.execute(update(Study).where(Study.id == study_id, Study.runner_id == runner)
+                    .values(runner_id=None, heartbeat_at=None).execution_options(synchronize_session=False))
+
+
+def pause_study(session: Session, *, study_id: int) -> Study:
+    """Pauses a robustness study, or each queued or running job of a seeds study (TransitionError if none)."""
+    study = get_study(session, study_id=study_id)
+    if study.kind == "seeds":
+        jobs = [j for j in study_jobs(session, study_id=study_id) if j.status in (JobStatus.QUEUED, JobStatus.RUNNING)]
+        if not jobs:
+            raise TransitionError(f"study {study_id} has no queued or running job to pause")
+        for job in jobs:
+            lifecycle.request_pause(session, job_id=job.id)
+        return study
+    if study.status not in (JobStatus.QUEUED, JobStatus.RUNNING):
+        raise TransitionError(f"study {study_id} is {study.status}; pause needs queued or running")
+    study.status = JobStatus.PAUSED
+    return study
+
+
+def resume_study(session: Session, *, study_id: int) -> Study:
+    """Queues a paused or failed robustness study, or each paused or failed job of a seeds study."""
+    study = get_study(session, study_id=study_id)
+    if study.kind == "seeds":
+        jobs = [j for j in study_jobs(session, study_id=study_id) if j.status in (JobStatus.PAUSED, JobStatus.FAILED)]
+        if not jobs:
+            raise TransitionError(f"study {study_id} has no paused or failed job to resume")
+        for job in jobs:
+            lifecycle.requeue(session, job_id=job.id)
+        return study
+    if study.status not in (JobStatus.PAUSED, JobStatus.FAILED):
+        raise TransitionError(f"study {study_id} is {study.status}; resume needs paused or failed")
+    study.status, study.error = JobStatus.QUEUED, None
+    return study
+
+
+def delete_study(session: Session, *, study_id: int) -> None:
+    """The study with its cells or its jobs (and their evaluations); TransitionError while any of it runs."""
+    study = get_study(session, study_id=study_id)
+    jobs = study_jobs(session, study_id=study_id)
+    if _lease_is_live(study) or any(lifecycle.lease_is_live(j) for j in jobs):
+        raise TransitionError(f"study {study_id} is running; pause it first")
+    for job in jobs:
+        lifecycle.delete_job(session, job_id=job.id)
+    session.execute(delete(StudyCell).where(StudyCell.study_id == study_id))
+    session.execute(delete(Study).where(Study.id == study_id))

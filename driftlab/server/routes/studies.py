@@ -1,0 +1,95 @@
+"""Studies: create, list, read, pause, resume, delete; and the comparison of jobs side by side."""
+
+from __future__ import annotations
+
+from typing import Annotated, Any
+
+from fastapi import APIRouter, Depends, HTTPException, Query, Request, Response
+from sqlalchemy.orm import Session, sessionmaker
+
+from driftlab import studies as study_views
+from driftlab.db import lifecycle, storage, studies
+from driftlab.server.routes.deps import factory, require_token, wake_runner
+from driftlab.server.schemas import StudyCreate, StudyId
+
+router = APIRouter(tags=["studies"])
+Factory = Annotated[sessionmaker[Session], Depends(factory)]
+Mutating = [Depends(require_token)]
+
+
+@router.post("/api/studies", status_code=201, dependencies=Mutating)
+def create_study(body: StudyCreate, db: Factory, request: Request) -> dict[str, Any]:
+    """ConfigError -> 422 naming the field; an unknown evaluation_id -> 404; nothing is stored on error."""
+    doc = body.model_dump(exclude_none=True, exclude={"name"})
+    with storage.transaction(db) as session:
+        if body.name and studies.find_study(session, name=body.name) is not None:
+            raise HTTPException(409, f"name: a study named {body.name!r} exists")
+        study = study_views.start_study(session, doc=doc, name=body.name)
+        out = study_views.study_summary(session, study)
+    wake_runner(request)
+    return out
+
+
+@router.get("/api/studies")
+def list_studies(db: Factory) -> list[dict[str, Any]]:
+    with storage.transaction(db) as session:
+        return [{"id": s.id, "name": s.name, "kind": s.kind, "status": studies.study_status(session, s)}
+                for s in studies.list_studies(session)]
+
+
+@router.get("/api/studies/{study_id}")
+def get_study(study_id: StudyId, db: Factory) -> dict[str, Any]:
+    with storage.transaction(db) as session:
+        return study_views.study_summary(session, studies.get_study(session, study_id=study_id))
+
+
+@router.post("/api/studies/{study_id}/pause", dependencies=Mutating)
+def pause(study_id: StudyId, db: Factory) -> dict[str, Any]:
+    """409 unless something of it is queued or running."""
+    try:
+        with storage.transaction(db) as session:
+            return study_views.study_summary(session, studies.pause_study(session, study_id=study_id))
+    except lifecycle.TransitionError as exc:
+        raise HTTPException(409, str(exc)) from None
+
+
+@router.post("/api/studies/{study_id}/resume", dependencies=Mutating)
+def resume(study_id: StudyId, db: Factory, request: Request) -> dict[str, Any]:
+    """409 unless something of it is paused or failed."""
+    try:
+        with storage.transaction(db) as session:
+            out = study_views.study_summary(session, studies.resume_study(session, study_id=study_id))
+    except lifecycle.TransitionError as exc:
+        raise HTTPException(409, str(exc)) from None
+    wake_runner(request)
+    return out
+
+
+@router.delete("/api/studies/{study_id}", status_code=204, dependencies=Mutating)
+def delete(study_id: StudyId, db: Factory) -> Response:
+    """The study with its cells, or its jobs and their evaluations; 409 while any of it runs."""
+    try:
+        with storage.transaction(db) as session:
+            studies.delete_study(session, study_id=study_id)
+    except lifecycle.TransitionError as exc:
+        raise HTTPException(409, str(exc)) from None
+    return Response(status_code=204)
+
+
+def _job_ids(jobs: str) -> list[int]:
+    try:
+        ids = [int(part) for part in jobs.split(",") if part.strip()]
+    except ValueError:
+        raise HTTPException(422, f"jobs: comma-separated job ids, got {jobs!r}") from None
+    if not ids or len(ids) > study_views.MAX_COMPARED_JOBS or any(i < 1 for i in ids):
+        raise HTTPException(422, f"jobs: 1 to {study_views.MAX_COMPARED_JOBS} job ids >= 1, got {jobs!r}")
+    return ids
+
+
+@router.get("/api/compare")
+def compare(db: Factory, jobs: str = Query(..., max_length=400, description="job ids, e.g. 1,2,3")
+            ) -> list[dict[str, Any]]:
+    """For each job, in the order given: its best (theta, J), n_done and convergence (J and best so far)."""
+    ids = _job_ids(jobs)
+    with storage.transaction(db) as session:
+        return study_views.compare_jobs(session, job_ids=ids)

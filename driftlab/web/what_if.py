@@ -1,0 +1,91 @@
+"""A tab's what-if panel: sliders for theta (within the job's bounds) and the main plant mismatch settings;
+moving one asks for that episode (the dashboard's what-if runner runs it in a worker) and reports its result.
+"""
+
+from __future__ import annotations
+
+import time
+from collections.abc import Callable
+from typing import Any
+
+import numpy as np
+import viser
+
+from driftlab.core.tuning import DEFAULT_BOUNDS
+from driftlab.web.frames import EpisodeFrames
+from driftlab.web.sources import JobHistory
+
+# What-if plant sliders: (config key, label, min, max, step).
+PLANT_SLIDERS = (("plant.friction_scale", "mu scale", 0.8, 1.3, 0.01),
+                 ("plant.tyre_c_scale", "tyre C scale", 0.8, 1.4, 0.01),
+                 ("plant.steer_lag_s", "steer lag [s]", 0.0, 0.1, 0.005),
+                 ("plant.cg_height_m", "CG height [m]", 0.0, 0.8, 0.05))
+
+# request(theta, config_doc, plant overrides): run that episode, answer through WhatIfPanel.show_result.
+WhatIfRequest = Callable[[dict[str, float], dict[str, Any], dict[str, float]], None]
+
+
+class WhatIfPanel:
+    def __init__(self, gui: viser.GuiApi, client: viser.ClientHandle, request: WhatIfRequest) -> None:
+        self.client = client
+        self.request = request
+        self.history: JobHistory | None = None
+        self.theta_bounds: dict[str, tuple[float, float]] = dict(DEFAULT_BOUNDS)
+        self._requested_at: float | None = None
+        self.last_latency_s: float | None = None
+        with gui.add_folder("What-if", expand_by_default=False):
+            gui.add_markdown("Move a slider: that one episode runs in a worker and plays at once, with the "
+                             "job's best episode as the blue ghost car.")
+            self.theta_sliders = {k: gui.add_slider(k, lo, hi, (hi - lo) / 200.0, 0.5 * (lo + hi))
+                                  for k, (lo, hi) in DEFAULT_BOUNDS.items()}
+            self.plant_sliders = {key: gui.add_slider(label, lo, hi, step, lo)
+                                  for key, label, lo, hi, step in PLANT_SLIDERS}
+            self.text = gui.add_markdown("")
+            self.gui_reset = gui.add_button("Reset to the best theta and the job's plant")
+        for slider in (*self.theta_sliders.values(), *self.plant_sliders.values()):
+            slider.on_update(self._on_slider)
+
+    def select_job(self, history: JobHistory) -> None:
+        self.history = history
+        self.theta_bounds = {k: tuple(v) for k, v in history.spec.get("bounds", DEFAULT_BOUNDS).items()}
+
+    def reset_sliders(self, best: EpisodeFrames | None, run: bool = True) -> None:
+        """Theta at the job's best (or the bounds' middle), the plant at the job's own."""
+        if self.history is None:
+            return
+        theta = best.theta if best is not None else {k: 0.5 * (lo + hi) for k, (lo, hi) in DEFAULT_BOUNDS.items()}
+        plant = self.history.spec.get("config", {}).get("plant", {})
+        with self.client.atomic():
+            for key, slider in self.theta_sliders.items():
+                lo, hi = self.theta_bounds.get(key, DEFAULT_BOUNDS[key])
+                slider.min, slider.max, slider.step = lo, hi, (hi - lo) / 200.0
+                slider.value = float(np.clip(theta[key], lo, hi))
+            for key, slider in self.plant_sliders.items():
+                value = plant.get(key.split(".", 1)[1], slider.value)
+                slider.value = float(np.clip(value, slider.min, slider.max))
+        if run:
+            self.ask()
+
+    def _on_slider(self, event: viser.GuiEvent) -> None:
+        if event.client is not None:
+            self.ask()
+
+    def ask(self) -> None:
+        if self.history is None:
+            return
+        theta = {k: float(s.value) for k, s in self.theta_sliders.items()}
+        overrides = {k: float(s.value) for k, s in self.plant_sliders.items()}
+        self._requested_at = time.perf_counter()
+        self.text.content = "running..."
+        self.request(theta, self.history.spec.get("config", {}), overrides)
+
+    def show_error(self, error: str) -> None:
+        self.text.content = f"**error**: {error}"
+
+    def show_result(self, frames: EpisodeFrames, worker_ms: float) -> None:
+        """Called once the episode plays: its status, J and how long after the slider it started."""
+        latency = ""
+        if self._requested_at is not None:  # the first frame of the new episode is queued by now
+            self.last_latency_s = time.perf_counter() - self._requested_at
+            latency = f", first frame **{1000 * self.last_latency_s:.0f} ms** after the slider"
+        self.text.content = f"{frames.status}, J {frames.J:.3f}; episode {worker_ms:.0f} ms in the worker{latency}"

@@ -1,0 +1,114 @@
+"""Runs a robustness study: its theta on every pending cell of the grid, one episode per seed on the executor
+(the local pool or Dask, as a job's episodes), each cell stored as soon as its episodes are back; a cell whose
+plant cannot drift the scenario is stored as not drivable without running.
+
+The runner holds the study's lease (driftlab.db.studies) as a job's runner holds the job's: a pause request,
+a delete or a takeover ends the lease, and the runner stops after the episodes in flight. A study that was
+interrupted continues with the cells still pending.
+"""
+
+from __future__ import annotations
+
+import time
+from collections.abc import Callable
+from concurrent.futures import FIRST_COMPLETED, Future, wait
+from dataclasses import dataclass, field
+from typing import Any
+
+from sqlalchemy.orm import Session, sessionmaker
+
+from driftlab.core.drivability import drivable_reason
+from driftlab.core.robust import aggregate
+from driftlab.core.study import RobustnessStudySpec
+from driftlab.db import lifecycle, storage, studies
+from driftlab.db.lifecycle import JobStatus
+from driftlab.db.models import Study
+from driftlab.worker.executor import EpisodeExecutor, EpisodeOutcome
+from driftlab.worker.job_loop import EXECUTOR_LOST, is_executor_lost
+
+
+@dataclass
+class _PendingCell:
+    cell_id: int
+    config_doc: dict[str, Any]
+    seeds: list[int]
+    outcomes: dict[int, EpisodeOutcome] = field(default_factory=dict)
+
+    @property
+    def done(self) -> bool:
+        return len(self.outcomes) == len(self.seeds)
+
+
+def _store_cell(factory: sessionmaker[Session], study_id: int, runner: str, cell: _PendingCell) -> bool:
+    """Commits the cell if this runner still holds the study (False: stop)."""
+    samples = [cell.outcomes[s].sample() for s in cell.seeds]
+    score = aggregate(samples)
+    with storage.transaction(factory) as session:
+        if not studies.heartbeat_study(session, study_id=study_id, runner=runner):
+            return False
+        studies.store_cell(session, cell_id=cell.cell_id, status=score.status, J=score.J,
+                           n_completed=score.n_completed, seeds=[s.as_dict() for s in samples],
+                           wall_ms=sum(o.wall_ms for o in cell.outcomes.values()))
+    return True
+
+
+def _store_not_drivable(factory: sessionmaker[Session], study_id: int, runner: str, cell_ids: list[int]) -> None:
+    """Cells whose plant has no drift at the scenario's radius and sideslip: stored as such, never run (an
+    episode there says nothing about the controller, driftlab.core.drivability)."""
+    if not cell_ids:
+        return
+    with storage.transaction(factory) as session:
+        if not studies.heartbeat_study(session, study_id=study_id, runner=runner):
+            return
+        for cell_id in cell_ids:
+            studies.store_cell(session, cell_id=cell_id, status=studies.NOT_DRIVABLE, J=None, n_completed=0,
+                               seeds=[], wall_ms=0.0)
+
+
+def run_study(factory: sessionmaker[Session], study_id: int, executor: EpisodeExecutor, *, runner: str,
+              workers: int = 1, should_stop: Callable[[], bool] = lambda: False) -> str:
+    """Runs a study whose lease ``runner`` holds (:func:`driftlab.db.studies.claim_study`) until every cell is
+    stored, it is paused, or ``should_stop()`` (back to the queue). Returns the status it leaves it in."""
+    with storage.transaction(factory) as session:
+        study = studies.get_study(session, study_id=study_id)
+        spec = RobustnessStudySpec.from_dict(study.spec)
+        todo = [(c.id, c.settings) for c in studies.cells(session, study_id=study_id) if c.status == studies.PENDING]
+    seeds = spec.episode_seeds
+    queue = [_PendingCell(cell_id, spec.cell_config(settings), seeds) for cell_id, settings in todo
+             if drivable_reason(spec.cell_episode_config(settings)) is None]
+    _store_not_drivable(factory, study_id, runner, [cell_id for cell_id, _ in todo
+                                                    if cell_id not in {c.cell_id for c in queue}])
+    episodes: dict[Future[EpisodeOutcome], _PendingCell] = {}
+    held, shutting_down, last_beat = True, False, time.monotonic()
+    try:
+        while queue or episodes:
+            if time.monotonic() - last_beat >= lifecycle.HEARTBEAT_S:
+                with storage.transaction(factory) as session:
+                    held = studies.heartbeat_study(session, study_id=study_id, runner=runner)
+                last_beat = time.monotonic()
+            shutting_down = shutting_down or should_stop()
+            while held and not shutting_down and queue and len(episodes) < workers:
+                cell = queue.pop(0)
+                for seed in seeds:
+                    episodes[executor.submit(spec.theta, cell.config_doc, seed)] = cell
+            if not episodes:
+                break
+            finished, _ = wait(list(episodes), timeout=lifecycle.HEARTBEAT_S, return_when=FIRST_COMPLETED)
+            for future in finished:
+                outcome = future.result()
+                cell = episodes.pop(future)
+                cell.outcomes[outcome.seed] = outcome
+                if cell.done and held:
+                    held = _store_cell(factory, study_id, runner, cell)
+    except Exception as exc:
+        lost = is_executor_lost(exc)
+        status = JobStatus.PAUSED if lost else JobStatus.FAILED
+        error = f"{EXECUTOR_LOST}: {type(exc).__name__}: {exc}" if lost else f"{type(exc).__name__}: {exc}"
+        with storage.transaction(factory) as session:
+            studies.release_study(session, study_id=study_id, runner=runner, status=status, error=error[:2000])
+        return status
+    status = JobStatus.FINISHED if not queue and held else JobStatus.QUEUED if shutting_down else JobStatus.PAUSED
+    with storage.transaction(factory) as session:
+        studies.release_study(session, study_id=study_id, runner=runner, status=status)
+        study = session.get(Study, study_id)
+        return study.status if study is not None else status

@@ -1,0 +1,70 @@
+"""A robustness study's lease, on a real SQLite file: one runner at a time, a dead runner's study taken over,
+a pause seen at the next heartbeat, and a seeds study's status and lifecycle read from its jobs."""
+
+from datetime import timedelta
+
+import pytest
+
+from driftlab.core.tuning import TuningSpec
+from driftlab.db import lifecycle, storage, studies
+from driftlab.db.models import Study, utcnow
+
+
+@pytest.fixture
+def factory(tmp_path):
+    return storage.open_database(f"sqlite:///{tmp_path / 'studies.db'}")
+
+
+def _robustness(factory):
+    with storage.transaction(factory) as session:
+        study = studies.create_study(session, name="grid", kind="robustness", spec={})
+        studies.add_cells(session, study_id=study.id, cells=[{"plant.mass_scale": 1.0}])
+        return study.id
+
+
+def test_one_runner_holds_a_study_and_a_dead_runners_study_is_taken_over(factory):
+    study_id = _robustness(factory)
+    with storage.transaction(factory) as session:
+        assert studies.next_claimable_study(session) == study_id
+        assert studies.claim_study(session, study_id=study_id, runner="a")
+    with storage.transaction(factory) as session:
+        assert not studies.claim_study(session, study_id=study_id, runner="b")  # a's lease is live
+        assert studies.next_claimable_study(session) is None
+        with pytest.raises(lifecycle.TransitionError, match="running"):
+            studies.delete_study(session, study_id=study_id)
+    with storage.transaction(factory) as session:  # a dies: its heartbeat gets old
+        session.get(Study, study_id).heartbeat_at = (utcnow() - timedelta(seconds=60)).replace(tzinfo=None)
+    with storage.transaction(factory) as session:
+        assert studies.next_claimable_study(session) == study_id
+        assert studies.claim_study(session, study_id=study_id, runner="b")
+    with storage.transaction(factory) as session:
+        assert not studies.heartbeat_study(session, study_id=study_id, runner="a")
+        studies.release_study(session, study_id=study_id, runner="a", status="finished")  # too late: no effect
+        assert session.get(Study, study_id).runner_id == "b"
+        studies.pause_study(session, study_id=study_id)
+    with storage.transaction(factory) as session:
+        assert not studies.heartbeat_study(session, study_id=study_id, runner="b")  # b stops
+        studies.release_study(session, study_id=study_id, runner="b", status="finished")
+        study = session.get(Study, study_id)
+        assert study.status == "paused" and study.runner_id is None
+
+
+def test_a_seeds_studys_status_and_lifecycle_are_its_jobs(factory):
+    with storage.transaction(factory) as session:
+        study = studies.create_study(session, name="s", kind="seeds", spec={}, status="jobs")
+        ids = [storage.create_job(session, name=f"s-{seed}", spec=TuningSpec().to_dict(), seed=seed,
+                                  study_id=study.id).id for seed in (0, 1)]
+        assert studies.study_status(session, study) == "queued"
+        studies.pause_study(session, study_id=study.id)
+        assert studies.study_status(session, study) == "paused"
+        storage.set_job_status(session, job_id=ids[0], status="finished")
+        studies.resume_study(session, study_id=study.id)
+        assert [storage.get_job(session, job_id=i).status for i in ids] == ["finished", "queued"]
+        with pytest.raises(lifecycle.TransitionError, match="no paused or failed job"):
+            studies.resume_study(session, study_id=study.id)
+        storage.set_job_status(session, job_id=ids[1], status="finished")
+        assert studies.study_status(session, study) == "finished"
+    with storage.transaction(factory) as session:
+        studies.delete_study(session, study_id=study.id)
+    with storage.transaction(factory) as session:
+        assert storage.list_jobs(session) == [] and studies.list_studies(session) == []

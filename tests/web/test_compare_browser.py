@@ -1,0 +1,118 @@
+"""The compare mode and the robustness heatmap in a real headless Chromium against a real server process
+(one job worker) and SQLite file; screenshots go to a temporary folder (and to DRIFTLAB_SCREENSHOTS if set)."""
+
+import io
+import os
+
+import httpx
+import numpy as np
+import pytest
+from matplotlib import image as mpimg
+from playwright.sync_api import sync_playwright
+
+from tests.server_process import free_port, start_server
+from tests.web.test_view_browser import CHROMIUM, CHROMIUM_ARGS, SCREENSHOT_DIR, ConsoleLog
+
+JOB_SPEC = {"iterations": 6, "seed_points": 6, "robust_samples": 1, "confirm_samples": 0}
+GRID = {"plant.friction_scale": [0.9, 1.0, 1.1, 1.2], "plant.mass_scale": [0.9, 1.0, 1.1]}
+
+
+def _wait_study(url, study_id, timeout_s=180):
+    import time
+
+    deadline = time.time() + timeout_s
+    while time.time() < deadline:
+        study = httpx.get(f"{url}/api/studies/{study_id}").json()
+        if study["status"] == "finished":
+            return study
+        time.sleep(0.3)
+    raise AssertionError(f"study {study_id} did not finish: {study['status']}")
+
+
+@pytest.fixture(scope="module")
+def server(tmp_path_factory):
+    db = tmp_path_factory.mktemp("compare") / "driftlab.db"
+    proc, url = start_server(db, free_port(), extra_args=("--workers", "1"))
+    seeds = httpx.post(f"{url}/api/studies", json={"kind": "seeds", "name": "three", "seeds": [0, 1, 2],
+                                                   "spec": JOB_SPEC}).json()
+    grid = httpx.post(f"{url}/api/studies", json={"kind": "robustness", "name": "grip", "theta": {"k": 0.05},
+                                                  "grid": GRID}).json()
+    yield url, _wait_study(url, seeds["id"]), _wait_study(url, grid["id"])
+    proc.terminate()
+    proc.wait(timeout=30)
+
+
+@pytest.fixture(scope="module")
+def browser():
+    if not os.path.exists(CHROMIUM):
+        pytest.fail(f"no chromium at {CHROMIUM}: install Debian's package or set DRIFTLAB_CHROMIUM")
+    with sync_playwright() as p:
+        b = p.chromium.launch(executable_path=CHROMIUM, args=CHROMIUM_ARGS, headless=True)
+        yield b
+        b.close()
+
+
+def _save(png, name, tmp_path):
+    for folder in filter(None, (str(tmp_path), SCREENSHOT_DIR)):
+        os.makedirs(folder, exist_ok=True)
+        with open(os.path.join(folder, name), "wb") as f:
+            f.write(png)
+    return mpimg.imread(io.BytesIO(png))[..., :3]
+
+
+def _open_compare(browser, url, study_label):
+    page = browser.new_page(viewport={"width": 1400, "height": 1300})
+    log = ConsoleLog(page)
+    page.goto(f"{url}/viser/")
+    log.wait_for("Connected!")
+    page.get_by_text("Compare", exact=True).click()
+    page.get_by_role("combobox", name="Study").click()  # viser's dropdown: a select box, then its options
+    page.get_by_role("option", name=study_label).click()
+    page.get_by_role("button", name="Show comparison").click()
+    return page
+
+
+def test_compare_mode_overlays_a_seeds_study_and_plays_its_best_episodes_together(server, browser, tmp_path):
+    url, seeds, _ = server
+    page = _open_compare(browser, url, f"{seeds['id']} · three · seeds · finished")
+    summary = page.get_by_text("three (seeds, finished); final best J from")
+    summary.wait_for(timeout=30_000)
+    final = seeds["final_best_J"]
+    assert f"from {min(final):.3f} to {max(final):.3f}, median {np.median(final):.3f}" in summary.inner_text()
+    for job_id in seeds["job_ids"]:  # one row per job, its best J as the API has it
+        job = httpx.get(f"{url}/api/jobs/{job_id}").json()
+        page.get_by_text(f"{job['name']} (id {job_id})").first.wait_for(timeout=10_000)
+    plot = page.locator(".uplot", has=page.get_by_text("Compare: best J so far (completed)"))
+    plot.wait_for(timeout=10_000)
+    page.get_by_role("button", name="Play best episodes together").click()
+    page.get_by_text("Compare (best episodes together)").wait_for(timeout=30_000)
+    for n, name in enumerate(("red car", "blue ghost", "green ghost")):
+        page.get_by_text(f"{name}: three-seed{n}").wait_for(timeout=10_000)
+    page.wait_for_timeout(2500)  # the cars drive for a moment
+    pixels = _save(page.screenshot(), "compare.png", tmp_path)
+    scene = pixels[:, : int(pixels.shape[1] * 0.6)]
+    assert scene.std() > 0.05, "the 3D view looks blank"
+    plot_pixels = mpimg.imread(io.BytesIO(plot.screenshot()))[..., :3]
+    assert plot_pixels.std() > 0.05, "the comparison plot looks blank"
+    # The shaded 25-75 % band: light blue pixels (blue above red and green).
+    bluish = (plot_pixels[..., 2] > plot_pixels[..., 0] + 0.05) & (plot_pixels[..., 2] > 0.8)
+    assert bluish.mean() > 0.005, "no shaded band in the comparison plot"
+    page.close()
+
+
+def test_the_heatmap_shows_each_cell_as_stored(server, browser, tmp_path):
+    url, _, grid = server
+    page = _open_compare(browser, url, f"{grid['id']} · grip · robustness · finished")
+    page.get_by_text("grip (robustness, finished): 12 of 12 cells run").wait_for(timeout=30_000)
+    table = page.locator("table", has=page.get_by_text("plant.friction_scale"))
+    table.wait_for(timeout=10_000)
+    rows = table.locator("tr").all()[2:]  # below the column key's row and the column values' row
+    shown = [[td.inner_text() for td in row.locator("td").all()] for row in rows]
+    expected = [c["J"] if c["status"] == "completed" else c["status"] for c in grid["cells"]]
+    expected = [f"{v:.3f}" if isinstance(v, float) else v for v in expected]
+    assert [text for row in shown for text in row] == expected
+    assert [row.locator("th").inner_text() for row in rows] == [str(v) for v in GRID["plant.friction_scale"]]
+    pixels = _save(page.screenshot(), "heatmap.png", tmp_path)
+    table_pixels = mpimg.imread(io.BytesIO(table.screenshot()))[..., :3]
+    assert table_pixels.std() > 0.05 and pixels.std() > 0.05, "the heatmap looks blank"
+    page.close()

@@ -67,8 +67,11 @@ def _open_study(factory, args: argparse.Namespace, tuning_spec) -> int:
         if study is None:
             study = study_views.start_study(session, doc=study_doc(args, tuning_spec), name=args.name)
             sys.stderr.write(f"study {study.name} (id {study.id}): {study.kind}\n")
+        elif study.kind != args.kind:
+            raise ConfigError(f"--name {args.name}: a {study.kind} study of that name exists; choose another name")
         else:
-            sys.stderr.write(f"resuming study {study.name} (id {study.id})\n")
+            sys.stderr.write(f"resuming study {study.name} (id {study.id}) with its stored settings (arguments "
+                             f"given now that differ are not applied; a new --name starts a new study)\n")
         return study.id
 
 

@@ -35,6 +35,10 @@ def test_a_seeds_study_runs_continues_by_name_and_reports_its_band(tmp_path):
     assert sorted(out["final_best_J"]) == sorted(c[-1] for c in curves if c[-1] is not None)
     again = _run(*args)
     assert "resuming study pair" in again.stderr and json.loads(again.stdout)["job_ids"] == out["job_ids"]
+    assert "stored settings" in again.stderr  # a re-run says its new arguments are not applied
+    other_kind = _run("study", "robustness", "--theta", "c_lr=0.02", "--grid", "plant.mass_scale=1.0", "--db", db,
+                      "--name", "pair")
+    assert other_kind.returncode == 2 and "seeds study of that name exists" in other_kind.stderr
     shown = _run("study", "show", "--name", "pair", "--db", db, "--every", "1")
     assert json.loads(shown.stdout)["band"] == out["band"]
     report = _run("report", "--study", "pair", "--db", db, "--out", str(tmp_path / "rep"))

@@ -6,50 +6,35 @@ and its J is a penalty worse than any completed run's (see :func:`failure_penalt
 
 from __future__ import annotations
 
-import math
 import time
 from dataclasses import dataclass, field
 
 import numpy as np
 
+from driftlab.core.closed_loop import (
+    COL,
+    COLUMNS,
+    DONE,
+    I_DIRECTION,
+    I_EVENTS,
+    I_ROWS,
+    I_STATUS,
+    STATUSES,
+    LoopSettings,
+    finish_step,
+    new_loop_state,
+    run_until_constrained,
+)
 from driftlab.core.config import EpisodeConfig, Theta
-from driftlab.core.controller import DriftController, build_controller_model
+from driftlab.core.controller import build_controller_model
 from driftlab.core.errors import ConfigError, NoEquilibriumError
 from driftlab.core.metrics import EpisodeMetrics, compute_metrics
-from driftlab.core.planner import InertiaDriftPlanner, Phase, Triggers
-from driftlab.core.plant import (
-    DRIVE,
-    HEADING,
-    N_PLANT_STATES,
-    SIDESLIP,
-    SPEED,
-    STEER,
-    X_POS,
-    Y_POS,
-    YAW_RATE,
-    Plant,
-)
-from driftlab.core.track import FigureEight, track_errors, wrap_angle
-from driftlab.core.variation import (
-    MAX_SEED,
-    NOISE_HEADING,
-    NOISE_SIDESLIP,
-    NOISE_SPEED,
-    NOISE_X,
-    NOISE_Y,
-    NOISE_YAW_RATE,
-    draw_variation,
-)
+from driftlab.core.planner import Phase, initial_plan_state
+from driftlab.core.plant import DRIVE, HEADING, N_PLANT_STATES, SIDESLIP, SPEED, STEER, X_POS, Y_POS, YAW_RATE, Plant
+from driftlab.core.track import LEFT, RIGHT, FigureEight, wrap_angle
+from driftlab.core.variation import MAX_SEED, draw_variation
 
-STATUSES = ("completed", "spun_out", "left_track", "stalled", "gripped_up", "solver_failed", "diverged")
-
-# Trajectory columns recorded at the controller rate, with units.
-COLUMNS = (
-    "t_s", "x_m", "y_m", "psi_rad", "V_mps", "beta_rad", "r_radps", "delta_cmd_rad", "delta_rad", "delta_mpc_rad",
-    "Fxr_cmd_n", "Fxr_n", "e_m", "dpsi_rad", "c", "phase", "V_ref_mps", "beta_ref_rad", "r_ref_radps",
-    "delta_ref_rad", "Fxr_ref_n", "osqp",
-)
-COL = {name: i for i, name in enumerate(COLUMNS)}
+__all__ = ["COL", "COLUMNS", "STATUSES", "EpisodeResult", "failure_penalty", "run_episode"]
 
 
 @dataclass
@@ -76,34 +61,6 @@ class EpisodeResult:
         """The JSON object `driftlab episode` prints."""
         return {"status": self.status, "J": self.J, "theta": self.theta.as_dict(), "seed": self.seed,
                 **self.metrics.as_dict(), "wall_ms": round(self.wall_ms, 2)}
-
-
-class _FailureMonitor:
-    """Applies :class:`FailureLimits` each step; returns a failure status or None."""
-
-    def __init__(self, config: EpisodeConfig) -> None:
-        self.limits = config.failure
-        self.last_trigger_s = 0.0
-        self.gripup_since: float | None = None
-
-    def check(self, t_s: float, s: np.ndarray, lateral_error_m: float, beta_ref_rad: float) -> str | None:
-        lim = self.limits
-        if not np.all(np.isfinite(s)) or not math.isfinite(lateral_error_m):
-            return "diverged"
-        if abs(s[SIDESLIP]) > lim.max_sideslip_rad or abs(s[YAW_RATE]) > lim.max_yaw_rate_radps:
-            return "spun_out"
-        if abs(lateral_error_m) > lim.max_lateral_error_m:
-            return "left_track"
-        if s[SPEED] < lim.min_speed_mps:
-            return "stalled"
-        drifting = s[SIDESLIP] * beta_ref_rad > 0.0 and abs(s[SIDESLIP]) >= lim.gripup_sideslip_rad
-        if drifting or t_s - self.last_trigger_s < lim.gripup_grace_s:
-            self.gripup_since = None
-        elif self.gripup_since is None:
-            self.gripup_since = t_s
-        elif t_s - self.gripup_since > lim.gripup_time_s:
-            return "gripped_up"
-        return None
 
 
 def initial_plant_state(config: EpisodeConfig, track: FigureEight, speed_mps: float, sideslip_rad: float,
@@ -147,66 +104,28 @@ def run_episode(theta: Theta, config: EpisodeConfig, *, seed: int = 0) -> Episod
     dt = config.mpc.dt_s
     n_steps = int(round(scenario.max_time_s / dt))
     variation = draw_variation(config.plant, seed, n_steps + 1)
-    noise = variation.noise
     plant = Plant(variation.plant, config.vehicle)
-    controller = DriftController(model, config.mpc, theta.dV, theta.k, scenario.lookahead_m)
-    planner = InertiaDriftPlanner(Triggers(theta.c_lr, theta.c_rl), scenario.settle_tolerance_rad)
-    monitor = _FailureMonitor(config)
     start = model.left
     offset = variation.start_offset
     state = initial_plant_state(config, track, start.speed_mps + theta.dV + offset[0], start.sideslip_rad + offset[1],
                                 start.yaw_rate_radps + offset[2], start.steer_rad, start.drive_force_n)
-    rows = np.zeros((n_steps + 1, len(COLUMNS)))
-    status = "completed"
-    n_rows = 0
-    for step in range(n_steps + 1):
-        t = step * dt
-        # What the sensors report (the planner and the controller see this; J and the failure rules the truth).
-        sensed = _measured(state, noise[step]) if variation.noisy else state
-        circle = track.circle(planner.phase.direction)
-        seen = track_errors(circle, sensed[X_POS], sensed[Y_POS], sensed[HEADING] + sensed[SIDESLIP])
-        ref = controller.reference(planner.phase.direction)
-        phase = planner.update(t, sensed[X_POS], sensed[Y_POS], seen.trigger_fraction, sensed[SIDESLIP] - ref[1])
-        if phase != Phase.FINISHED and phase.direction != circle.direction:
-            circle = track.circle(phase.direction)
-            seen = track_errors(circle, sensed[X_POS], sensed[Y_POS], sensed[HEADING] + sensed[SIDESLIP])
-            ref = controller.reference(phase.direction)
-            monitor.last_trigger_s = t
-        errors = track_errors(circle, state[X_POS], state[Y_POS], state[HEADING] + state[SIDESLIP]) \
-            if variation.noisy else seen
-        row = rows[n_rows]
-        row[COL["t_s"]] = t
-        row[COL["x_m"]], row[COL["y_m"]], row[COL["psi_rad"]] = state[X_POS], state[Y_POS], state[HEADING]
-        row[COL["V_mps"]], row[COL["beta_rad"]], row[COL["r_radps"]] = state[SPEED], state[SIDESLIP], state[YAW_RATE]
-        row[COL["delta_rad"]], row[COL["Fxr_n"]] = state[STEER], state[DRIVE]
-        row[COL["e_m"]], row[COL["dpsi_rad"]], row[COL["c"]] = errors.lateral_error_m, errors.course_error_rad, \
-            errors.trigger_fraction
-        row[COL["phase"]] = phase
-        row[COL["V_ref_mps"]], row[COL["beta_ref_rad"]], row[COL["r_ref_radps"]] = ref[0], ref[1], ref[2]
-        row[COL["delta_ref_rad"]], row[COL["Fxr_ref_n"]] = ref[3], ref[4] * 1e3
-        n_rows += 1
-        failure = monitor.check(t, state, errors.lateral_error_m, ref[1])
-        if failure is not None:
-            status = failure
+    settings = _loop_settings(config, theta, track, n_steps, variation.noisy)
+    loop = new_loop_state(state, initial_plan_state(), start.inputs, n_steps, len(model.left_qp.step_limit))
+    # OSQP runs here, between stretches of the compiled loop; its warm start lives and dies with the episode.
+    sessions = {LEFT: model.left_qp.session(), RIGHT: model.right_qp.session()}
+    qa_left, qa_right = model.left_qp.arrays, model.right_qp.arrays
+    args = (plant.params, plant.actuators)
+    while run_until_constrained(settings, loop, qa_left, qa_right, model.params, *args, variation.noise) != DONE:
+        direction = int(loop.ints[I_DIRECTION])
+        du, ok = sessions[direction].solve_constrained(loop.qp_q, loop.qp_lower, loop.qp_upper)
+        finish_step(settings, loop, qa_left if direction == LEFT else qa_right, *args, du, ok, True)
+        if loop.ints[I_STATUS] >= 0:
             break
-        if phase == Phase.FINISHED:
-            break
-        controller.freeze_estimate(not phase.is_sustained)
-        measured = np.array([sensed[SPEED], sensed[SIDESLIP], sensed[YAW_RATE]])
-        actuators = np.array([state[STEER], state[DRIVE]])
-        steer, drive, solution = controller.step(measured, actuators, phase.direction, seen.lateral_error_m,
-                                                 seen.course_error_rad)
-        row[COL["delta_cmd_rad"]], row[COL["delta_mpc_rad"]], row[COL["Fxr_cmd_n"]] = steer, solution.steer_rad, drive
-        row[COL["osqp"]] = 1.0 if solution.used_osqp else 0.0
-        if not solution.ok:
-            status = "solver_failed"
-            break
-        state = plant.step(state, steer, drive, dt)
-    else:
-        status = "stalled"  # out of time before finishing the 8
-    trajectory = rows[:n_rows]
-    triggers = [{"t_s": e.time_s, "x_m": e.x_m, "y_m": e.y_m, "phase": int(e.phase)}
-                for e in planner.trigger_events]
+    status = STATUSES[int(loop.ints[I_STATUS])]
+    trajectory = loop.rows[:int(loop.ints[I_ROWS])].copy()
+    triggers = [{"t_s": float(t), "x_m": float(x), "y_m": float(y), "phase": int(phase)}
+                for t, phase, x, y in loop.events[:int(loop.ints[I_EVENTS])]
+                if phase in (Phase.INERTIA_LEFT_TO_RIGHT, Phase.INERTIA_RIGHT_TO_LEFT)]
     metrics = compute_metrics(trajectory, [e["t_s"] for e in triggers], track, COL)
     if status == "completed":
         j_value = metrics.objective_j
@@ -216,13 +135,22 @@ def run_episode(theta: Theta, config: EpisodeConfig, *, seed: int = 0) -> Episod
                          wall_ms=(time.perf_counter() - started) * 1e3, theta=theta, seed=seed)
 
 
-def _measured(state: np.ndarray, noise: np.ndarray) -> np.ndarray:
-    """The plant state as the sensors report it: pose and [V, beta, r] with this step's noise."""
-    sensed = state.copy()
-    sensed[X_POS] += noise[NOISE_X]
-    sensed[Y_POS] += noise[NOISE_Y]
-    sensed[HEADING] += noise[NOISE_HEADING]
-    sensed[SPEED] += noise[NOISE_SPEED]
-    sensed[SIDESLIP] += noise[NOISE_SIDESLIP]
-    sensed[YAW_RATE] += noise[NOISE_YAW_RATE]
-    return sensed
+def _loop_settings(config: EpisodeConfig, theta: Theta, track: FigureEight, n_steps: int,
+                   noisy: bool) -> LoopSettings:
+    mpc, scenario, failure = config.mpc, config.scenario, config.failure
+    left, right = track.left, track.right
+    return LoopSettings(
+        dt_s=float(mpc.dt_s), n_steps=n_steps, speed_offset_mps=float(theta.dV),
+        feedback_gain_radpm=float(theta.k), lookahead_m=float(scenario.lookahead_m),
+        steer_limit_rad=float(mpc.steer_limit_rad), disturbance_gain=float(mpc.disturbance_gain),
+        disturbance_start_gain=float(mpc.disturbance_start_gain),
+        hold_steps=int(round(mpc.estimator_hold_s / mpc.dt_s)),
+        estimator_uses_actuators=bool(mpc.estimator_uses_actuators),
+        estimator_linear=mpc.estimator_model == "linear", model_steer_lag_s=float(mpc.model_steer_lag_s),
+        c_lr=float(theta.c_lr), c_rl=float(theta.c_rl), settle_tolerance_rad=float(scenario.settle_tolerance_rad),
+        left_circle=(float(left.center_x_m), float(left.center_y_m), float(left.radius_m)),
+        right_circle=(float(right.center_x_m), float(right.center_y_m), float(right.radius_m)),
+        max_sideslip_rad=float(failure.max_sideslip_rad), max_yaw_rate_radps=float(failure.max_yaw_rate_radps),
+        max_lateral_error_m=float(failure.max_lateral_error_m), min_speed_mps=float(failure.min_speed_mps),
+        gripup_sideslip_rad=float(failure.gripup_sideslip_rad), gripup_time_s=float(failure.gripup_time_s),
+        gripup_grace_s=float(failure.gripup_grace_s), substep_s=float(config.plant.substep_s), noisy=bool(noisy))

@@ -6,9 +6,10 @@ import math
 from dataclasses import asdict, dataclass
 
 import numpy as np
+from numba import njit
 
-from driftlab.core.planner import Phase
-from driftlab.core.track import FigureEight, wrap_angle
+from driftlab.core.planner import Phase, phase_direction
+from driftlab.core.track import LEFT, FigureEight, wrap_angle
 
 COURSE_WEIGHT = 5.0  # lambda_1 (paper section IV-A)
 SIDESLIP_WEIGHT = 1.0  # lambda_2
@@ -43,13 +44,22 @@ def objective_j(e_m: np.ndarray, dpsi_rad: np.ndarray, beta_err_rad: np.ndarray)
 
 def progress_m(traj: np.ndarray, track: FigureEight, col: dict[str, int]) -> float:
     """Arc length driven along the scenario, summed over steps on the circle of each step's phase."""
+    left, right = track.left, track.right
+    return _progress_m(np.ascontiguousarray(traj[:, col["x_m"]]), np.ascontiguousarray(traj[:, col["y_m"]]),
+                       np.ascontiguousarray(traj[:, col["phase"]]), left.center_y_m, left.radius_m,
+                       right.center_y_m, right.radius_m)
+
+
+@njit(cache=True)
+def _progress_m(x_m, y_m, phase, left_center_y_m, left_radius_m, right_center_y_m, right_radius_m):
     total = 0.0
-    for i in range(1, len(traj)):
-        phase = Phase(int(traj[i, col["phase"]]))
-        circle = track.circle(phase.direction)
-        a0 = circle.polar_angle(traj[i - 1, col["x_m"]], traj[i - 1, col["y_m"]])
-        a1 = circle.polar_angle(traj[i, col["x_m"]], traj[i, col["y_m"]])
-        total += circle.direction * wrap_angle(a1 - a0) * circle.radius_m
+    for i in range(1, len(x_m)):
+        direction = phase_direction(int(phase[i]))
+        center_y, radius = (left_center_y_m, left_radius_m) if direction == LEFT else (right_center_y_m,
+                                                                                         right_radius_m)
+        a0 = math.atan2(y_m[i - 1] - center_y, x_m[i - 1] - 0.0)
+        a1 = math.atan2(y_m[i] - center_y, x_m[i] - 0.0)
+        total += direction * wrap_angle(a1 - a0) * radius
     return total
 
 

@@ -8,9 +8,16 @@ delta, Fxr and both increments.
 
 Solving: the QP is condensed to the 2*Nc increments once per reference. Each step first forms the
 unconstrained minimizer with a precomputed gain; when it satisfies every limit it *is* the QP's solution
-(the constraints are inactive, the QP is strictly convex). Only otherwise OSQP (set up once per episode,
-warm-started within it, only q, l, u updated) solves the constrained QP. OSQP's polishing is off: OSQP 1.x
-prints an unguarded line on stdout per polish (osqp/osqp#785), which would corrupt the CLI's JSON.
+(the constraints are inactive, the QP is strictly convex). Only otherwise (one step in fifteen or so) a solver
+runs, chosen by ``qp_solver``:
+
+- ``daqp`` (default): DAQP's dual active-set method (Arnstroem, Bemporad & Axehill 2022), exact for this dense
+  40-variable QP, ~40 us a solve.
+- ``osqp``: OSQP (the paper's solver; set up once per episode, warm-started within it, only q, l, u updated) at
+  ``osqp_eps``, ~600 us a solve. Its accepted answers include "solved inaccurate": on the default plant they
+  sat up to 0.64 (rad or kN) from the exact increments, some beyond a limit. Jobs stored before revision 7
+  ran it and stay on it. OSQP's polishing is off: OSQP 1.x prints an unguarded line on stdout per polish
+  (osqp/osqp#785), which would corrupt the CLI's JSON.
 
 Offset-free extension (not in the paper; ``disturbance_gain`` > 0): a constant additive disturbance d on
 (Vdot, betadot, rdot) is estimated each step from the difference between the measured state and the
@@ -21,11 +28,14 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass, fields
+from typing import NamedTuple
 
+import daqp
 import numpy as np
 import osqp
 import scipy.linalg
 import scipy.sparse as sp
+from numba import njit
 
 from driftlab.core.equilibrium import Equilibrium, jacobians
 from driftlab.core.errors import ConfigError
@@ -60,6 +70,7 @@ class MpcConfig:
         disturbance_gain: filter gain in [0, 1] of the offset-free disturbance estimate (0: the paper).
         model_steer_lag_s, model_drive_lag_s: actuator time constants the controller's model assumes [s];
             both 0 is the paper's model (inputs act at once).
+        qp_solver: "daqp" (exact dual active set) or "osqp" (the paper's; stored jobs before schema 7).
         osqp_eps: OSQP absolute and relative tolerance.
         path_states: add e [m] and dpsi [rad] to the model (False: the paper).
         q_lateral_error, q_course_error: weights on e and dpsi when path_states is on.
@@ -95,6 +106,7 @@ class MpcConfig:
     model_steer_lag_s: float = 0.027
     model_drive_lag_s: float = 0.05
     osqp_eps: float = 1e-5
+    qp_solver: str = "daqp"
     path_states: bool = True
     q_lateral_error: float = 0.707
     q_course_error: float = 6.54
@@ -111,7 +123,8 @@ class MpcConfig:
         return cls(q_speed=1.0, q_sideslip=417.0, q_yaw_rate=26.0, q_steer=5.5, q_drive_kn=0.2,
                    r_steer_step=56.0, r_drive_step_kn=0.024, steer_rate_radps=3.0, discretization="euler",
                    model_steer_lag_s=0.0, model_drive_lag_s=0.0, path_states=False, q_lateral_error=0.0,
-                   q_course_error=0.0, disturbance_gain=0.0, feedback_in_model=False, terminal_cost=False)
+                   q_course_error=0.0, disturbance_gain=0.0, feedback_in_model=False, terminal_cost=False,
+                   qp_solver="osqp")
 
     def __post_init__(self) -> None:
         ranges = {
@@ -123,6 +136,8 @@ class MpcConfig:
         }
         if self.estimator_model not in ("linear", "nonlinear"):
             raise ConfigError(f"mpc.estimator_model must be 'linear' or 'nonlinear', got {self.estimator_model!r}")
+        if self.qp_solver not in ("daqp", "osqp"):
+            raise ConfigError(f"mpc.qp_solver must be 'daqp' or 'osqp', got {self.qp_solver!r}")
         if self.discretization not in ("euler", "zoh"):
             raise ConfigError(f"mpc.discretization must be 'euler' or 'zoh', got {self.discretization!r}")
         weights = {f.name: (0.0, 1e7) for f in fields(self) if f.name.startswith(("q_", "r_"))}
@@ -249,6 +264,120 @@ class MpcSolution:
     increments: np.ndarray  # the whole optimal increment sequence, [d_delta, d_Fxr kN] per step
 
 
+class QpArrays(NamedTuple):
+    """A :class:`ReferenceQp`'s constants as the compiled closed loop reads them (numba takes a named tuple)."""
+
+    a_cont: np.ndarray  # continuous Jacobians at the equilibrium, A (3x3) and B (3x2, per kN)
+    b_cont: np.ndarray
+    x_eq: np.ndarray  # [V, beta, r]
+    u_eq_scaled: np.ndarray  # [delta, Fxr kN]
+    z_eq: np.ndarray  # [V, beta, r, delta, Fxr kN]
+    speed_mps: float
+    yaw_rate_radps: float
+    z_lin: np.ndarray  # the linearization point in the QP's state layout
+    gain_state: np.ndarray
+    gain_disturbance: np.ndarray
+    gain_reference: np.ndarray
+    gamma_t_q: np.ndarray
+    phi: np.ndarray
+    lam: np.ndarray
+    repeat: np.ndarray
+    cumsum: np.ndarray
+    step_limit: np.ndarray
+    input_lo: np.ndarray
+    input_hi: np.ndarray
+    path_states: bool
+    models_lag: bool
+    horizon: int
+    steer_limit_rad: float
+    drive_min_kn: float
+    drive_max_kn: float
+
+
+@njit(cache=True)
+def clip(x, lo, hi):
+    """np.clip of a scalar, to the bit (NaN passes through; max first, then min)."""
+    if x != x:
+        return x
+    x = x if x > lo else lo
+    return x if x < hi else hi
+
+
+@njit(cache=True)
+def pack_state(path_states, models_lag, state, path_errors, actuators_scaled, previous_commands_scaled):
+    """z = [V, beta, r, (e, dpsi,) (delta_a, Fxr_a kN,) delta_prev, Fxr_prev kN]: the QP's state, with the
+    path errors if ``path_states`` and the actuator states if ``models_lag``."""
+    n = 3 + (2 if path_states else 0) + (N_U if models_lag else 0) + N_U
+    z = np.empty(n)
+    z[:3] = state
+    i = 3
+    if path_states:
+        z[i:i + 2] = path_errors
+        i += 2
+    if models_lag:
+        z[i:i + N_U] = actuators_scaled
+        i += N_U
+    z[i:i + N_U] = previous_commands_scaled
+    return z
+
+
+@njit(cache=True)
+def reference_terms(qa, z_ref):
+    """The reference's share of the unconstrained minimizer and of the QP's linear term."""
+    aug = pack_state(qa.path_states, qa.models_lag, z_ref[:N_X], np.zeros(2), z_ref[N_X:], z_ref[N_X:]) - qa.z_lin
+    n_z = aug.shape[0]
+    deviation = np.empty(qa.horizon * n_z)
+    for k in range(qa.horizon):
+        deviation[k * n_z:(k + 1) * n_z] = aug
+    return np.dot(qa.gain_reference, deviation), np.dot(qa.gamma_t_q, deviation)
+
+
+@njit(cache=True)
+def unconstrained_increments(qa, z_now, ref_gain_term, disturbance):
+    """(du, dz, offset, within): the unconstrained minimizer, the state's deviation from the linearization
+    point, the previous command repeated over the horizon, and whether du satisfies every limit (then it *is*
+    the QP's solution: the QP is strictly convex and no constraint is active)."""
+    dz = z_now - qa.z_lin
+    du = ref_gain_term - np.dot(qa.gain_state, dz) - np.dot(qa.gain_disturbance, disturbance)
+    u_prev = z_now[-N_U:].copy()
+    offset = np.dot(qa.repeat, u_prev)
+    cumulative = offset + np.dot(qa.cumsum, du)
+    tol = 1e-9
+    within = ((np.abs(du) - qa.step_limit).max() <= tol and (qa.input_lo - cumulative).max() <= tol
+              and (cumulative - qa.input_hi).max() <= tol)
+    return du, dz, offset, within
+
+
+@njit(cache=True)
+def constrained_terms(qa, dz, disturbance, ref_linear_term, offset):
+    """OSQP's (q, l, u) for this step: the condensed QP's linear term and the limits on [du, cumulative u]."""
+    q = np.dot(qa.gamma_t_q, np.dot(qa.phi, dz) + np.dot(qa.lam, disturbance)) - ref_linear_term
+    lower = np.concatenate((-qa.step_limit, qa.input_lo - offset))
+    upper = np.concatenate((qa.step_limit, qa.input_hi - offset))
+    return q, lower, upper
+
+
+@njit(cache=True)
+def next_commands(qa, u_prev, du):
+    """(steer rad, drive kN): the first increment applied to the previous commands, within the limits."""
+    return (clip(u_prev[0] + du[0], -qa.steer_limit_rad, qa.steer_limit_rad),
+            clip(u_prev[1] + du[1], qa.drive_min_kn, qa.drive_max_kn))
+
+
+@njit(cache=True)
+def update_estimate(estimate, n_updates, innovation, gain, start_gain, dt_s, limit, frozen):
+    """One step of :class:`DisturbanceEstimator` on its arrays (``estimate`` and the count ``n_updates[0]``
+    change in place)."""
+    if gain > 0.0 and not frozen:
+        n_updates[0] += 1
+        step_gain = max(gain, min(start_gain, 1.0 / n_updates[0]))
+        measured = innovation / dt_s
+        value = estimate + step_gain * (measured - estimate)
+        for i in range(N_X):
+            estimate[i] = clip(value[i], -limit[i], limit[i])
+    return estimate
+
+
 class ReferenceQp:
     """The condensed QP for one reference equilibrium (built once, reused every step)."""
 
@@ -324,10 +453,22 @@ class ReferenceQp:
         self.cumsum = cumsum
         self.repeat = np.kron(np.ones((n_h, 1)), np.eye(N_U))  # u -> [u, u, ..., u]
         self.constraint_matrix = np.vstack([np.eye(n_h * N_U), cumsum])
+        self.daqp_sense = np.zeros(2 * n_h * N_U, dtype=np.intc)  # all inequalities
         step_limit = np.array([config.steer_rate_radps * config.dt_s, config.drive_rate_nps * config.dt_s * KN])
         self.step_limit = np.tile(step_limit, n_h)
         self.input_lo = np.tile(np.array([-config.steer_limit_rad, config.drive_min_n * KN]), n_h)
         self.input_hi = np.tile(np.array([config.steer_limit_rad, config.drive_max_n * KN]), n_h)
+        self.arrays = QpArrays(
+            a_cont=np.ascontiguousarray(self.a_cont), b_cont=np.ascontiguousarray(self.b_cont),
+            x_eq=equilibrium.state, u_eq_scaled=scale_inputs(equilibrium.inputs),
+            z_eq=to_scaled(equilibrium.state, equilibrium.inputs), speed_mps=float(equilibrium.speed_mps),
+            yaw_rate_radps=float(equilibrium.yaw_rate_radps), z_lin=self.z_lin, gain_state=self.gain_state,
+            gain_disturbance=self.gain_disturbance, gain_reference=self.gain_reference, gamma_t_q=self.gamma_t_q,
+            phi=self.phi, lam=self.lam, repeat=self.repeat, cumsum=self.cumsum, step_limit=self.step_limit,
+            input_lo=self.input_lo, input_hi=self.input_hi, path_states=bool(self.path_states),
+            models_lag=bool(self.models_lag), horizon=int(n_h), steer_limit_rad=float(config.steer_limit_rad),
+            drive_min_kn=float(config.drive_min_n * KN), drive_max_kn=float(config.drive_max_n * KN))
+
     def augmented_reference(self, z_ref: np.ndarray) -> np.ndarray:
         """The 5-entry reference [V, beta, r, delta, Fxr kN] in this QP's state layout (path errors 0)."""
         return self.pack_state(z_ref[:N_X], np.zeros(2), z_ref[N_X:], z_ref[N_X:])
@@ -335,13 +476,9 @@ class ReferenceQp:
     def pack_state(self, state: np.ndarray, path_errors: np.ndarray, actuators_scaled: np.ndarray,
                    previous_commands_scaled: np.ndarray) -> np.ndarray:
         """z = [V, beta, r, (e, dpsi,) (delta_a, Fxr_a kN,) delta_prev, Fxr_prev kN] for this QP."""
-        parts = [state]
-        if self.path_states:
-            parts.append(path_errors)
-        if self.models_lag:
-            parts.append(actuators_scaled)
-        parts.append(previous_commands_scaled)
-        return np.concatenate(parts)
+        return pack_state(bool(self.path_states), bool(self.models_lag), np.asarray(state, float),
+                          np.asarray(path_errors, float), np.asarray(actuators_scaled, float),
+                          np.asarray(previous_commands_scaled, float))
 
     def session(self) -> QpSession:
         """A fresh solver for one episode (its OSQP warm start and caches die with the episode)."""
@@ -349,8 +486,7 @@ class ReferenceQp:
 
 
 class QpSession:
-    """One episode's use of a :class:`ReferenceQp`: the OSQP instance (set up on first need) and the last
-    reference's terms.
+    """One episode's use of a :class:`ReferenceQp`: the OSQP instance, set up on first need.
 
     Kept apart from the cached :class:`ReferenceQp` so that no solver state (OSQP's warm start, its adapted
     rho) survives from one episode to the next: an episode is a pure function of its inputs.
@@ -359,8 +495,6 @@ class QpSession:
     def __init__(self, qp: ReferenceQp) -> None:
         self.qp = qp
         self._solver: osqp.OSQP | None = None
-        self._ref_key = b""
-        self._ref_terms: tuple[np.ndarray, np.ndarray] | None = None
 
     def _osqp(self) -> osqp.OSQP:
         if self._solver is None:
@@ -376,48 +510,43 @@ class QpSession:
             self._solver = solver
         return self._solver
 
-    def _reference_terms(self, z_ref: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-        key = z_ref.tobytes()
-        if key != self._ref_key or self._ref_terms is None:  # the reference changes rarely: cache one
-            qp = self.qp
-            deviation = np.tile(qp.augmented_reference(z_ref) - qp.z_lin, qp.config.horizon)
-            self._ref_terms = (qp.gain_reference @ deviation, qp.gamma_t_q @ deviation)
-            self._ref_key = key
-        return self._ref_terms
+    def solve_constrained(self, q: np.ndarray, lower: np.ndarray, upper: np.ndarray) -> tuple[np.ndarray, bool]:
+        """The condensed QP with this step's terms (:func:`constrained_terms`): (du, ok); du is zero when the
+        solver failed."""
+        if self.qp.config.qp_solver == "daqp":
+            x, ok = self._daqp(q, lower, upper)
+        else:
+            solver = self._osqp()
+            solver.update(q=q, l=lower, u=upper)
+            result = solver.solve(raise_error=False)
+            x, ok = result.x, result.info.status_val in (1, 2) and result.x is not None
+        ok = ok and bool(np.all(np.isfinite(x)))
+        step_limit = self.qp.step_limit
+        return (np.clip(x, -step_limit, step_limit) if ok else np.zeros(len(step_limit))), ok
+
+    def _daqp(self, q: np.ndarray, lower: np.ndarray, upper: np.ndarray) -> tuple[np.ndarray, bool]:
+        """DAQP: the first 2 Nc limits are bounds on du, the rest rows of the cumulative-sum matrix."""
+        qp = self.qp
+        x, _, exitflag, _ = daqp.solve(qp.hessian, q, qp.cumsum, upper, lower, qp.daqp_sense)
+        return np.asarray(x), exitflag > 0
 
     def solve(self, z_now: np.ndarray, z_ref: np.ndarray, disturbance: np.ndarray) -> MpcSolution:
-        """Optimal increments.
+        """Optimal increments (the closed loop does the same with the compiled parts directly).
 
         Args:
-            z_now: the QP's state (:meth:`pack_state`), the last two entries being the previous commands.
+            z_now: the QP's state (:meth:`ReferenceQp.pack_state`), the last two entries being the previous commands.
             z_ref: reference [V, beta, r, delta, Fxr kN].
             disturbance: estimated additive disturbance on (Vdot, betadot, rdot).
         """
-        qp = self.qp
-        dz = z_now - qp.z_lin
-        ref_gain_term, ref_linear_term = self._reference_terms(z_ref)
-        du = ref_gain_term - qp.gain_state @ dz - qp.gain_disturbance @ disturbance
-        u_prev = z_now[-N_U:]
-        offset = qp.repeat @ u_prev
-        cumulative = offset + qp.cumsum @ du
-        tol = 1e-9
-        within = ((np.abs(du) - qp.step_limit).max() <= tol and (qp.input_lo - cumulative).max() <= tol
-                  and (cumulative - qp.input_hi).max() <= tol)
-        used_osqp = False
+        qa = self.qp.arrays
+        z_now, z_ref, disturbance = (np.asarray(v, float) for v in (z_now, z_ref, disturbance))
+        ref_gain_term, ref_linear_term = reference_terms(qa, z_ref)
+        du, dz, offset, within = unconstrained_increments(qa, z_now, ref_gain_term, disturbance)
         ok = True
         if not within:
-            used_osqp = True
-            solver = self._osqp()
-            q = qp.gamma_t_q @ (qp.phi @ dz + qp.lam @ disturbance) - ref_linear_term
-            solver.update(q=q, l=np.concatenate([-qp.step_limit, qp.input_lo - offset]),
-                          u=np.concatenate([qp.step_limit, qp.input_hi - offset]))
-            result = solver.solve(raise_error=False)
-            ok = result.info.status_val in (1, 2) and result.x is not None and np.all(np.isfinite(result.x))
-            du = np.clip(result.x, -qp.step_limit, qp.step_limit) if ok else np.zeros_like(du)
-        config = qp.config
-        steer = float(np.clip(u_prev[0] + du[0], -config.steer_limit_rad, config.steer_limit_rad))
-        drive_kn = float(np.clip(u_prev[1] + du[1], config.drive_min_n * KN, config.drive_max_n * KN))
-        return MpcSolution(steer, drive_kn / KN, used_osqp, ok, du)
+            du, ok = self.solve_constrained(*constrained_terms(qa, dz, disturbance, ref_linear_term, offset))
+        steer, drive_kn = next_commands(qa, z_now[-N_U:].copy(), du)
+        return MpcSolution(steer, drive_kn / KN, not within, ok, du)
 
 
 class DisturbanceEstimator:
@@ -438,12 +567,8 @@ class DisturbanceEstimator:
         self.limit = limit
         self.value = np.zeros(N_X)
         self.frozen = False
-        self.n_updates = 0
+        self._n_updates = np.zeros(1, dtype=np.int64)
 
     def update(self, innovation: np.ndarray) -> np.ndarray:
-        if self.gain > 0.0 and not self.frozen:
-            self.n_updates += 1
-            gain = max(self.gain, min(self.start_gain, 1.0 / self.n_updates))
-            measured = innovation / self.dt_s
-            self.value = np.clip(self.value + gain * (measured - self.value), -self.limit, self.limit)
-        return self.value
+        return update_estimate(self.value, self._n_updates, np.asarray(innovation, float), self.gain,
+                               self.start_gain, self.dt_s, np.asarray(self.limit, float), self.frozen).copy()

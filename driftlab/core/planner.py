@@ -16,6 +16,9 @@ from __future__ import annotations
 from dataclasses import dataclass
 from enum import IntEnum
 
+import numpy as np
+from numba import njit
+
 from driftlab.core.track import LEFT, RIGHT
 
 
@@ -55,57 +58,79 @@ class PlannerEvent:
     y_m: float
 
 
+# The planner's state, as the compiled closed loop keeps it: [phase, armed, in the far half (final lap),
+# last c].
+PLAN_PHASE, PLAN_ARMED, PLAN_FAR_HALF, PLAN_LAST_FRACTION = range(4)
+N_PLAN_STATE = 4
+
+
+def initial_plan_state() -> np.ndarray:
+    """The start: left-hand drift, armed (the start point is the far point of the left circle)."""
+    return np.array([float(Phase.LEFT_DRIFT), 1.0, 0.0, 0.5])
+
+
+@njit(cache=True)
+def phase_direction(phase):
+    """The circle a phase tracks: LEFT or RIGHT (:attr:`Phase.direction`)."""
+    return RIGHT if phase == 1 or phase == 2 else LEFT
+
+
+@njit(cache=True)
+def advance_phase(plan, trigger_fraction, sideslip_err_rad, c_lr, c_rl, settle_tolerance_rad):
+    """One control step of the planner; updates ``plan`` in place and returns the phase (an int of
+    :class:`Phase`) and whether it changed.
+
+    Args:
+        trigger_fraction: c of the circle of the current phase (from :func:`track_errors`).
+        sideslip_err_rad: beta - beta_ref for the current reference.
+    """
+    # c falls to 0 at P0 and jumps to ~1 past it: a jump counts as reaching c = 0.
+    crossed_p0 = plan[PLAN_LAST_FRACTION] < 0.25 and trigger_fraction > 0.75
+    plan[PLAN_LAST_FRACTION] = trigger_fraction
+    if trigger_fraction > 0.5 and not crossed_p0:
+        plan[PLAN_ARMED] = 1.0
+    phase = int(plan[PLAN_PHASE])
+    threshold = c_lr if phase == 0 else c_rl
+    at_trigger = plan[PLAN_ARMED] > 0.5 and (trigger_fraction <= threshold or crossed_p0)
+    new_phase = phase
+    if (phase == 0 or phase == 2) and at_trigger:
+        new_phase = phase + 1
+        plan[PLAN_ARMED] = 0.0
+    elif phase == 1 or phase == 3:
+        if abs(sideslip_err_rad) < settle_tolerance_rad:
+            new_phase = phase + 1
+    elif phase == 4:
+        # Done at the point opposite P0 again (c = 0.5), approached from c near 1.
+        if 0.55 < trigger_fraction < 0.9:
+            plan[PLAN_FAR_HALF] = 1.0
+        if plan[PLAN_FAR_HALF] > 0.5 and trigger_fraction <= 0.5:
+            new_phase = 5
+    plan[PLAN_PHASE] = new_phase
+    return new_phase, new_phase != phase
+
+
 class InertiaDriftPlanner:
-    """Tracks the phase; call :meth:`update` once per control step."""
+    """Tracks the phase; call :meth:`update` once per control step (the closed loop calls
+    :func:`advance_phase` itself)."""
 
     def __init__(self, triggers: Triggers, settle_tolerance_rad: float = 0.05) -> None:
         self.triggers = triggers
         self.settle_tolerance_rad = settle_tolerance_rad
-        self.phase = Phase.LEFT_DRIFT
-        self._armed = True  # the start point is the far point of the left circle
-        self._final_far_half = False
-        self._last_fraction = 0.5
+        self.state = initial_plan_state()
         self.events: list[PlannerEvent] = []
+
+    @property
+    def phase(self) -> Phase:
+        return Phase(int(self.state[PLAN_PHASE]))
 
     def update(self, time_s: float, x_m: float, y_m: float, trigger_fraction: float,
                sideslip_err_rad: float) -> Phase:
-        """Advance the phase.
-
-        Args:
-            trigger_fraction: c of the circle of the current phase (from :func:`track_errors`).
-            sideslip_err_rad: beta - beta_ref for the current reference.
-        """
-        # c falls to 0 at P0 and jumps to ~1 past it: a jump counts as reaching c = 0.
-        crossed_p0 = self._last_fraction < 0.25 and trigger_fraction > 0.75
-        self._last_fraction = trigger_fraction
-        if trigger_fraction > 0.5 and not crossed_p0:
-            self._armed = True
-        phase = self.phase
-        at_trigger = self._armed and (trigger_fraction <= self._threshold(phase) or crossed_p0)
-        if phase == Phase.LEFT_DRIFT and at_trigger:
-            self._switch(Phase.INERTIA_LEFT_TO_RIGHT, time_s, x_m, y_m)
-        elif phase == Phase.RIGHT_DRIFT and at_trigger:
-            self._switch(Phase.INERTIA_RIGHT_TO_LEFT, time_s, x_m, y_m)
-        elif phase in (Phase.INERTIA_LEFT_TO_RIGHT, Phase.INERTIA_RIGHT_TO_LEFT):
-            if abs(sideslip_err_rad) < self.settle_tolerance_rad:
-                self.phase = Phase(phase + 1)
-                self.events.append(PlannerEvent(time_s, self.phase, x_m, y_m))
-        elif phase == Phase.LEFT_DRIFT_FINAL:
-            # Done at the point opposite P0 again (c = 0.5), approached from c near 1.
-            if 0.55 < trigger_fraction < 0.9:
-                self._final_far_half = True
-            if self._final_far_half and trigger_fraction <= 0.5:
-                self.phase = Phase.FINISHED
-                self.events.append(PlannerEvent(time_s, self.phase, x_m, y_m))
-        return self.phase
-
-    def _threshold(self, phase: Phase) -> float:
-        return self.triggers.c_lr if phase == Phase.LEFT_DRIFT else self.triggers.c_rl
-
-    def _switch(self, phase: Phase, time_s: float, x_m: float, y_m: float) -> None:
-        self.phase = phase
-        self._armed = False
-        self.events.append(PlannerEvent(time_s, phase, x_m, y_m))
+        """Advance the phase (see :func:`advance_phase`)."""
+        phase, changed = advance_phase(self.state, trigger_fraction, sideslip_err_rad, self.triggers.c_lr,
+                                       self.triggers.c_rl, self.settle_tolerance_rad)
+        if changed:
+            self.events.append(PlannerEvent(time_s, Phase(phase), x_m, y_m))
+        return Phase(phase)
 
     @property
     def trigger_events(self) -> list[PlannerEvent]:

@@ -17,6 +17,9 @@ import math
 from dataclasses import dataclass
 from typing import NamedTuple
 
+import numpy as np
+from numba import njit
+
 from driftlab.core.errors import ConfigError
 
 TWO_PI = 2.0 * math.pi
@@ -24,12 +27,60 @@ LEFT = 1  # counter-clockwise circle, left-hand drift
 RIGHT = -1  # clockwise circle, right-hand drift
 
 
+@njit(cache=True)
 def wrap_angle(angle_rad: float) -> float:
     """Wrap to (-pi, pi]."""
-    wrapped = math.fmod(angle_rad + math.pi, TWO_PI)
+    wrapped = np.fmod(angle_rad + math.pi, TWO_PI)
     if wrapped <= 0.0:
         wrapped += TWO_PI
     return wrapped - math.pi
+
+
+@njit(cache=True)
+def _exact_square(x: float) -> tuple[float, float]:
+    """x * x as an unevaluated sum hi + lo (Dekker's product with Veltkamp's split)."""
+    t = x * 134217729.0
+    hi = t - (t - x)
+    lo = x - hi
+    p = hi * hi
+    q = hi * lo + lo * hi
+    z = p + q
+    return z, p - z + q + lo * lo
+
+
+@njit(cache=True)
+def hypot(x: float, y: float) -> float:
+    """sqrt(x^2 + y^2) exactly as CPython 3.11's ``math.hypot`` rounds it (its ``vector_norm``).
+
+    numba's own hypot (C's) differs from it in the last bit now and then; stored episodes were computed with
+    CPython's, and a bit is enough to move a knife-edge episode. ``tests/core/test_track.py`` checks the two agree.
+    """
+    x = abs(x)
+    y = abs(y)
+    largest = max(x, y)
+    if math.isinf(largest):
+        return largest
+    if math.isnan(x) or math.isnan(y):
+        return math.nan
+    if largest == 0.0:
+        return largest
+    exponent = math.frexp(largest)[1]
+    scale = math.ldexp(1.0, -exponent)
+    csum, frac1, frac2 = 1.0, 0.0, 0.0
+    for v in (x * scale, y * scale):
+        hi, lo = _exact_square(v)
+        total = csum + hi
+        frac2 += (csum - total) + hi
+        csum = total
+        frac1 += lo
+    h = math.sqrt(csum - 1.0 + (frac1 + frac2))
+    hi, lo = _exact_square(h)
+    total = csum - hi
+    frac2 += (csum - total) - hi
+    csum = total
+    frac1 -= lo
+    h += (csum - 1.0 + (frac1 + frac2)) / (2.0 * h)
+    return h / scale
 
 
 @dataclass(frozen=True)
@@ -103,12 +154,19 @@ class FigureEight:
 
 def track_errors(circle: Circle, x_m: float, y_m: float, course_rad: float) -> TrackErrors:
     """Errors of a car at (x, y) with course angle psi + beta against ``circle`` (P0 at the origin)."""
-    phi = circle.polar_angle(x_m, y_m)
-    distance = math.hypot(x_m - circle.center_x_m, y_m - circle.center_y_m)
-    lateral = circle.direction * (distance - circle.radius_m)
-    course_error = wrap_angle(circle.heading_at(phi) - course_rad)
-    p0_angle = circle.polar_angle(0.0, 0.0)
-    swept = (p0_angle - phi) if circle.direction == LEFT else (phi - p0_angle)
+    return TrackErrors(*circle_errors(circle.center_x_m, circle.center_y_m, circle.radius_m, circle.direction,
+                                      x_m, y_m, course_rad))
+
+
+@njit(cache=True)
+def circle_errors(center_x_m, center_y_m, radius_m, direction, x_m, y_m, course_rad):
+    """(e m, dpsi rad, arc to P0 m, c) of a car at (x, y) with course psi + beta against a circle (see
+    :class:`TrackErrors`); the compiled closed loop calls this each control step."""
+    phi = math.atan2(y_m - center_y_m, x_m - center_x_m)
+    distance = hypot(x_m - center_x_m, y_m - center_y_m)
+    lateral = direction * (distance - radius_m)
+    course_error = wrap_angle(wrap_angle(phi + direction * 0.5 * math.pi) - course_rad)
+    p0_angle = math.atan2(0.0 - center_y_m, 0.0 - center_x_m)
+    swept = (p0_angle - phi) if direction == LEFT else (phi - p0_angle)
     swept = swept % TWO_PI
-    arc = swept * circle.radius_m
-    return TrackErrors(lateral, course_error, arc, swept / TWO_PI)
+    return lateral, course_error, swept * radius_m, swept / TWO_PI

@@ -5,7 +5,7 @@ import numpy as np
 import pytest
 
 from driftlab.core.config import EpisodeConfig, Theta, apply_overrides
-from driftlab.core.controller import DriftController, build_controller_model
+from driftlab.core.controller import hold_estimate
 from driftlab.core.episode import run_episode
 from driftlab.core.equilibrium import drift_equilibrium
 from driftlab.core.mpc import DisturbanceEstimator, MpcConfig
@@ -33,15 +33,15 @@ def test_estimate_starts_as_a_capped_running_mean_then_filters_at_the_gain():
 
 def test_estimate_is_held_through_a_flick_and_its_aftermath():
     mpc = MpcConfig(disturbance_gain=0.1, estimator_hold_s=0.5)
-    config = EpisodeConfig(mpc=mpc)
-    s = config.scenario
-    model = build_controller_model(config.vehicle, mpc, s.left_radius_m, s.right_radius_m, s.sideslip_rad)
-    controller = DriftController(model, mpc, 0.0, 0.05, s.lookahead_m)
-    controller.freeze_estimate(False)
-    assert not controller.estimator.frozen
-    controller.freeze_estimate(True)  # the inertia phase
-    assert controller.estimator.frozen
-    held = [controller.freeze_estimate(False) or controller.estimator.frozen for _ in range(12)]
+    hold_steps = int(round(mpc.estimator_hold_s / mpc.dt_s))
+    frozen, left = hold_estimate(False, 0, hold_steps)
+    assert not frozen
+    frozen, left = hold_estimate(True, left, hold_steps)  # the inertia phase
+    assert frozen
+    held = []
+    for _ in range(12):
+        frozen, left = hold_estimate(False, left, hold_steps)
+        held.append(frozen)
     assert held == [True] * 9 + [False] * 3  # 0.5 s at 0.05 s: the first 9 steps after the flick, then free
 
 

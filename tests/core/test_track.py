@@ -2,6 +2,7 @@
 
 import math
 
+import numpy as np
 import pytest
 
 from driftlab.core.track import FigureEight, track_errors, wrap_angle
@@ -64,3 +65,14 @@ def test_unequal_radii():
     assert track.right.center_y_m == -60.0
     assert track.scenario_length_m == pytest.approx(2 * math.pi * 90.0)
     assert track_errors(track.right, 0.0, -120.0, math.pi).trigger_fraction == pytest.approx(0.5)
+
+
+def test_compiled_hypot_rounds_as_cpython_does():
+    """The closed loop's lateral error uses track.hypot; stored episodes were computed with math.hypot, and one
+    last bit is enough to move a knife-edge episode."""
+    from driftlab.core.track import hypot
+
+    rng = np.random.default_rng(0)
+    xs, ys = (rng.standard_normal(20000) * 10 ** rng.uniform(-4, 3, 20000) for _ in range(2))
+    assert all(hypot(x, y) == math.hypot(x, y) for x, y in zip(xs, ys, strict=True))
+    assert hypot(0.0, 0.0) == 0.0 and math.isinf(hypot(math.inf, 1.0)) and math.isnan(hypot(math.nan, 1.0))

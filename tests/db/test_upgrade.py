@@ -61,7 +61,8 @@ def test_schema_1_database_upgrades_and_its_results_still_reproduce(tmp_path):
                                                                "mpc.disturbance_start_gain": 0.0,
                                                                "mpc.estimator_hold_s": 0.0,
                                                                "mpc.estimator_uses_actuators": False,
-                                                               "mpc.estimator_model": "nonlinear"}))
+                                                               "mpc.estimator_model": "nonlinear",
+                                                               "mpc.qp_solver": "osqp"}))
     assert old.J == RELEASE_J
     with sqlite3.connect(path) as db:
         db.executescript(SCHEMA_1)
@@ -77,10 +78,11 @@ def test_schema_1_database_upgrades_and_its_results_still_reproduce(tmp_path):
     with storage.transaction(factory) as session:
         job = session.get(Job, 1)
         evaluation = session.get(Evaluation, 1)
-        assert session.get(Meta, "schema_version").value == "6"
+        assert session.get(Meta, "schema_version").value == "7"
         spec = TuningSpec.from_dict(job.spec)
         assert spec.robust_samples == 1 and spec.confirm_samples == 0 and not spec.config.plant.varies
         assert not spec.config.mpc.feedback_in_model and spec.config.mpc.estimator_hold_s == 0.0  # pinned by 0005
+        assert spec.config.mpc.qp_solver == "osqp"  # pinned by 0007
         assert evaluation.seeds == [{"seed": 0, "status": old.status, "J": old.J,
                                      "completed_fraction": old.metrics.completed_fraction}]
         assert evaluation.trajectory_seed == 0
@@ -93,7 +95,7 @@ def test_schema_1_database_upgrades_and_its_results_still_reproduce(tmp_path):
 
 def test_a_new_database_is_created_at_the_head_revision(tmp_path):
     factory = storage.open_database(f"sqlite:///{tmp_path / 'new.db'}")
-    assert schema.current_revision(storage.engine_of(factory)) == schema.head_revision() == "0006"
+    assert schema.current_revision(storage.engine_of(factory)) == schema.head_revision() == "0007"
     with storage.transaction(factory) as session:
         job = storage.create_job(session, name="fresh", spec=TuningSpec().to_dict(), seed=0)
         assert job.runner_id is None and job.heartbeat_at is None
@@ -143,4 +145,34 @@ def test_revision_0006_adds_studies_to_a_database_with_jobs(tmp_path):
         assert [c.settings for c in studies.cells(session, study_id=study.id)] == [{"plant.mass_scale": 1.0},
                                                                                   {"plant.mass_scale": 1.1}]
         assert [j.name for j in studies.study_jobs(session, study_id=study.id)] == ["member"]
-        assert session.get(Meta, "schema_version").value == "6"
+        assert session.get(Meta, "schema_version").value == "7"
+
+
+def test_revision_0007_pins_stored_jobs_and_studies_to_osqp(tmp_path):
+    """Jobs and studies stored before the exact QP solver keep the solver they ran; new ones get DAQP."""
+    from alembic import command
+    from sqlalchemy import create_engine
+
+    from driftlab.db.models import Job as JobRow
+    from driftlab.db.models import Study
+
+    url = f"sqlite:///{tmp_path / 'v6.db'}"
+    engine = create_engine(url)
+    config = config_to_dict(EpisodeConfig())
+    del config["mpc"]["qp_solver"]  # as revision 6 stored it
+    job_spec = {**TuningSpec().to_dict(), "config": config}
+    with engine.connect() as connection, connection.begin():
+        command.upgrade(schema._config(connection), "0006")
+        for i, (table, spec) in enumerate((("jobs", job_spec), ("studies", {"kind": "robustness", "config": config}),
+                                           ("studies", {"kind": "seeds", "spec": job_spec}))):
+            extra, value = ("seed", 0) if table == "jobs" else ("kind", spec["kind"])
+            connection.exec_driver_sql(f"INSERT INTO {table} (id, name, spec, {extra}, status, created_at, updated_at) "
+                                       "VALUES (?, ?, ?, ?, 'finished', '2026-11-01', '2026-11-01')",
+                                       (i + 1, f"old{i}", json.dumps(spec), value))
+    factory = storage.open_database(url)
+    with storage.transaction(factory) as session:
+        assert TuningSpec.from_dict(session.get(JobRow, 1).spec).config.mpc.qp_solver == "osqp"
+        assert session.get(Study, 2).spec["config"]["mpc"]["qp_solver"] == "osqp"
+        assert TuningSpec.from_dict(session.get(Study, 3).spec["spec"]).config.mpc.qp_solver == "osqp"
+        fresh = storage.create_job(session, name="new", spec=TuningSpec().to_dict(), seed=0)
+        assert TuningSpec.from_dict(fresh.spec).config.mpc.qp_solver == "daqp"

@@ -1,0 +1,313 @@
+"""The closed loop of one episode, compiled: sensing, planner, controller and plant, control step by step.
+
+Each control step (paper Algorithm 1, inner loop): the sensors read the plant (with the episode's noise), the
+planner advances its phase on the tracked circle's trigger quantity c, the trajectory row and the failure
+rules are written from the true state, the disturbance estimate is updated, and the MPC's increments are
+formed. Where the unconstrained minimizer violates a limit, :func:`run_until_constrained` returns to Python,
+which solves the QP with OSQP and hands the increments to :func:`finish_step`; the loop then goes on. Between
+those returns (about one control step in fifteen) no Python runs.
+
+The arithmetic is that of the former step-by-step Python loop, operation for operation (``np.dot`` is the same
+BLAS call as numpy's ``@``; :func:`driftlab.core.track.hypot` rounds as CPython does), so stored episodes
+reproduce bit for bit (``tests/db/test_upgrade.py``).
+"""
+
+from __future__ import annotations
+
+from typing import NamedTuple
+
+import numpy as np
+from numba import njit
+
+from driftlab.core.controller import (
+    DISTURBANCE_LIMIT,
+    drift_reference,
+    hold_estimate,
+    lookahead_error_m,
+    mirror,
+    predict_one_step,
+)
+from driftlab.core.mpc import (
+    KN,
+    N_U,
+    clip,
+    constrained_terms,
+    next_commands,
+    pack_state,
+    reference_terms,
+    unconstrained_increments,
+    update_estimate,
+)
+from driftlab.core.planner import PLAN_PHASE, advance_phase, phase_direction
+from driftlab.core.plant import DRIVE, HEADING, SIDESLIP, SPEED, STEER, X_POS, Y_POS, YAW_RATE, plant_step
+from driftlab.core.track import LEFT, circle_errors
+from driftlab.core.variation import (
+    NOISE_HEADING,
+    NOISE_SIDESLIP,
+    NOISE_SPEED,
+    NOISE_X,
+    NOISE_Y,
+    NOISE_YAW_RATE,
+)
+
+# Trajectory columns recorded at the controller rate, with units.
+COLUMNS = (
+    "t_s", "x_m", "y_m", "psi_rad", "V_mps", "beta_rad", "r_radps", "delta_cmd_rad", "delta_rad", "delta_mpc_rad",
+    "Fxr_cmd_n", "Fxr_n", "e_m", "dpsi_rad", "c", "phase", "V_ref_mps", "beta_ref_rad", "r_ref_radps",
+    "delta_ref_rad", "Fxr_ref_n", "osqp",
+)
+COL = {name: i for i, name in enumerate(COLUMNS)}
+(C_T, C_X, C_Y, C_PSI, C_V, C_BETA, C_R, C_DELTA_CMD, C_DELTA, C_DELTA_MPC, C_FXR_CMD, C_FXR, C_E, C_DPSI, C_C,
+ C_PHASE, C_V_REF, C_BETA_REF, C_R_REF, C_DELTA_REF, C_FXR_REF, C_OSQP) = range(len(COLUMNS))
+
+STATUSES = ("completed", "spun_out", "left_track", "stalled", "gripped_up", "solver_failed", "diverged")
+(COMPLETED, SPUN_OUT, LEFT_TRACK, STALLED, GRIPPED_UP, SOLVER_FAILED, DIVERGED) = range(len(STATUSES))
+RUNNING = -1
+
+# What run_until_constrained returns.
+DONE, NEEDS_QP = 0, 1
+
+# Integer loop state: step, rows written, controller's direction and last direction, hold steps left,
+# whether a previous measurement exists, status, trigger events, the grip-up clock's state.
+(I_STEP, I_ROWS, I_DIRECTION, I_LAST_DIRECTION, I_HOLD_LEFT, I_HAS_LAST, I_STATUS, I_EVENTS, I_GRIPUP,
+ I_UPDATES) = range(10)
+# Float loop state: last trigger time, grip-up start, the seen errors of the step waiting for OSQP.
+F_LAST_TRIGGER_S, F_GRIPUP_SINCE_S, F_SEEN_E, F_SEEN_DPSI = range(4)
+MAX_EVENTS = 16
+
+
+class LoopSettings(NamedTuple):
+    """The episode's constants the compiled loop reads (theta, scenario, controller, failure rules)."""
+
+    dt_s: float
+    n_steps: int
+    speed_offset_mps: float
+    feedback_gain_radpm: float
+    lookahead_m: float
+    steer_limit_rad: float
+    disturbance_gain: float
+    disturbance_start_gain: float
+    hold_steps: int
+    estimator_uses_actuators: bool
+    estimator_linear: bool
+    model_steer_lag_s: float
+    c_lr: float
+    c_rl: float
+    settle_tolerance_rad: float
+    left_circle: tuple[float, float, float]  # centre x, centre y, radius [m]
+    right_circle: tuple[float, float, float]
+    max_sideslip_rad: float
+    max_yaw_rate_radps: float
+    max_lateral_error_m: float
+    min_speed_mps: float
+    gripup_sideslip_rad: float
+    gripup_time_s: float
+    gripup_grace_s: float
+    substep_s: float
+    noisy: bool
+
+
+class LoopState(NamedTuple):
+    """Everything that changes during an episode, as arrays the compiled loop updates in place."""
+
+    ints: np.ndarray
+    floats: np.ndarray
+    plant: np.ndarray  # the plant state (driftlab.core.plant layout)
+    plan: np.ndarray  # the planner's state (driftlab.core.planner layout)
+    estimate: np.ndarray  # disturbance estimate on (Vdot, betadot, rdot), left-hand form
+    last_mpc: np.ndarray  # the MPC's last commands [delta rad, Fxr N]
+    last_applied: np.ndarray  # the last commands sent [delta rad, Fxr N]
+    last_measured: np.ndarray  # the last measured [V, beta, r]
+    last_actuators: np.ndarray  # the last measured actuator positions [delta rad, Fxr N]
+    ref_key: np.ndarray  # (2, 5): the reference each side's cached terms belong to
+    ref_gain: np.ndarray  # (2, 2 Nc): cached reference terms per side (index 0 left, 1 right)
+    ref_linear: np.ndarray
+    ref_valid: np.ndarray
+    rows: np.ndarray  # (n_steps + 1, len(COLUMNS))
+    events: np.ndarray  # (MAX_EVENTS, 4): t s, phase, x m, y m of each phase change
+    pending: np.ndarray  # the step waiting for OSQP: [u_prev (2)]
+    qp_q: np.ndarray  # OSQP's terms of that step
+    qp_lower: np.ndarray
+    qp_upper: np.ndarray
+
+
+def new_loop_state(plant_state: np.ndarray, plan: np.ndarray, start_inputs: np.ndarray, n_steps: int,
+                   n_increments: int) -> LoopState:
+    ints = np.zeros(10, dtype=np.int64)
+    ints[I_DIRECTION] = ints[I_LAST_DIRECTION] = LEFT
+    ints[I_STATUS] = RUNNING
+    return LoopState(ints=ints, floats=np.zeros(4), plant=plant_state.copy(), plan=plan, estimate=np.zeros(3),
+                     last_mpc=start_inputs.copy(), last_applied=start_inputs.copy(), last_measured=np.zeros(3),
+                     last_actuators=np.zeros(2), ref_key=np.zeros((2, 5)), ref_gain=np.zeros((2, n_increments)),
+                     ref_linear=np.zeros((2, n_increments)), ref_valid=np.zeros(2, dtype=np.int64),
+                     rows=np.zeros((n_steps + 1, len(COLUMNS))), events=np.zeros((MAX_EVENTS, 4)),
+                     pending=np.zeros(N_U), qp_q=np.zeros(n_increments), qp_lower=np.zeros(2 * n_increments),
+                     qp_upper=np.zeros(2 * n_increments))
+
+
+@njit(cache=True)
+def _errors(cfg, direction, x_m, y_m, course_rad):
+    circle = cfg.left_circle if direction == LEFT else cfg.right_circle
+    return circle_errors(circle[0], circle[1], circle[2], direction, x_m, y_m, course_rad)
+
+
+@njit(cache=True)
+def _failure(cfg, st, t_s, s, lateral_error_m, beta_ref_rad):
+    """The failure rules (:class:`~driftlab.core.config.FailureLimits`) on the true state: a status or RUNNING."""
+    if not np.all(np.isfinite(s)) or not np.isfinite(lateral_error_m):
+        return DIVERGED
+    if abs(s[SIDESLIP]) > cfg.max_sideslip_rad or abs(s[YAW_RATE]) > cfg.max_yaw_rate_radps:
+        return SPUN_OUT
+    if abs(lateral_error_m) > cfg.max_lateral_error_m:
+        return LEFT_TRACK
+    if s[SPEED] < cfg.min_speed_mps:
+        return STALLED
+    drifting = s[SIDESLIP] * beta_ref_rad > 0.0 and abs(s[SIDESLIP]) >= cfg.gripup_sideslip_rad
+    if drifting or t_s - st.floats[F_LAST_TRIGGER_S] < cfg.gripup_grace_s:
+        st.ints[I_GRIPUP] = 0
+    elif st.ints[I_GRIPUP] == 0:
+        st.ints[I_GRIPUP] = 1
+        st.floats[F_GRIPUP_SINCE_S] = t_s
+    elif t_s - st.floats[F_GRIPUP_SINCE_S] > cfg.gripup_time_s:
+        return GRIPPED_UP
+    return RUNNING
+
+
+@njit(cache=True)
+def _reference(cfg, qa, st, direction):
+    return drift_reference(qa, st.estimate, direction, cfg.speed_offset_mps, cfg.disturbance_gain > 0.0)
+
+
+@njit(cache=True)
+def _update_disturbance(cfg, st, qa_last, params, measured, actuators, direction, frozen):
+    """The disturbance estimate after this step's measurement, mirrored to the side driven (offset-free MPC;
+    zero when off)."""
+    if st.ints[I_HAS_LAST] == 0 or cfg.disturbance_gain == 0.0:
+        return st.estimate.copy()
+    if not frozen:
+        # One-step prediction under the inputs the actuators actually applied (measured at both ends of the
+        # step, shaped by the model's lag).
+        if cfg.estimator_uses_actuators:
+            start, end, lag = st.last_actuators, actuators, cfg.model_steer_lag_s
+        else:
+            start, end, lag = st.last_applied, st.last_applied, 0.0
+        predicted = predict_one_step(qa_last, params, cfg.estimator_linear, st.last_measured, start, end, lag,
+                                     cfg.dt_s)
+        update_estimate(st.estimate, st.ints[I_UPDATES:I_UPDATES + 1], (measured - predicted) * mirror(direction),
+                        cfg.disturbance_gain, cfg.disturbance_start_gain, cfg.dt_s, DISTURBANCE_LIMIT, False)
+    return st.estimate * mirror(direction)
+
+
+@njit(cache=True)
+def _sensed(cfg, s, noise_row):
+    """The plant state as the sensors report it: pose and [V, beta, r] with this step's noise."""
+    if not cfg.noisy:
+        return s
+    sensed = s.copy()
+    sensed[X_POS] += noise_row[NOISE_X]
+    sensed[Y_POS] += noise_row[NOISE_Y]
+    sensed[HEADING] += noise_row[NOISE_HEADING]
+    sensed[SPEED] += noise_row[NOISE_SPEED]
+    sensed[SIDESLIP] += noise_row[NOISE_SIDESLIP]
+    sensed[YAW_RATE] += noise_row[NOISE_YAW_RATE]
+    return sensed
+
+
+@njit(cache=True)
+def run_until_constrained(cfg, st, qa_left, qa_right, model_params, plant_params, actuator_params, noise):
+    """Steps the loop until the episode ends (returns DONE, the status in ``st.ints[I_STATUS]``) or a step's
+    QP has an active limit (returns NEEDS_QP with OSQP's terms in ``st.qp_*``; call :func:`finish_step`)."""
+    ints, floats = st.ints, st.floats
+    while ints[I_STEP] <= cfg.n_steps:
+        step = ints[I_STEP]
+        t = step * cfg.dt_s
+        s = st.plant
+        sensed = _sensed(cfg, s, noise[step])
+        phase = int(st.plan[PLAN_PHASE])
+        direction = phase_direction(phase)
+        seen = _errors(cfg, direction, sensed[X_POS], sensed[Y_POS], sensed[HEADING] + sensed[SIDESLIP])
+        ref = _reference(cfg, qa_left if direction == LEFT else qa_right, st, direction)
+        phase, changed = advance_phase(st.plan, seen[3], sensed[SIDESLIP] - ref[1], cfg.c_lr, cfg.c_rl,
+                                       cfg.settle_tolerance_rad)
+        if changed and ints[I_EVENTS] < MAX_EVENTS:
+            event = st.events[ints[I_EVENTS]]
+            event[0], event[1], event[2], event[3] = t, phase, sensed[X_POS], sensed[Y_POS]
+            ints[I_EVENTS] += 1
+        if phase != 5 and phase_direction(phase) != direction:
+            direction = phase_direction(phase)
+            seen = _errors(cfg, direction, sensed[X_POS], sensed[Y_POS], sensed[HEADING] + sensed[SIDESLIP])
+            ref = _reference(cfg, qa_left if direction == LEFT else qa_right, st, direction)
+            floats[F_LAST_TRIGGER_S] = t
+        errors = _errors(cfg, direction, s[X_POS], s[Y_POS], s[HEADING] + s[SIDESLIP]) if cfg.noisy else seen
+        row = st.rows[ints[I_ROWS]]
+        row[C_T] = t
+        row[C_X], row[C_Y], row[C_PSI] = s[X_POS], s[Y_POS], s[HEADING]
+        row[C_V], row[C_BETA], row[C_R] = s[SPEED], s[SIDESLIP], s[YAW_RATE]
+        row[C_DELTA], row[C_FXR] = s[STEER], s[DRIVE]
+        row[C_E], row[C_DPSI], row[C_C] = errors[0], errors[1], errors[3]
+        row[C_PHASE] = phase
+        row[C_V_REF], row[C_BETA_REF], row[C_R_REF] = ref[0], ref[1], ref[2]
+        row[C_DELTA_REF], row[C_FXR_REF] = ref[3], ref[4] * 1e3
+        ints[I_ROWS] += 1
+        failure = _failure(cfg, st, t, s, errors[0], ref[1])
+        if failure != RUNNING:
+            ints[I_STATUS] = failure
+            return DONE
+        if phase == 5:
+            ints[I_STATUS] = COMPLETED
+            return DONE
+        in_flick = not (phase == 0 or phase == 2 or phase == 4)
+        frozen, ints[I_HOLD_LEFT] = hold_estimate(in_flick, ints[I_HOLD_LEFT], cfg.hold_steps)
+        # The controller's step: disturbance, reference, unconstrained increments.
+        measured = np.array([sensed[SPEED], sensed[SIDESLIP], sensed[YAW_RATE]])
+        actuators = np.array([s[STEER], s[DRIVE]])
+        ints[I_LAST_DIRECTION] = ints[I_DIRECTION]
+        ints[I_DIRECTION] = direction
+        qa_last = qa_left if ints[I_LAST_DIRECTION] == LEFT else qa_right
+        disturbance = _update_disturbance(cfg, st, qa_last, model_params, measured, actuators, direction, frozen)
+        qa = qa_left if direction == LEFT else qa_right
+        side = 0 if direction == LEFT else 1
+        z_now = pack_state(qa.path_states, qa.models_lag, measured, np.array([seen[0], seen[1]]),
+                           np.array([actuators[0], actuators[1] * KN]),
+                           np.array([st.last_mpc[0], st.last_mpc[1] * KN]))
+        z_ref = _reference(cfg, qa, st, direction)
+        if st.ref_valid[side] == 0 or np.any(st.ref_key[side] != z_ref):  # the reference changes rarely
+            st.ref_gain[side], st.ref_linear[side] = reference_terms(qa, z_ref)
+            st.ref_key[side] = z_ref
+            st.ref_valid[side] = 1
+        du, dz, offset, within = unconstrained_increments(qa, z_now, st.ref_gain[side], disturbance)
+        st.last_measured[:] = measured
+        st.last_actuators[:] = actuators
+        ints[I_HAS_LAST] = 1
+        floats[F_SEEN_E], floats[F_SEEN_DPSI] = seen[0], seen[1]
+        st.pending[:] = z_now[-N_U:]
+        if not within:
+            q, lower, upper = constrained_terms(qa, dz, disturbance, st.ref_linear[side], offset)
+            st.qp_q[:], st.qp_lower[:], st.qp_upper[:] = q, lower, upper
+            return NEEDS_QP
+        finish_step(cfg, st, qa, plant_params, actuator_params, du, True, False)
+        if ints[I_STATUS] != RUNNING:
+            return DONE
+    ints[I_STATUS] = STALLED  # out of time before finishing the 8
+    return DONE
+
+
+@njit(cache=True)
+def finish_step(cfg, st, qa, plant_params, actuator_params, du, ok, used_osqp):
+    """The rest of a control step once its increments are known: commands, the paper's steering feedback
+    delta_f = delta_mpc + k e_la (eq. 11), and the plant's step."""
+    ints = st.ints
+    steer_mpc, drive_kn = next_commands(qa, st.pending, du)
+    drive_n = drive_kn / KN
+    st.last_mpc[0], st.last_mpc[1] = steer_mpc, drive_n
+    e_la = lookahead_error_m(st.floats[F_SEEN_E], st.floats[F_SEEN_DPSI], cfg.lookahead_m)
+    steer = clip(steer_mpc + cfg.feedback_gain_radpm * e_la, -cfg.steer_limit_rad, cfg.steer_limit_rad)
+    st.last_applied[0], st.last_applied[1] = steer, drive_n
+    row = st.rows[ints[I_ROWS] - 1]
+    row[C_DELTA_CMD], row[C_DELTA_MPC], row[C_FXR_CMD] = steer, steer_mpc, drive_n
+    row[C_OSQP] = 1.0 if used_osqp else 0.0
+    if not ok:
+        ints[I_STATUS] = SOLVER_FAILED
+        return
+    st.plant[:] = plant_step(st.plant, steer, drive_n, cfg.dt_s, cfg.substep_s, plant_params, actuator_params)
+    ints[I_STEP] += 1

@@ -1,22 +1,22 @@
 """Bayesian optimization with an ask/tell interface (paper section III-C), minimizing.
 
-Surrogate: a scikit-learn GP (ARD Matern 5/2 plus a noise term) on inputs scaled to the unit cube and
-normalized outputs. Acquisition: expected improvement times the probability of success from a GP
-classifier when some evaluations failed (as MATLAB bayesopt's error constraint does), so a failed
-evaluation never enters the regression as an invented number. Seed points: a scrambled Latin hypercube.
+Surrogate (:mod:`driftlab.core.surrogate`): a GP (ARD Matern 5/2 plus noise) on inputs scaled to the unit cube
+and normalized outputs. Acquisition (:mod:`driftlab.core.acquisition`): expected improvement times the
+probability of success when some evaluations failed (as MATLAB bayesopt's error constraint does), so a failed
+evaluation never enters the regression as an invented number. P(success) comes from a Laplace GP classifier
+(scikit-learn's; a least-squares label GP, tried, let twice as many proposals into a failing region) conditioned
+on at most ``_CLASSIFIER_POINTS`` evaluations: every failure and a spread of the successes. Seed points: a
+scrambled Latin hypercube.
 
-Determinism and resume: every proposal is a function of (seed, told history, pending points) only. The
-kernel hyperparameters are refit from a fixed starting point at history sizes that are multiples of
-``refit_every``, on that prefix of the history; between refits the GP is conditioned on the whole history
-with those hyperparameters held (~ms). A resumed optimizer therefore rebuilds the same state from
-``tell`` calls alone (``tell`` only records; fitting happens lazily in ``ask``).
-
-Hyperparameters are fit on at most 200 of those points (the same selection rule), which keeps a refit near
-0.5 s at n = 400; the GP then conditions on the whole active set.
+Determinism and resume: every proposal is a function of (seed, told history, pending points) only. Both GPs'
+hyperparameters are refit from a fixed starting point at history sizes that are multiples of ``refit_every``,
+on that prefix of the history and on at most ``_HYPER_FIT_POINTS`` of its points (~30 ms); between refits the
+GPs are conditioned on the whole active set with those hyperparameters held. A resumed optimizer therefore
+rebuilds the same state from ``tell`` calls alone (``tell`` only records; fitting happens lazily in ``ask``).
 
 Active set: the GP sees at most ``active_set`` successful observations: the best half by value, and a
 space-filling spread of the rest (greedy farthest-point order from the best), so that the surrogate stays
-accurate near the optimum and still knows the landscape (the cost is O(active_set^3) per fit).
+accurate near the optimum and still knows the landscape (the cost is O(active_set^3) per ask).
 
 Batch: points asked and not yet told are pending; the next ask treats them as observed at the GP mean
 ("kriging believer", Ginsbourger et al. 2010), so two workers get two different points.
@@ -32,21 +32,26 @@ import numpy as np
 from scipy.linalg import solve_triangular
 from scipy.optimize import minimize
 from scipy.special import erf
-from scipy.stats import norm, qmc
+from scipy.stats import qmc
 from sklearn.exceptions import ConvergenceWarning
-from sklearn.gaussian_process import GaussianProcessClassifier, GaussianProcessRegressor
+from sklearn.gaussian_process import GaussianProcessClassifier
 from sklearn.gaussian_process._gpc import COEFS, LAMBDAS
-from sklearn.gaussian_process.kernels import RBF, ConstantKernel, Matern, WhiteKernel
+from sklearn.gaussian_process.kernels import RBF, ConstantKernel
 
+from driftlab.core.acquisition import constrained_ei, expected_improvement, failure_clearance
 from driftlab.core.errors import ConfigError
 from driftlab.core.limits import check_int
+from driftlab.core.surrogate import GaussianProcess, Hyperparameters, fit_hyperparameters
 
-_CANDIDATES = 1000
+_CANDIDATES = 256
+_LOCAL_CANDIDATES = 128
 _LOCAL_STARTS = 2
-_HYPER_FIT_POINTS = 200  # hyperparameters from at most this many points; the GP then conditions on all
+_LOCAL_ITERATIONS = 10
+_HYPER_FIT_POINTS = 80  # hyperparameters from at most this many points; the GPs then condition on all
 _EI_XI = 0.0
 _MIN_SUCCESS_PROBABILITY = 0.5
 _FAILURE_CLEARANCE = 0.015  # unit-cube distance over which a failure suppresses proposals
+_CLASSIFIER_POINTS = 150  # the classifier conditions on every failure and a spread of successes, this many
 
 
 class SuccessProbability:
@@ -109,9 +114,9 @@ class BayesianOptimizer:
         self.y: list[float | None] = []  # None: failed evaluation
         self.pending: list[np.ndarray] = []
         self._hyper_at = -1
-        self._kernel = None
+        self._regression_hp: Hyperparameters | None = None
         self._clf_at = -1
-        self._clf_kernel = None
+        self._label_hp = None
 
     # -- public interface -------------------------------------------------------------------------------
     def ask(self) -> dict[str, float]:
@@ -168,15 +173,13 @@ class BayesianOptimizer:
         x_ok = x_all[ok]
         y_ok = np.array([v for v in self.y if v is not None])
         active = self._active_indices(x_ok, y_ok, self.active_set)
-        gp = self._regressor(x_ok[active], y_ok[active])
+        gp = GaussianProcess(x_ok[active], y_ok[active], self._regression_hyperparameters())
         if self.pending:  # kriging believer: pending points observed at the GP mean
             x_pend = np.array(self.pending)
-            x_fit = np.vstack([x_ok[active], x_pend])
-            y_fit = np.concatenate([y_ok[active], gp.predict(x_pend)])
-            gp = self._conditioned(x_fit, y_fit)
+            gp = gp.with_observations(x_pend, gp.predict(x_pend, return_std=False)[0])
         classifier = self._classifier(x_all, ok) if not ok.all() else None
         best = float(y_ok.min())
-        return self._maximize(gp, classifier, best, x_ok[int(np.argmin(y_ok))])
+        return self._maximize(gp, classifier, best, x_ok[int(np.argmin(y_ok))], x_all[~ok])
 
     def _active_indices(self, x: np.ndarray, y: np.ndarray, limit: int) -> np.ndarray:
         n = len(y)
@@ -185,95 +188,95 @@ class BayesianOptimizer:
         order = np.argsort(y, kind="stable")
         keep = list(order[: limit // 2])
         rest = order[limit // 2:]
-        # Farthest-point spread of the rest, starting from the kept set.
-        dist = np.min(np.linalg.norm(x[rest][:, None, :] - x[keep][None, :, :], axis=2), axis=1)
-        chosen = []
-        for _ in range(limit - len(keep)):
+        return np.array(keep + self._spread(x[rest], x[keep], limit - len(keep), rest))
+
+    @staticmethod
+    def _spread(candidates: np.ndarray, chosen: np.ndarray, count: int, ids: np.ndarray) -> list[int]:
+        """``count`` of ``ids`` (rows of ``candidates``) in greedy farthest-point order from ``chosen``."""
+        if len(chosen):
+            dist = np.min(np.linalg.norm(candidates[:, None, :] - chosen[None, :, :], axis=2), axis=1)
+        else:
+            dist = np.full(len(candidates), np.inf)
+        picked = []
+        for _ in range(min(count, len(candidates))):
             j = int(np.argmax(dist))
-            chosen.append(rest[j])
-            dist = np.minimum(dist, np.linalg.norm(x[rest] - x[rest[j]], axis=1))
+            picked.append(int(ids[j]))
+            dist = np.minimum(dist, np.linalg.norm(candidates - candidates[j], axis=1))
             dist[j] = -1.0
-        return np.array(keep + chosen)
+        return picked
 
-    def _base_kernel(self):
-        return (ConstantKernel(1.0, (1e-3, 1e3)) * Matern(length_scale=np.full(self.dim, 0.3),
-                                                           length_scale_bounds=(1e-2, 1e1), nu=2.5)
-                + WhiteKernel(1e-3, (1e-8, 1e-1)))
+    def _boundary(self) -> int:
+        """The history size whose prefix the hyperparameters are fit on (the last multiple of refit_every)."""
+        return (len(self.x) // self.refit_every) * self.refit_every
 
-    def _regressor(self, x: np.ndarray, y: np.ndarray) -> GaussianProcessRegressor:
-        """GP with hyperparameters refit at the last multiple of refit_every told (deterministic on resume)."""
-        boundary = (len(self.x) // self.refit_every) * self.refit_every
-        if self._kernel is None or self._hyper_at != boundary:
-            ok_prefix = [(xi, yi) for xi, yi in zip(self.x[:boundary], self.y[:boundary], strict=True)
-                         if yi is not None]
-            if len(ok_prefix) < 2:
-                ok_prefix = list(zip(x, y, strict=True))
-            xp = np.array([p[0] for p in ok_prefix])
-            yp = np.array([p[1] for p in ok_prefix])
-            active = self._active_indices(xp, yp, min(self.active_set, _HYPER_FIT_POINTS))
-            gp = GaussianProcessRegressor(self._base_kernel(), normalize_y=True, n_restarts_optimizer=0,
-                                          random_state=self.seed)
-            with warnings.catch_warnings():
-                warnings.simplefilter("ignore", ConvergenceWarning)
-                gp.fit(xp[active], yp[active])
-            self._kernel = gp.kernel_
+    def _regression_hyperparameters(self) -> Hyperparameters:
+        boundary = self._boundary()
+        if self._hyper_at != boundary:
+            prefix = [(xi, yi) for xi, yi in zip(self.x[:boundary], self.y[:boundary], strict=True) if yi is not None]
+            hp = Hyperparameters.default(self.dim)
+            if len(prefix) >= 2:  # else the defaults: a fit on data past the prefix would not replay on resume
+                xp = np.array([p[0] for p in prefix])
+                yp = np.array([p[1] for p in prefix])
+                chosen = self._active_indices(xp, yp, min(self.active_set, _HYPER_FIT_POINTS))
+                y_fit = yp[chosen]
+                y_fit = (y_fit - y_fit.mean()) / (y_fit.std() if y_fit.std() > 1e-12 else 1.0)
+                hp = fit_hyperparameters(xp[chosen], y_fit, hp)
+            self._regression_hp = hp
             self._hyper_at = boundary
-        return self._conditioned(x, y)
+        return self._regression_hp
 
-    def _conditioned(self, x: np.ndarray, y: np.ndarray) -> GaussianProcessRegressor:
-        gp = GaussianProcessRegressor(self._kernel, normalize_y=True, optimizer=None)
-        return gp.fit(x, y)
+    def _classifier_indices(self, x: np.ndarray, ok: np.ndarray, limit: int) -> np.ndarray:
+        """At most ``limit`` evaluations for the classifier: the failures (a spread of them beyond half the
+        limit), then a spread of the successes away from them."""
+        failed, succeeded = np.flatnonzero(~ok), np.flatnonzero(ok)
+        if len(failed) > limit // 2:
+            failed = np.array(self._spread(x[failed], np.empty((0, self.dim)), limit // 2, failed), dtype=int)
+        room = limit - len(failed)
+        if len(succeeded) > room:
+            succeeded = np.array(self._spread(x[succeeded], x[failed], room, succeeded), dtype=int)
+        return np.sort(np.concatenate([failed, succeeded]).astype(int))
 
     def _classifier(self, x: np.ndarray, ok: np.ndarray) -> SuccessProbability | None:
-        """P(success) from a GP classifier; its kernel is learnt on the same schedule as the regressor's."""
+        """P(success) from a GP classifier; its kernel is learnt on the regressor's schedule, on at most
+        ``_HYPER_FIT_POINTS`` of the prefix's evaluations."""
         if ok.sum() == 0:
             return None
-        boundary = (len(self.x) // self.refit_every) * self.refit_every
-        if self._clf_kernel is None or self._clf_at != boundary:
+        boundary = self._boundary()
+        if self._clf_at != boundary:
             ok_prefix = ok[:boundary]
             if 0 < ok_prefix.sum() < boundary:
                 kernel = ConstantKernel(4.0, (1e-1, 1e3)) * RBF(np.full(self.dim, 0.3), (0.05, 5.0))
+                chosen = self._classifier_indices(x[:boundary], ok_prefix, _HYPER_FIT_POINTS)
                 clf = GaussianProcessClassifier(kernel, random_state=self.seed)
                 with warnings.catch_warnings():
                     warnings.simplefilter("ignore", ConvergenceWarning)
-                    clf.fit(x[:boundary], ok_prefix.astype(int))
-                self._clf_kernel = clf.kernel_
+                    clf.fit(x[chosen], ok_prefix[chosen].astype(int))
+                self._label_hp = clf.kernel_
             else:
-                self._clf_kernel = ConstantKernel(4.0) * RBF(np.full(self.dim, 0.3))
+                self._label_hp = ConstantKernel(4.0) * RBF(np.full(self.dim, 0.3))
             self._clf_at = boundary
+        chosen = self._classifier_indices(x, ok, _CLASSIFIER_POINTS)
         # warm_start: sklearn searches the Laplace mode twice in one fit (for the likelihood, then for
         # prediction); the second search starts from the first one's mode. Nothing carries over between fits.
-        classifier = GaussianProcessClassifier(self._clf_kernel, optimizer=None, warm_start=True)
-        return SuccessProbability(classifier.fit(x, ok.astype(int)))
+        classifier = GaussianProcessClassifier(self._label_hp, optimizer=None, warm_start=True)
+        return SuccessProbability(classifier.fit(x[chosen], ok[chosen].astype(int)))
 
-    def _acquisition(self, gp, classifier, best: float, x: np.ndarray) -> np.ndarray:
-        mean, std = gp.predict(x, return_std=True)
-        std = np.maximum(std, 1e-12)
-        z = (best - mean - _EI_XI) / std
-        ei = (best - mean - _EI_XI) * norm.cdf(z) + std * norm.pdf(z)
-        if classifier is not None:
-            # EI weighted by P(success), and zero where success is less likely than not (a probabilistic
-            # constraint, Gelbart, Snoek & Adams 2014): where the regressor has no data its EI is large, and
-            # a soft weight alone lets it keep probing the failing region.
-            p_success = classifier(x)
-            ei = ei * p_success * (p_success >= _MIN_SUCCESS_PROBABILITY) * self._failure_clearance(x)
-        return ei
+    def _acquisition(self, gp: GaussianProcess, classifier: SuccessProbability | None, best: float,
+                     failed: np.ndarray, x: np.ndarray) -> np.ndarray:
+        mean, std = gp.predict(x)
+        ei = expected_improvement(mean, std, best, _EI_XI)
+        if classifier is None:
+            return ei
+        p_success = classifier(x)
+        return constrained_ei(ei, p_success, failure_clearance(x, failed, _FAILURE_CLEARANCE),
+                              _MIN_SUCCESS_PROBABILITY)
 
-    def _failure_clearance(self, x: np.ndarray) -> np.ndarray:
-        """1 - exp(-(d / r)^2), d the distance to the nearest failed point: where the failure boundary runs
-        close past the optimum, the classifier still says "likely success" right next to a failure, and EI
-        would propose the same failing point again and again."""
-        failed = np.array([xi for xi, yi in zip(self.x, self.y, strict=True) if yi is None])
-        if len(failed) == 0:
-            return np.ones(len(x))
-        d2 = np.min(((x[:, None, :] - failed[None, :, :]) ** 2).sum(axis=2), axis=1)
-        return 1.0 - np.exp(-d2 / _FAILURE_CLEARANCE**2)
-
-    def _maximize(self, gp, classifier, best: float, x_best: np.ndarray) -> np.ndarray:
+    def _maximize(self, gp: GaussianProcess, classifier: SuccessProbability | None, best: float,
+                  x_best: np.ndarray, failed: np.ndarray) -> np.ndarray:
         rng = self._rng()
-        local = np.clip(x_best + rng.normal(0.0, 0.05, (_CANDIDATES // 4, self.dim)), 0.0, 1.0)
+        local = np.clip(x_best + rng.normal(0.0, 0.05, (_LOCAL_CANDIDATES, self.dim)), 0.0, 1.0)
         candidates = np.vstack([rng.random((_CANDIDATES, self.dim)), local])
-        values = self._acquisition(gp, classifier, best, candidates)
+        values = self._acquisition(gp, classifier, best, failed, candidates)
         if values.max() <= 0.0 and classifier is not None:
             # Success looks unlikely everywhere: try where it is likeliest.
             return candidates[int(np.argmax(classifier(candidates)))]
@@ -285,12 +288,12 @@ class BayesianOptimizer:
         def negative_with_gradient(u):
             # Value and forward-difference gradient in one batched prediction (one GP solve, not d + 1).
             probes = np.vstack([u, u + step * np.eye(self.dim)])
-            values = -self._acquisition(gp, classifier, best, probes)
+            values = -self._acquisition(gp, classifier, best, failed, probes)
             return float(values[0]), (values[1:] - values[0]) / step
 
         for start in starts:
             res = minimize(negative_with_gradient, start, jac=True, method="L-BFGS-B",
-                           bounds=[(0.0, 1.0)] * self.dim, options={"maxiter": 15})
+                           bounds=[(0.0, 1.0)] * self.dim, options={"maxiter": _LOCAL_ITERATIONS})
             if np.all(np.isfinite(res.x)) and -res.fun > best_v:
                 best_x, best_v = np.clip(res.x, 0.0, 1.0), -float(res.fun)
         if self._is_repeat(best_x):

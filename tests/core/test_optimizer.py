@@ -103,6 +103,35 @@ def test_bad_bounds_name_the_field(bounds, field):
         BayesianOptimizer(bounds)
 
 
+def test_the_surrogate_equals_sklearns_gp_and_its_likelihood_gradient_is_exact():
+    """driftlab.core.surrogate against scikit-learn's GaussianProcessRegressor with the same fixed kernel, and the
+    analytic log-likelihood gradient against central differences."""
+    from sklearn.gaussian_process import GaussianProcessRegressor
+    from sklearn.gaussian_process.kernels import ConstantKernel, Matern, WhiteKernel
+
+    from driftlab.core.surrogate import GaussianProcess, Hyperparameters, log_marginal_likelihood
+
+    rng = np.random.default_rng(3)
+    x = rng.random((80, 4))
+    y = np.sin(5 * x[:, 0]) + x[:, 1] ** 2 + 0.01 * rng.standard_normal(80)
+    hp = Hyperparameters(np.array([0.3, 0.5, 0.8, 0.2]), 1.2, 1e-3)
+    kernel = ConstantKernel(1.2, "fixed") * Matern([0.3, 0.5, 0.8, 0.2], "fixed", nu=2.5) + WhiteKernel(1e-3, "fixed")
+    z = (y - y.mean()) / y.std()
+    reference = GaussianProcessRegressor(kernel).fit(x, z)
+    ours = GaussianProcess(x, z, hp)
+    query = rng.random((200, 4))
+    mean, std = ours.predict(query)
+    ref_mean, ref_std = reference.predict(query, return_std=True)
+    np.testing.assert_allclose(mean, ref_mean, atol=1e-9)
+    np.testing.assert_allclose(std, np.sqrt(np.maximum(ref_std**2 - 1e-3, 0.0)), atol=1e-7)  # latent, no noise
+    value, grad = log_marginal_likelihood(hp.as_log_vector(), x, z)
+    assert value == pytest.approx(reference.log_marginal_likelihood_value_, rel=1e-9)
+    h = 1e-6
+    numeric = [(log_marginal_likelihood(hp.as_log_vector() + h * e, x, z)[0]
+                - log_marginal_likelihood(hp.as_log_vector() - h * e, x, z)[0]) / (2 * h) for e in np.eye(6)]
+    np.testing.assert_allclose(grad, numeric, rtol=1e-5, atol=1e-5)
+
+
 def test_success_probability_equals_sklearns_predict_proba():
     from sklearn.gaussian_process import GaussianProcessClassifier
     from sklearn.gaussian_process.kernels import RBF, ConstantKernel
@@ -115,3 +144,19 @@ def test_success_probability_equals_sklearns_predict_proba():
     clf = GaussianProcessClassifier(ConstantKernel(4.0) * RBF(np.full(4, 0.3)), optimizer=None).fit(x, ok)
     query = rng.random((500, 4))
     np.testing.assert_allclose(SuccessProbability(clf)(query), clf.predict_proba(query)[:, 1], atol=1e-10)
+
+
+def test_pending_points_enter_by_a_block_update_equal_to_a_full_refactorization():
+    """Kriging believer's pending points extend the Cholesky factor in O(n^2 q); the factor is the joint
+    kernel matrix's."""
+    from driftlab.core.surrogate import GaussianProcess, Hyperparameters, matern52
+
+    rng = np.random.default_rng(4)
+    x, y = rng.random((60, 4)), rng.standard_normal(60)
+    base = GaussianProcess(x[:50], y[:50], Hyperparameters.default(4))
+    updated = base.with_observations(x[50:], y[50:])
+    joint = matern52(x, x, base.hp) + (base.hp.noise_variance + 1e-10) * np.eye(60)
+    joint[50:, 50:] += 1e-12 * np.eye(10)
+    np.testing.assert_allclose(updated.chol @ updated.chol.T, joint, atol=1e-10)
+    mean, std = updated.predict(x[50:])
+    np.testing.assert_allclose(mean, y[50:], atol=0.1)  # observed with noise 1e-3: the mean passes near them

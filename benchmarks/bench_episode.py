@@ -46,8 +46,9 @@ def main() -> None:
         mpc.QpSession.solve_constrained = _solve
         print(f"plant={plant:8s} controller={controller:8s} status={result.status:10s} "
               f"steps={len(result.trajectory)} episode wall median {statistics.median(walls):.1f} ms (7 runs)")
-        print(f"    constrained QP ({config.mpc.qp_solver}) in {len(OSQP_US)}/{len(result.trajectory)} steps, median {np.median(OSQP_US):.0f} us, "
-              f"{np.sum(OSQP_US) / 1e3:.1f} ms of the episode")
+        solver = config.mpc.qp_solver
+        print(f"    constrained QP ({solver}) in {len(OSQP_US)}/{len(result.trajectory)} steps, "
+              f"median {np.median(OSQP_US):.0f} us, {np.sum(OSQP_US) / 1e3:.1f} ms of the episode")
 
 
 if __name__ == "__main__":

@@ -149,8 +149,14 @@ def _tuning_spec(args: argparse.Namespace):
         name, _, pair = item.partition("=")
         lo, _, hi = pair.partition(":")
         bounds[name.strip()] = [lo, hi]
-    iterations = 500 if args.iterations is None else args.iterations
-    return TuningSpec(iterations=iterations, seed_points=args.seed_points, active_set=args.active_set,
+    from driftlab.core.tuning import DEFAULT_SEED_POINTS, PAPER_PRESET
+
+    preset = PAPER_PRESET if args.preset == "paper" else {"iterations": 500, "seed_points": DEFAULT_SEED_POINTS,
+                                                          "active_set": 400}
+    iterations = preset["iterations"] if args.iterations is None else args.iterations
+    seed_points = preset["seed_points"] if args.seed_points is None else args.seed_points
+    active_set = preset["active_set"] if args.active_set is None else args.active_set
+    return TuningSpec(iterations=iterations, seed_points=seed_points, active_set=active_set,
                       seed=args.seed, robust_samples=args.robust_samples, confirm_samples=args.confirm_samples,
                       bounds=bounds, config=config)
 
@@ -311,8 +317,11 @@ def _add_job_options(parser: argparse.ArgumentParser) -> None:
     """The options of a tuning job's specification (shared by `tune` and `study seeds`), but its seed."""
     parser.add_argument("--iterations", type=int, help="evaluations in total (default 500 for a new job); on a "
                         "stored job a new budget: a finished job continues to it")
-    parser.add_argument("--seed-points", type=int, default=20)
-    parser.add_argument("--active-set", type=int, default=400)
+    parser.add_argument("--preset", choices=("default", "paper"), default="default",
+                        help="paper: the paper's BO, 500 iterations, 20 space-filling points, active set 400 "
+                             "(default: 12 space-filling points); options given explicitly win")
+    parser.add_argument("--seed-points", type=int, help="space-filling evaluations before the GP (default 12)")
+    parser.add_argument("--active-set", type=int, help="most evaluations the GP is fit on (default 400)")
     parser.add_argument("--robust-samples", type=int, default=DEFAULT_ROBUST_SAMPLES, metavar="N",
                         help=f"seeded episodes per evaluation, 1..{MAX_ROBUST_SAMPLES} (default "
                              f"{DEFAULT_ROBUST_SAMPLES}): J is their mean and an evaluation completes only if all "

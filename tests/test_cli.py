@@ -141,3 +141,16 @@ def test_robust_evaluation_stores_each_seed_and_rescore_uses_fresh_ones(tmp_path
 def test_rescore_of_an_unknown_job_is_one_line_exit_2(tmp_path):
     out = _run("rescore", "--name", "nope", "--db", str(tmp_path / "t.db"))
     assert out.returncode == 2 and "nope" in out.stderr and len(out.stderr.strip().splitlines()) == 1
+
+
+@pytest.mark.parametrize(("preset", "extra", "expected"), [
+    ("default", [], {"iterations": 500, "seed_points": 12, "active_set": 400}),
+    ("paper", [], {"iterations": 500, "seed_points": 20, "active_set": 400}),
+    ("paper", ["--seed-points", "7", "--iterations", "30"], {"iterations": 30, "seed_points": 7, "active_set": 400}),
+])
+def test_tune_presets_set_the_bo_budget_and_explicit_options_win(preset, extra, expected):
+    from driftlab.cli import _tuning_spec, build_parser
+
+    args = build_parser().parse_args(["tune", "--preset", preset, *extra])
+    spec = _tuning_spec(args).to_dict()
+    assert {k: spec[k] for k in expected} == expected

@@ -32,9 +32,7 @@ from typing import NamedTuple
 
 import daqp
 import numpy as np
-import osqp
 import scipy.linalg
-import scipy.sparse as sp
 from numba import njit
 
 from driftlab.core.equilibrium import Equilibrium, jacobians
@@ -494,10 +492,13 @@ class QpSession:
 
     def __init__(self, qp: ReferenceQp) -> None:
         self.qp = qp
-        self._solver: osqp.OSQP | None = None
+        self._solver = None
 
-    def _osqp(self) -> osqp.OSQP:
+    def _osqp(self):
         if self._solver is None:
+            import osqp  # only the osqp solver needs it (~0.2 s of a cold start)
+            import scipy.sparse as sp
+
             qp = self.qp
             solver = osqp.OSQP()
             solver.setup(

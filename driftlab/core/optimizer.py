@@ -8,11 +8,12 @@ evaluation never enters the regression as an invented number. P(success) comes f
 on at most ``_CLASSIFIER_POINTS`` evaluations: every failure and a spread of the successes. Seed points: a
 scrambled Latin hypercube.
 
-Determinism and resume: every proposal is a function of (seed, told history, pending points) only. Both GPs'
-hyperparameters are refit from a fixed starting point at history sizes that are multiples of ``refit_every``,
-on that prefix of the history and on at most ``_HYPER_FIT_POINTS`` of its points (~30 ms); between refits the
-GPs are conditioned on the whole active set with those hyperparameters held. A resumed optimizer therefore
-rebuilds the same state from ``tell`` calls alone (``tell`` only records; fitting happens lazily in ``ask``).
+Determinism and resume: every proposal is a function of (seed, told history, pending points) only. The GP's
+hyperparameters are refit from a fixed starting point at history sizes that are multiples of ``refit_every``
+plus half a period (the classifier's at the multiples, so that no ask pays for both), on that prefix of the
+history and on at most ``_HYPER_FIT_POINTS`` of its points (~30 ms each); between refits both models are
+conditioned with those hyperparameters held. A resumed optimizer therefore rebuilds the same state from
+``tell`` calls alone (``tell`` only records; fitting happens lazily in ``ask``, the first one fitting both).
 
 Active set: the GP sees at most ``active_set`` successful observations: the best half by value, and a
 space-filling spread of the rest (greedy farthest-point order from the best), so that the surrogate stays
@@ -52,6 +53,15 @@ _EI_XI = 0.0
 _MIN_SUCCESS_PROBABILITY = 0.5
 _FAILURE_CLEARANCE = 0.015  # unit-cube distance over which a failure suppresses proposals
 _CLASSIFIER_POINTS = 150  # the classifier conditions on every failure and a spread of successes, this many
+_CLASSIFIER_FIT_ITERATIONS = 20
+
+
+def _bounded_lbfgs(obj_func, initial_theta, bounds):
+    """sklearn's default classifier optimizer (L-BFGS-B on the log marginal likelihood) with at most 20
+    iterations: run to convergence it took 20-60 ms at a refit, and the hyperparameters move little after."""
+    result = minimize(obj_func, initial_theta, method="L-BFGS-B", jac=True, bounds=bounds,
+                      options={"maxiter": _CLASSIFIER_FIT_ITERATIONS})
+    return result.x, result.fun
 
 
 class SuccessProbability:
@@ -205,12 +215,14 @@ class BayesianOptimizer:
             dist[j] = -1.0
         return picked
 
-    def _boundary(self) -> int:
-        """The history size whose prefix the hyperparameters are fit on (the last multiple of refit_every)."""
-        return (len(self.x) // self.refit_every) * self.refit_every
+    def _boundary(self, offset: int = 0) -> int:
+        """The history size whose prefix the hyperparameters are fit on: the last multiple of refit_every, plus
+        ``offset`` (the regressor refits half a period after the classifier, so that no ask pays for both)."""
+        n = len(self.x) - offset
+        return 0 if n < 0 else (n // self.refit_every) * self.refit_every + offset
 
     def _regression_hyperparameters(self) -> Hyperparameters:
-        boundary = self._boundary()
+        boundary = self._boundary(self.refit_every // 2)
         if self._hyper_at != boundary:
             prefix = [(xi, yi) for xi, yi in zip(self.x[:boundary], self.y[:boundary], strict=True) if yi is not None]
             hp = Hyperparameters.default(self.dim)
@@ -247,7 +259,7 @@ class BayesianOptimizer:
             if 0 < ok_prefix.sum() < boundary:
                 kernel = ConstantKernel(4.0, (1e-1, 1e3)) * RBF(np.full(self.dim, 0.3), (0.05, 5.0))
                 chosen = self._classifier_indices(x[:boundary], ok_prefix, _HYPER_FIT_POINTS)
-                clf = GaussianProcessClassifier(kernel, random_state=self.seed)
+                clf = GaussianProcessClassifier(kernel, optimizer=_bounded_lbfgs, random_state=self.seed)
                 with warnings.catch_warnings():
                     warnings.simplefilter("ignore", ConvergenceWarning)
                     clf.fit(x[chosen], ok_prefix[chosen].astype(int))

@@ -9,7 +9,7 @@ from fastapi import Path, Query
 from pydantic import BaseModel, ConfigDict, Field
 
 from driftlab.core.limits import JOB_LIMITS
-from driftlab.core.tuning import DEFAULT_CONFIRM_SAMPLES, DEFAULT_ROBUST_SAMPLES
+from driftlab.core.tuning import DEFAULT_CONFIRM_SAMPLES, DEFAULT_ROBUST_SAMPLES, DEFAULT_SEED_POINTS
 
 MAX_ID = 2**63 - 1  # SQLite's INTEGER; larger ids cannot exist (and used to overflow into a 500)
 MAX_PAGE = 1000
@@ -32,7 +32,7 @@ class JobCreate(BaseModel):
 
     name: str | None = Field(default=None, min_length=1, max_length=200)
     iterations: int = _limited("iterations", description="evaluations in total")
-    seed_points: int = _limited("seed_points", 20)
+    seed_points: int = _limited("seed_points", DEFAULT_SEED_POINTS)
     active_set: int = _limited("active_set", 400)
     seed: int = _limited("seed", 0)
     robust_samples: int = _limited("robust_samples", DEFAULT_ROBUST_SAMPLES,

@@ -1,0 +1,190 @@
+"""Every speed figure of DriftLab in one run, each also as a ratio to a fixed pure-Python calibration loop timed
+in the same run (these machines are shared and noisy: compare ratios across machines and days, seconds
+within one run).
+
+Figures: warm episode on one core (default plant, median of 15), cold `driftlab episode` (a new process, median
+of 3), ask+tell at n = 400 (median and worst of 31 consecutive, three refits of each model among them; and the
+first ask after a rebuild from stored history, which fits both), the
+paper's 500-run (500 iterations, 20 seed points, active set 400, 2 workers, one episode per evaluation) and
+where its seconds go, and with --robust the same run with the default robust evaluation (4 + 4 seeds).
+
+Run: OMP_NUM_THREADS=1 python benchmarks/bench_all.py [--robust] [--runs 1]
+"""
+
+from __future__ import annotations
+
+import argparse
+import os
+import statistics
+import subprocess
+import sys
+import tempfile
+import time
+
+os.environ.setdefault("OMP_NUM_THREADS", "1")
+
+import numpy as np  # noqa: E402
+
+
+def calibration_ms() -> float:
+    """A fixed pure-Python loop (integer arithmetic and a dict): median of 5, in ms."""
+    def loop() -> int:
+        table: dict[int, int] = {}
+        total = 0
+        for i in range(400_000):
+            total += (i * i) % 7
+            table[i & 1023] = total
+        return total
+
+    times = []
+    for _ in range(5):
+        t0 = time.perf_counter()
+        loop()
+        times.append((time.perf_counter() - t0) * 1e3)
+    return statistics.median(times)
+
+
+def warm_episode_ms() -> float:
+    from driftlab.core.config import EpisodeConfig, Theta
+    from driftlab.core.episode import run_episode
+
+    config = EpisodeConfig.preset("default")
+    run_episode(Theta(), config)
+    times = []
+    for seed in range(15):
+        t0 = time.perf_counter()
+        run_episode(Theta(), config, seed=seed)
+        times.append((time.perf_counter() - t0) * 1e3)
+    return statistics.median(times)
+
+
+def cold_episode_s() -> float:
+    times = []
+    for _ in range(3):
+        t0 = time.perf_counter()
+        subprocess.run([sys.executable, "-m", "driftlab.cli", "episode"], check=True, capture_output=True)
+        times.append(time.perf_counter() - t0)
+    return statistics.median(times)
+
+
+def proposal_ms() -> tuple[float, float, float]:
+    sys.path.insert(0, os.path.dirname(__file__))
+    from bench_optimizer import BOUNDS, objective
+
+    from driftlab.core.optimizer import BayesianOptimizer
+
+    rng = np.random.default_rng(0)
+    opt = BayesianOptimizer(BOUNDS, seed_points=20, active_set=400, seed=0)
+    for _ in range(400):
+        theta = {k: float(rng.uniform(*b)) for k, b in BOUNDS.items()}
+        opt.tell(theta, objective(theta))
+    t0 = time.perf_counter()
+    theta = opt.ask()  # the first ask after a rebuild fits both models' hyperparameters
+    opt.tell(theta, objective(theta))
+    first = (time.perf_counter() - t0) * 1e3
+    times = []
+    for _ in range(31):
+        t0 = time.perf_counter()
+        theta = opt.ask()
+        opt.tell(theta, objective(theta))
+        times.append((time.perf_counter() - t0) * 1e3)
+    return statistics.median(times), max(times), first
+
+
+class _Timer:
+    """Wraps a callable and sums the seconds spent in it."""
+
+    def __init__(self, owner, name: str) -> None:
+        self.owner, self.name, self.original, self.seconds, self.calls = owner, name, getattr(owner, name), 0.0, 0
+        timer = self
+
+        def timed(*args, **kwargs):
+            t0 = time.perf_counter()
+            try:
+                return timer.original(*args, **kwargs)
+            finally:
+                timer.seconds += time.perf_counter() - t0
+                timer.calls += 1
+
+        setattr(owner, name, timed)
+
+    def restore(self) -> None:
+        setattr(self.owner, self.name, self.original)
+
+
+def tuning_run(robust: bool) -> dict[str, float]:
+    """A whole job as `driftlab tune` runs it, with the main process's time split by where it goes."""
+    from driftlab.core.optimizer import BayesianOptimizer
+    from driftlab.core.tuning import TuningSpec
+    from driftlab.db import lifecycle, storage
+    from driftlab.worker import job_loop
+    from driftlab.worker.executor import LocalProcessExecutor
+
+    spec = TuningSpec(iterations=500, seed_points=20, active_set=400, seed=0,
+                      **({} if robust else {"robust_samples": 1, "confirm_samples": 0}))
+    with tempfile.TemporaryDirectory() as folder:
+        t0 = time.perf_counter()
+        factory = storage.open_database(f"sqlite:///{folder}/bench.db")
+        runner = lifecycle.new_runner_id("bench")
+        with storage.transaction(factory) as session:
+            job_id = storage.create_job(session, name="bench", spec=spec.to_dict(), seed=0).id
+        job_loop.claim_job(factory, job_id, runner)
+        executor = LocalProcessExecutor(2)
+        executor.warm_up().result()
+        startup = time.perf_counter() - t0
+        timers = [_Timer(BayesianOptimizer, "ask"), _Timer(BayesianOptimizer, "tell"), _Timer(job_loop, "_store")]
+        episode_ms: list[float] = []
+        original_submit = executor.submit
+
+        def submit(*args, **kwargs):
+            future = original_submit(*args, **kwargs)
+            future.add_done_callback(lambda f: episode_ms.append(f.result().wall_ms))
+            return future
+
+        executor.submit = submit
+        t1 = time.perf_counter()
+        try:
+            job_loop.run_job(factory, job_id, executor, runner=runner, workers=2)
+        finally:
+            for timer in timers:
+                timer.restore()
+            executor.shutdown()
+        loop_s = time.perf_counter() - t1
+    ask, tell, store = timers
+    return {"startup_s": startup, "loop_s": loop_s, "wall_s": startup + loop_s, "ask_s": ask.seconds,
+            "tell_s": tell.seconds, "store_s": store.seconds, "episodes": len(episode_ms),
+            "episode_cpu_s": sum(episode_ms) / 1e3}
+
+
+def main() -> None:
+    parser = argparse.ArgumentParser()
+    parser.add_argument("--robust", action="store_true", help="also the 500-run with robust evaluation")
+    parser.add_argument("--runs", type=int, default=1, help="500-runs to take the median of")
+    args = parser.parse_args()
+    cal = calibration_ms()
+    print(f"calibration loop: {cal:.1f} ms (every ratio below is figure / this)")
+
+    def show(label: str, value: float, unit: str, target: str) -> None:
+        scale = 1e3 if unit == "s" else 1.0
+        print(f"  {label:44s} {value:8.3f} {unit:2s}  ratio {value * scale / cal:7.2f}   target {target}")
+
+    show("warm episode, default plant (median of 15)", warm_episode_ms(), "ms", "<= 20 ms")
+    show("cold `driftlab episode` (median of 3)", cold_episode_s(), "s", "<= 1.5 s")
+    median, worst, first = proposal_ms()
+    show("ask+tell at n = 400, median of 31", median, "ms", "<= 30 ms")
+    show("ask+tell at n = 400, worst of 31 (3+3 refits)", worst, "ms", "<= 100 ms")
+    show("first ask+tell after a resume at n = 400", first, "ms", "(both refits at once)")
+    for robust in ([False, True] if args.robust else [False]):
+        runs = [tuning_run(robust) for _ in range(args.runs)]
+        run = {k: statistics.median(r[k] for r in runs) for k in runs[0]}
+        name = "robust 4+4 seeds" if robust else "one episode per evaluation"
+        show(f"500-run, 2 workers, {name}", run["wall_s"], "s", "<= 180 s" if robust else "<= 40 s")
+        print(f"    where it goes: start-up {run['startup_s']:.1f} s (database, 2 worker processes); job loop "
+              f"{run['loop_s']:.1f} s, of which in the main process: ask {run['ask_s']:.1f} s, tell "
+              f"{run['tell_s']:.2f} s, storage {run['store_s']:.1f} s, the rest waiting for episodes; "
+              f"{run['episodes']:.0f} episodes took {run['episode_cpu_s']:.1f} s in the workers "
+              f"({run['episode_cpu_s'] / 2:.1f} s per worker)")
+
+
+if __name__ == "__main__":
+    main()

@@ -1,0 +1,129 @@
+"""Sample efficiency on the drift objective itself: DriftLab's optimizer against Optuna's TPESampler and GPSampler
+and uniform random search, side by side.
+
+Every method sees the same objective: a theta in the default bounds scored as a tuning job scores it (the
+default plant, ``--robust-samples`` seeded episodes with common random numbers, failed episodes at their
+penalty; confirmation seeds off, so every evaluation costs the same episodes). DriftLab is told a failed
+evaluation as failed (its interface); the peers get the penalized mean (theirs: a number). Printed: the median
+over BO seeds of the best completed J after 25, 50 and 100 evaluations (lower is better), its quartiles, and
+the CPU seconds a run took (episodes included).
+
+Optuna is a benchmark-only extra (``pip install optuna torch``; its GPSampler needs torch), never a runtime
+dependency.
+
+Run: OMP_NUM_THREADS=1 python benchmarks/peers.py [--seeds 6] [--evaluations 100] [--methods driftlab,tpe,gp,random]
+     (``driftlab-sN``: DriftLab with N space-filling points, e.g. driftlab-s20 for the paper's 20)
+"""
+
+from __future__ import annotations
+
+import argparse
+import os
+import time
+from concurrent.futures import ProcessPoolExecutor
+
+import numpy as np
+
+os.environ.setdefault("OMP_NUM_THREADS", "1")
+
+CHECKPOINTS = (25, 50, 100)
+
+
+def _objective(robust_samples: int, bo_seed: int):
+    """theta dict -> (J or None if the evaluation failed, penalized J)."""
+    from driftlab.core.config import EpisodeConfig, Theta
+    from driftlab.core.episode import run_episode
+    from driftlab.core.robust import SampleResult, aggregate, tuning_seeds
+
+    config = EpisodeConfig.preset("default")
+    seeds = tuning_seeds(bo_seed, robust_samples)
+
+    def evaluate(theta: dict[str, float]) -> tuple[float | None, float]:
+        samples = []
+        for seed in seeds:
+            r = run_episode(Theta.from_mapping(theta), config, seed=seed)
+            samples.append(SampleResult(seed, r.status, r.J, r.metrics.completed_fraction, None))
+        score = aggregate(samples)
+        return (score.J if score.status == "completed" else None), score.J
+
+    return evaluate
+
+
+def _run(args: tuple[str, int, int, int]) -> tuple[str, int, list[float], float]:
+    """One optimizer run: (method, seed, best completed J after each evaluation, CPU seconds)."""
+    method, bo_seed, evaluations, robust_samples = args
+    from driftlab.core.tuning import DEFAULT_BOUNDS, TuningSpec
+
+    evaluate = _objective(robust_samples, bo_seed)
+    bounds = DEFAULT_BOUNDS
+    trace: list[float] = []
+    best = np.inf
+    started = time.process_time()
+    if method.startswith("driftlab"):
+        from driftlab.core.optimizer import BayesianOptimizer
+
+        # "driftlab": the job default; "driftlab-sN": N space-filling points first
+        seed_points = int(method.split("-s")[1]) if "-s" in method else TuningSpec().seed_points
+        opt = BayesianOptimizer(bounds, seed_points=seed_points, active_set=400, seed=bo_seed)
+        for _ in range(evaluations):
+            theta = opt.ask()
+            value, _ = evaluate(theta)
+            opt.tell(theta, value)
+            best = min(best, value) if value is not None else best
+            trace.append(best)
+    elif method == "random":
+        rng = np.random.default_rng(bo_seed)
+        for _ in range(evaluations):
+            value, _ = evaluate({k: float(rng.uniform(*b)) for k, b in bounds.items()})
+            best = min(best, value) if value is not None else best
+            trace.append(best)
+    else:
+        import optuna
+
+        optuna.logging.set_verbosity(optuna.logging.WARNING)
+        sampler = (optuna.samplers.TPESampler(seed=bo_seed) if method == "tpe"
+                   else optuna.samplers.GPSampler(seed=bo_seed))
+        study = optuna.create_study(sampler=sampler, direction="minimize")
+
+        def objective(trial):
+            nonlocal best
+            theta = {k: trial.suggest_float(k, *b) for k, b in bounds.items()}
+            value, penalized = evaluate(theta)
+            best = min(best, value) if value is not None else best
+            trace.append(best)
+            return penalized
+
+        study.optimize(objective, n_trials=evaluations)
+    return method, bo_seed, trace, time.process_time() - started
+
+
+def main() -> None:
+    parser = argparse.ArgumentParser()
+    parser.add_argument("--seeds", type=int, default=6)
+    parser.add_argument("--evaluations", type=int, default=100)
+    parser.add_argument("--robust-samples", type=int, default=4)
+    parser.add_argument("--methods", default="driftlab,tpe,gp,random")
+    parser.add_argument("--workers", type=int, default=2)
+    args = parser.parse_args()
+    methods = args.methods.split(",")
+    jobs = [(m, s, args.evaluations, args.robust_samples) for s in range(args.seeds) for m in methods]
+    with ProcessPoolExecutor(args.workers) as pool:
+        results = list(pool.map(_run, jobs))
+    points = [c for c in CHECKPOINTS if c <= args.evaluations]
+    print(f"drift objective, default plant and bounds, {args.robust_samples} episodes per evaluation, "
+          f"{args.seeds} seeds; best completed J (median [q25, q75]) after n evaluations; lower is better")
+    print("| method | " + " | ".join(f"n = {c}" for c in points) + " | CPU s per run |")
+    print("|---|" + "---|" * (len(points) + 1))
+    for method in methods:
+        runs = [r for r in results if r[0] == method]
+        cells = []
+        for c in points:
+            values = np.array([r[2][c - 1] for r in runs])
+            q25, med, q75 = np.percentile(values, [25, 50, 75])
+            cells.append(f"{med:.3f} [{q25:.2f}, {q75:.2f}]")
+        cpu = np.median([r[3] for r in runs])
+        print(f"| {method} | " + " | ".join(cells) + f" | {cpu:.1f} |")
+
+
+if __name__ == "__main__":
+    main()

@@ -10,7 +10,8 @@ scrambled Latin hypercube.
 
 Determinism and resume: every proposal is a function of (seed, told history, pending points) only. The GP's
 hyperparameters are refit from a fixed starting point at history sizes that are multiples of ``refit_every``
-plus half a period (the classifier's at the multiples, so that no ask pays for both), on that prefix of the
+plus half a period (the classifier's at the multiples, so that no ask pays for both; below 4 periods, where fits
+are cheap and move most, every half period), on that prefix of the
 history and on at most ``_HYPER_FIT_POINTS`` of its points (~30 ms each); between refits both models are
 conditioned with those hyperparameters held. A resumed optimizer therefore rebuilds the same state from
 ``tell`` calls alone (``tell`` only records; fitting happens lazily in ``ask``, the first one fitting both).
@@ -221,8 +222,16 @@ class BayesianOptimizer:
         n = len(self.x) - offset
         return 0 if n < 0 else (n // self.refit_every) * self.refit_every + offset
 
+    def _regression_boundary(self) -> int:
+        """The regressor refits every half period while the history is short (fits are cheap there and its
+        hyperparameters move most), then half a period after the classifier."""
+        half = max(self.refit_every // 2, 1)
+        if len(self.x) < 4 * self.refit_every:
+            return (len(self.x) // half) * half
+        return self._boundary(half)
+
     def _regression_hyperparameters(self) -> Hyperparameters:
-        boundary = self._boundary(self.refit_every // 2)
+        boundary = self._regression_boundary()
         if self._hyper_at != boundary:
             prefix = [(xi, yi) for xi, yi in zip(self.x[:boundary], self.y[:boundary], strict=True) if yi is not None]
             hp = Hyperparameters.default(self.dim)

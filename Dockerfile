@@ -11,7 +11,7 @@ RUN pip install --no-cache-dir ".[dask]" \
     && useradd --create-home --uid 1000 driftlab \
     && mkdir -p /data "$NUMBA_CACHE_DIR" \
     # Warm the numba cache at build time: the first episode would otherwise compile for ~5 s.
-    && driftlab episode --plant nominal --controller paper > /dev/null \
+    && driftlab episode --plant nominal --controller paper > /dev/null && driftlab episode > /dev/null \
     && chown -R driftlab /data "$NUMBA_CACHE_DIR"
 
 USER driftlab

@@ -56,7 +56,9 @@ def _independent_solution(qp: ReferenceQp, z_now, z_ref):
     replace(MpcConfig.paper(), osqp_eps=1e-9),
     replace(MpcConfig.paper(), osqp_eps=1e-9, discretization="zoh"),
     replace(MpcConfig(), osqp_eps=1e-9, terminal_cost=False),  # path states and actuator lags
-], ids=["paper-euler", "paper-zoh", "default"])
+    replace(MpcConfig.paper(), qp_solver="daqp"),
+    replace(MpcConfig(), qp_solver="osqp", osqp_eps=1e-9, terminal_cost=False),
+], ids=["paper-euler", "paper-zoh", "default", "paper-daqp", "default-osqp"])
 def test_constrained_solution_matches_independent_solve(config):
     qp = ReferenceQp(config, RIGHT, P)
     # Just after a left-to-right switch: the car is in the left drift, the reference is the right one.

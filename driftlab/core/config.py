@@ -178,14 +178,42 @@ def apply_overrides(config: EpisodeConfig, overrides: dict[str, Any]) -> Episode
         section, _, name = dotted.partition(".")
         if section not in sections or not name:
             raise ConfigError(f"unknown config key {dotted!r}; keys look like "
-                              f"'<section>.<field>' with section one of {', '.join(sections)}")
+                              f"'<section>.<field>' with section one of {', '.join(sections)}", field=dotted)
         valid = {f.name for f in fields(sections[section])}
         if name not in valid:
-            raise ConfigError(f"unknown config key {dotted!r}; {section} has: {', '.join(sorted(valid))}")
+            raise ConfigError(f"unknown config key {dotted!r}; {section} has: {', '.join(sorted(valid))}",
+                              field=dotted)
         current = getattr(sections[section], name)
         changes.setdefault(section, {})[name] = _coerce(section, name, current, raw)
     updated = {s: replace(sections[s], **c) for s, c in changes.items()}
     return replace(config, **updated)
+
+
+def check_json_types(values: dict[str, Any]) -> None:
+    """Refuse a JSON value of the wrong type for its config key (flat dotted keys or nested sections): a number
+    given as text ("0.03"), a switch as 1. The CLI's ``--set`` parses text; a JSON document states its types.
+    Unknown keys pass here: :func:`apply_overrides` refuses them, naming them.
+
+    Raises:
+        ConfigError: naming the key and the JSON type it needs.
+    """
+    if values and all(isinstance(v, dict) for v in values.values()):
+        values = {f"{section}.{k}": v for section, fields_ in values.items() for k, v in fields_.items()}
+    defaults = config_keys()
+    for key, raw in values.items():
+        if key not in defaults:
+            continue
+        current = defaults[key]
+        if isinstance(current, bool):
+            ok, kind = isinstance(raw, bool), "true or false"
+        elif isinstance(current, int):
+            ok, kind = isinstance(raw, int) and not isinstance(raw, bool), "an integer"
+        elif isinstance(current, float):
+            ok, kind = isinstance(raw, (int, float)) and not isinstance(raw, bool), "a number"
+        else:
+            ok, kind = isinstance(raw, str), "a string"
+        if not ok:
+            raise ConfigError(f"{key} must be {kind} (a JSON value of that type), got {raw!r}", field=key)
 
 
 def config_to_dict(config: EpisodeConfig) -> dict[str, dict[str, Any]]:

@@ -2,7 +2,12 @@
 
 
 class ConfigError(ValueError):
-    """A configuration value is missing, unknown or out of its allowed range (the message names it)."""
+    """A configuration value is missing, unknown or out of its allowed range (the message names it; ``field``,
+    when given, is the key the message is about, for the API's error list)."""
+
+    def __init__(self, message: str, *, field: str | None = None) -> None:
+        super().__init__(message)
+        self.field = field
 
 
 class NoEquilibriumError(ValueError):

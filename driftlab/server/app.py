@@ -80,7 +80,7 @@ def create_app(db_url: str, *, workers: int | None = 2, start_worker: bool = Tru
     async def _config_error(_request: Request, exc: ConfigError):
         # The same shape as a schema error: ConfigError messages start with the field they are about.
         message = str(exc)
-        field = message.split(" ", 1)[0].strip("'\":")
+        field = exc.field or message.split(" ", 1)[0].strip("'\":")
         return JSONResponse({"detail": message, "errors": [{"field": field, "message": message}]}, status_code=422)
 
     @app.exception_handler(storage.NotFound)

@@ -8,6 +8,8 @@ from typing import Annotated, Any, Literal
 from fastapi import Path, Query
 from pydantic import BaseModel, ConfigDict, Field
 
+from driftlab.core.config import check_json_types
+from driftlab.core.errors import ConfigError
 from driftlab.core.limits import JOB_LIMITS
 from driftlab.core.tuning import DEFAULT_CONFIRM_SAMPLES, DEFAULT_ROBUST_SAMPLES, DEFAULT_SEED_POINTS
 
@@ -27,6 +29,30 @@ def _limited(name: str, default: int | None = None, description: str = "") -> An
     return Field(default=default, ge=lo, le=hi, strict=True, description=description)
 
 
+# A JSON number (an integer is a number; text and true/false are not).
+StrictNumber = Annotated[float, Field(strict=True)]
+
+
+def check_document_types(doc: dict[str, Any]) -> None:
+    """Numbers are strict inside a posted document's ``config``, ``grid`` and a seeds study's job ``spec`` too,
+    as they are at its top level (pydantic checks those): "0.03" is not 0.03.
+
+    Raises:
+        ConfigError: naming the key.
+    """
+    check_json_types(doc.get("config") or {})
+    for key, values in (doc.get("grid") or {}).items():
+        for value in values if isinstance(values, list) else []:
+            check_json_types({key: value})
+    spec = doc.get("spec")
+    if isinstance(spec, dict):
+        check_json_types(spec.get("config") or {})
+        for name, pair in (spec.get("bounds") or {}).items():
+            if not isinstance(pair, list) or any(isinstance(v, bool) or not isinstance(v, (int, float)) for v in pair):
+                raise ConfigError(f"spec.bounds.{name} must be [lo, hi], two JSON numbers, got {pair!r}",
+                                  field=f"spec.bounds.{name}")
+
+
 class JobCreate(BaseModel):
     model_config = ConfigDict(extra="forbid")
 
@@ -41,7 +67,7 @@ class JobCreate(BaseModel):
     confirm_samples: int = _limited("confirm_samples", DEFAULT_CONFIRM_SAMPLES,
                                     "more seeds an evaluation must also complete before it counts as the best "
                                     "so far (robust_samples + confirm_samples <= 64)")
-    bounds: dict[str, tuple[float, float]] | None = Field(default=None, max_length=4)
+    bounds: dict[str, tuple[StrictNumber, StrictNumber]] | None = Field(default=None, max_length=4)
     config: dict[str, Any] | None = Field(default=None, description="dotted keys as `driftlab --set`, "
                                           "e.g. {\"plant.steer_lag_s\": 0.02}, or nested sections")
 
@@ -68,7 +94,7 @@ class StudyCreate(BaseModel):
     seeds: list[Annotated[int, Field(strict=True)]] | None = Field(
         default=None, description="seeds study: one job per seed, distinct, 1 to 32 of them")
     spec: dict[str, Any] | None = Field(default=None, description="seeds study: a job spec as POST /api/jobs takes")
-    theta: dict[str, float] | None = Field(default=None, description="robustness study: the theta scored")
+    theta: dict[str, StrictNumber] | None = Field(default=None, description="robustness study: the theta scored")
     evaluation_id: int | None = Field(default=None, ge=1, le=MAX_ID, strict=True,
                                       description="robustness study: score this stored evaluation's theta, with "
                                                   "its job's config, seed and robust_samples")

@@ -140,11 +140,33 @@ def test_out_of_range_ids_are_404_or_422_never_500(server, path):
     ({"iterations": 40.0}, "iterations"),
     ({"iterations": 5, "seed": False}, "seed"),
     ({"iterations": 5, "seed_points": "3"}, "seed_points"),
+    ({"iterations": 5, "config": {"plant.steer_lag_s": "0.03"}}, "plant.steer_lag_s"),
+    ({"iterations": 5, "config": {"plant": {"friction_circle": 1}}}, "plant.friction_circle"),
+    ({"iterations": 5, "config": {"mpc.horizon": 20.5}}, "mpc.horizon"),
+    ({"iterations": 5, "bounds": {"k": ["0", "0.1"]}}, "bounds"),
+    ({"iterations": 5, "config": {"mpc.no_such": 1}}, "mpc.no_such"),
 ])
 def test_numbers_are_strict(server, body, field):
+    """Inside config and bounds too: a JSON document states its types (the CLI's --set parses text)."""
     _, url, _ = server
+    before = httpx.get(f"{url}/api/jobs").json()
     r = httpx.post(f"{url}/api/jobs", json=body)
     assert r.status_code == 422 and field in r.json()["detail"]
+    assert any(field in e["field"] for e in r.json().get("errors", [])), r.json()
+    assert httpx.get(f"{url}/api/jobs").json() == before  # nothing stored
+
+
+def test_study_config_values_are_strict_too(server):
+    _, url, _ = server
+    bad = [({"kind": "seeds", "seeds": [0], "spec": {"iterations": 2, "config": {"plant.mass_scale": "1.1"}}},
+            "plant.mass_scale"),
+           ({"kind": "seeds", "seeds": [0], "spec": {"iterations": 2, "bounds": {"k": ["0", 0.1]}}}, "spec.bounds.k"),
+           ({"kind": "robustness", "theta": {"k": "0.05"}, "grid": {"plant.mass_scale": [1.0]}}, "theta"),
+           ({"kind": "robustness", "theta": {"k": 0.05}, "grid": {"plant.mass_scale": [1.0, "1.1"]}},
+            "plant.mass_scale")]
+    for body, field in bad:
+        r = httpx.post(f"{url}/api/studies", json=body)
+        assert r.status_code == 422 and field in r.json()["detail"], (body, r.text)
 
 
 def test_a_budget_changed_on_a_running_job_is_honoured(server):

@@ -12,7 +12,7 @@ from driftlab.core.drivability import check_drivable
 from driftlab.core.tuning import TuningSpec
 from driftlab.db import lifecycle, storage
 from driftlab.server.routes.deps import factory, require_token, wake_runner
-from driftlab.server.schemas import After, JobCreate, JobId, JobPatch, Limit
+from driftlab.server.schemas import After, JobCreate, JobId, JobPatch, Limit, check_document_types
 from driftlab.server.serialize import evaluation_dict, evaluations_csv, job_dict
 
 router = APIRouter(prefix="/api/jobs", tags=["jobs"])
@@ -27,6 +27,7 @@ def _conflict(exc: lifecycle.TransitionError) -> HTTPException:
 @router.post("", status_code=201, dependencies=Mutating)
 def create_job(body: JobCreate, db: Factory, request: Request) -> dict[str, Any]:
     doc = body.model_dump(exclude_none=True, exclude={"name"})
+    check_document_types(doc)
     if "bounds" in doc:
         doc["bounds"] = {k: list(v) for k, v in doc["bounds"].items()}
     spec = TuningSpec.from_dict(doc)  # ConfigError -> 422 naming the field

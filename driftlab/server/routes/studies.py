@@ -10,7 +10,7 @@ from sqlalchemy.orm import Session, sessionmaker
 from driftlab import studies as study_views
 from driftlab.db import lifecycle, storage, studies
 from driftlab.server.routes.deps import factory, require_token, wake_runner
-from driftlab.server.schemas import StudyCreate, StudyId
+from driftlab.server.schemas import StudyCreate, StudyId, check_document_types
 
 router = APIRouter(tags=["studies"])
 Factory = Annotated[sessionmaker[Session], Depends(factory)]
@@ -21,6 +21,7 @@ Mutating = [Depends(require_token)]
 def create_study(body: StudyCreate, db: Factory, request: Request) -> dict[str, Any]:
     """ConfigError -> 422 naming the field; an unknown evaluation_id -> 404; nothing is stored on error."""
     doc = body.model_dump(exclude_none=True, exclude={"name"})
+    check_document_types(doc)
     with storage.transaction(db) as session:
         if body.name and studies.find_study(session, name=body.name) is not None:
             raise HTTPException(409, f"name: a study named {body.name!r} exists")

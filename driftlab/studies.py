@@ -13,6 +13,7 @@ from typing import Any
 from sqlalchemy import select
 from sqlalchemy.orm import Session
 
+from driftlab.core.config import dotted_config
 from driftlab.core.convergence import band, best_so_far
 from driftlab.core.drivability import check_drivable
 from driftlab.core.errors import ConfigError
@@ -36,18 +37,10 @@ def _robustness_doc(session: Session, doc: dict[str, Any]) -> dict[str, Any]:
         raise ConfigError("theta: give theta or evaluation_id, not both")
     evaluation = storage.get_evaluation(session, evaluation_id=evaluation_id)  # NotFound -> 404
     job_spec = TuningSpec.from_dict(evaluation.job.spec)
-    config = job_spec.to_dict()["config"]
-    flat = {f"{s}.{k}": v for s, values in config.items() for k, v in values.items()}
-    flat.update(_flatten(doc.get("config") or {}))
+    flat = {**dotted_config(job_spec.to_dict()["config"]), **dotted_config(doc.get("config") or {})}
     return {**doc, "theta": dict(evaluation.theta), "config": flat,
             "seed": doc.get("seed", job_spec.seed),
             "robust_samples": doc.get("robust_samples", job_spec.robust_samples)}
-
-
-def _flatten(config: dict[str, Any]) -> dict[str, Any]:
-    if config and all(isinstance(v, dict) for v in config.values()):
-        return {f"{s}.{k}": v for s, values in config.items() for k, v in values.items()}
-    return dict(config)
 
 
 def _refuse_fields(doc: dict[str, Any], kind: str, fields: tuple[str, ...]) -> None:

@@ -5,7 +5,7 @@ planner advances its phase on the tracked circle's trigger quantity c, the traje
 rules are written from the true state, the disturbance estimate is updated, and the MPC's increments are
 formed. Where the unconstrained minimizer violates a limit, :func:`run_until_constrained` returns to Python,
 which solves the QP with OSQP and hands the increments to :func:`finish_step`; the loop then goes on. Between
-those returns (about one control step in fifteen) no Python runs.
+those returns (about one control step in twenty) no Python runs.
 
 The arithmetic is that of the former step-by-step Python loop, operation for operation (``np.dot`` is the same
 BLAS call as numpy's ``@``; :func:`driftlab.core.track.hypot` rounds as CPython does), so stored episodes
@@ -194,7 +194,7 @@ def _update_disturbance(cfg, st, qa_last, params, measured, actuators, direction
         predicted = predict_one_step(qa_last, params, cfg.estimator_linear, st.last_measured, start, end, lag,
                                      cfg.dt_s)
         update_estimate(st.estimate, st.ints[I_UPDATES:I_UPDATES + 1], (measured - predicted) * mirror(direction),
-                        cfg.disturbance_gain, cfg.disturbance_start_gain, cfg.dt_s, DISTURBANCE_LIMIT, False)
+                        cfg.disturbance_gain, cfg.disturbance_start_gain, cfg.dt_s, DISTURBANCE_LIMIT)
     return st.estimate * mirror(direction)
 
 

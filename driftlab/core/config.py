@@ -189,6 +189,21 @@ def apply_overrides(config: EpisodeConfig, overrides: dict[str, Any]) -> Episode
     return replace(config, **updated)
 
 
+def dotted_config(document: Any) -> dict[str, Any]:
+    """A config document as flat dotted keys: it may be nested sections ({"plant": {"mass_scale": 1.1}}, as
+    stored) or dotted keys already ({"plant.mass_scale": 1.1}, as posted or given to ``--set``)."""
+    if not isinstance(document, dict):
+        raise ConfigError("config must be an object")
+    if document and all(isinstance(v, dict) for v in document.values()):
+        return {f"{section}.{k}": v for section, values in document.items() for k, v in values.items()}
+    return dict(document)
+
+
+def config_from_document(document: Any) -> EpisodeConfig:
+    """The episode config a stored or posted document describes (see :func:`dotted_config`); validated."""
+    return apply_overrides(EpisodeConfig(), dotted_config(document or {}))
+
+
 def check_json_types(values: dict[str, Any]) -> None:
     """Refuse a JSON value of the wrong type for its config key (flat dotted keys or nested sections): a number
     given as text ("0.03"), a switch as 1. The CLI's ``--set`` parses text; a JSON document states its types.
@@ -197,10 +212,8 @@ def check_json_types(values: dict[str, Any]) -> None:
     Raises:
         ConfigError: naming the key and the JSON type it needs.
     """
-    if values and all(isinstance(v, dict) for v in values.values()):
-        values = {f"{section}.{k}": v for section, fields_ in values.items() for k, v in fields_.items()}
     defaults = config_keys()
-    for key, raw in values.items():
+    for key, raw in dotted_config(values).items():
         if key not in defaults:
             continue
         current = defaults[key]

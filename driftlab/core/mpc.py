@@ -8,11 +8,11 @@ delta, Fxr and both increments.
 
 Solving: the QP is condensed to the 2*Nc increments once per reference. Each step first forms the
 unconstrained minimizer with a precomputed gain; when it satisfies every limit it *is* the QP's solution
-(the constraints are inactive, the QP is strictly convex). Only otherwise (one step in fifteen or so) a solver
+(the constraints are inactive, the QP is strictly convex). Only otherwise (about one step in twenty) a solver
 runs, chosen by ``qp_solver``:
 
 - ``daqp`` (default): DAQP's dual active-set method (Arnstroem, Bemporad & Axehill 2022), exact for this dense
-  40-variable QP, ~40 us a solve.
+  40-variable QP, ~60 us a solve with the call.
 - ``osqp``: OSQP (the paper's solver; set up once per episode, warm-started within it, only q, l, u updated) at
   ``osqp_eps``, ~600 us a solve. Its accepted answers include "solved inaccurate": on the default plant they
   sat up to 0.64 (rad or kN) from the exact increments, some beyond a limit. Jobs stored before revision 7
@@ -74,7 +74,7 @@ class MpcConfig:
         q_lateral_error, q_course_error: weights on e and dpsi when path_states is on.
         terminal_cost: weigh the last predicted state with the Riccati cost-to-go.
         disturbance_start_gain: the estimate starts as a running mean whose gain is capped at this (see
-            :class:`DisturbanceEstimator`); 0 starts at ``disturbance_gain``.
+            :func:`update_estimate`); 0 starts at ``disturbance_gain``.
         estimator_hold_s: the disturbance estimate stays frozen this long after an inertia phase ends [s]
             (the flick's aftermath is far from the drift whose mismatch it estimates).
         estimator_uses_actuators: the estimate's one-step prediction takes the measured actuator positions
@@ -363,10 +363,18 @@ def next_commands(qa, u_prev, du):
 
 
 @njit(cache=True)
-def update_estimate(estimate, n_updates, innovation, gain, start_gain, dt_s, limit, frozen):
-    """One step of :class:`DisturbanceEstimator` on its arrays (``estimate`` and the count ``n_updates[0]``
-    change in place)."""
-    if gain > 0.0 and not frozen:
+def update_estimate(estimate, n_updates, innovation, gain, start_gain, dt_s, limit):
+    """Offset-free MPC's disturbance estimate d on (Vdot, betadot, rdot), a first-order filter; ``estimate`` and
+    the count ``n_updates[0]`` change in place (a frozen estimate is simply not updated).
+
+    The measurement d_meas = innovation / dt = (x_meas - x_pred) / dt, x_pred being the controller model's
+    one-step prediction without disturbance; d follows it through d += g (d_meas - d), clipped to ``limit``. The
+    gain starts as a running mean capped at ``start_gain``, g = max(gain, min(start_gain, 1 / n)) over the first
+    n measurements: the episode starts at the *model's* drift, so the mismatch matters most then, and a plain
+    small gain leaves the car metres off its circle; an uncapped running mean takes the first, transient,
+    measurements at full weight and throws the car out of the drift.
+    """
+    if gain > 0.0:
         n_updates[0] += 1
         step_gain = max(gain, min(start_gain, 1.0 / n_updates[0]))
         measured = innovation / dt_s
@@ -548,28 +556,3 @@ class QpSession:
             du, ok = self.solve_constrained(*constrained_terms(qa, dz, disturbance, ref_linear_term, offset))
         steer, drive_kn = next_commands(qa, z_now[-N_U:].copy(), du)
         return MpcSolution(steer, drive_kn / KN, not within, ok, du)
-
-
-class DisturbanceEstimator:
-    """Offset-free MPC's disturbance estimate d on (Vdot, betadot, rdot), a first-order filter.
-
-    The measurement d_meas = (x_meas - x_pred) / dt, x_pred being the controller model's one-step
-    prediction without disturbance; d follows it through d += g (d_meas - d). The gain starts as a running
-    mean capped at ``start_gain``, g = max(gain, min(start_gain, 1 / n)) over the first n measurements: the
-    episode starts at the *model's* drift, so the mismatch matters most then, and a plain small gain leaves
-    the car metres off its circle; an uncapped running mean takes the first, transient, measurements at
-    full weight and throws the car out of the drift.
-    """
-
-    def __init__(self, gain: float, dt_s: float, limit: np.ndarray, start_gain: float = 0.0) -> None:
-        self.gain = gain
-        self.start_gain = start_gain
-        self.dt_s = dt_s
-        self.limit = limit
-        self.value = np.zeros(N_X)
-        self.frozen = False
-        self._n_updates = np.zeros(1, dtype=np.int64)
-
-    def update(self, innovation: np.ndarray) -> np.ndarray:
-        return update_estimate(self.value, self._n_updates, np.asarray(innovation, float), self.gain,
-                               self.start_gain, self.dt_s, np.asarray(self.limit, float), self.frozen).copy()

@@ -14,7 +14,7 @@ import math
 from dataclasses import dataclass
 from typing import Any
 
-from driftlab.core.config import EpisodeConfig, Theta, apply_overrides, config_from_dict, config_to_dict
+from driftlab.core.config import EpisodeConfig, Theta, apply_overrides, config_from_document, config_to_dict
 from driftlab.core.errors import ConfigError
 from driftlab.core.limits import JOB_LIMITS, MAX_ROBUST_SAMPLES, check_int
 from driftlab.core.robust import tuning_seeds
@@ -138,13 +138,7 @@ class RobustnessStudySpec:
 
     @classmethod
     def from_dict(cls, data: dict[str, Any]) -> RobustnessStudySpec:
-        raw_config = data.get("config") or {}
-        if not isinstance(raw_config, dict):
-            raise ConfigError("config must be an object")
-        if all(isinstance(v, dict) for v in raw_config.values()):
-            config = config_from_dict(raw_config)
-        else:
-            config = apply_overrides(EpisodeConfig(), raw_config)
+        config = config_from_document(data.get("config"))
         theta = data.get("theta")
         if not isinstance(theta, dict):
             raise ConfigError("theta must be an object {c_lr, c_rl, dV, k}")

@@ -12,7 +12,8 @@ Optuna is a benchmark-only extra (``pip install optuna torch``; its GPSampler ne
 dependency.
 
 Run: OMP_NUM_THREADS=1 python benchmarks/peers.py [--seeds 6] [--evaluations 100] [--methods driftlab,tpe,gp,random]
-     (``driftlab-sN``: DriftLab with N space-filling points, e.g. driftlab-s20 for the paper's 20)
+     (``driftlab-sN``: DriftLab with N space-filling points, e.g. driftlab-s20 for the paper's 20; a ``+mc``
+     suffix, e.g. ``driftlab+mc,tpe+mc``: the job's default box with the model corrections, six dimensions)
 """
 
 from __future__ import annotations
@@ -51,11 +52,12 @@ def _objective(robust_samples: int, bo_seed: int):
 
 def _run(args: tuple[str, int, int, int]) -> tuple[str, int, list[float], float]:
     """One optimizer run: (method, seed, best completed J after each evaluation, CPU seconds)."""
-    method, bo_seed, evaluations, robust_samples = args
-    from driftlab.core.tuning import DEFAULT_BOUNDS, TuningSpec
+    label, bo_seed, evaluations, robust_samples = args
+    from driftlab.core.tuning import DEFAULT_BOUNDS, MODEL_BOUNDS, TuningSpec
 
     evaluate = _objective(robust_samples, bo_seed)
-    bounds = DEFAULT_BOUNDS
+    method, six = label.removesuffix("+mc"), label.endswith("+mc")
+    bounds = {**DEFAULT_BOUNDS, **MODEL_BOUNDS} if six else DEFAULT_BOUNDS
     trace: list[float] = []
     best = np.inf
     started = time.process_time()
@@ -64,7 +66,8 @@ def _run(args: tuple[str, int, int, int]) -> tuple[str, int, list[float], float]
 
         # "driftlab": the job default; "driftlab-sN": N space-filling points first
         seed_points = int(method.split("-s")[1]) if "-s" in method else TuningSpec().seed_points
-        opt = BayesianOptimizer(bounds, seed_points=seed_points, active_set=400, seed=bo_seed)
+        initial = TuningSpec().initial_points if six else []  # as a job with the model corrections starts
+        opt = BayesianOptimizer(bounds, seed_points=seed_points, active_set=400, seed=bo_seed, initial_points=initial)
         for _ in range(evaluations):
             theta = opt.ask()
             value, _ = evaluate(theta)
@@ -94,7 +97,7 @@ def _run(args: tuple[str, int, int, int]) -> tuple[str, int, list[float], float]
             return penalized
 
         study.optimize(objective, n_trials=evaluations)
-    return method, bo_seed, trace, time.process_time() - started
+    return label, bo_seed, trace, time.process_time() - started
 
 
 def main() -> None:

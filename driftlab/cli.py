@@ -152,13 +152,14 @@ def _tuning_spec(args: argparse.Namespace):
     from driftlab.core.tuning import DEFAULT_SEED_POINTS, PAPER_PRESET
 
     preset = PAPER_PRESET if args.preset == "paper" else {"iterations": 500, "seed_points": DEFAULT_SEED_POINTS,
-                                                          "active_set": 400}
+                                                          "active_set": 400, "model_correction": True}
     iterations = preset["iterations"] if args.iterations is None else args.iterations
     seed_points = preset["seed_points"] if args.seed_points is None else args.seed_points
     active_set = preset["active_set"] if args.active_set is None else args.active_set
+    correction = preset["model_correction"] if args.model_correction is None else args.model_correction == "on"
     return TuningSpec(iterations=iterations, seed_points=seed_points, active_set=active_set,
                       seed=args.seed, robust_samples=args.robust_samples, confirm_samples=args.confirm_samples,
-                      bounds=bounds, config=config)
+                      bounds=bounds, config=config, model_correction=correction)
 
 
 def _open_tuning_job(factory, args: argparse.Namespace, runner: str) -> tuple[int, str]:
@@ -318,8 +319,12 @@ def _add_job_options(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--iterations", type=int, help="evaluations in total (default 500 for a new job); on a "
                         "stored job a new budget: a finished job continues to it")
     parser.add_argument("--preset", choices=("default", "paper"), default="default",
-                        help="paper: the paper's BO, 500 iterations, 20 space-filling points, active set 400 "
-                             "(default: 12 space-filling points); options given explicitly win")
+                        help="paper: the paper's BO, 500 iterations, 20 space-filling points, active set 400, "
+                             "theta's four parameters only (default: 12 space-filling points, model correction on); "
+                             "options given explicitly win")
+    parser.add_argument("--model-correction", choices=("on", "off"),
+                        help="also learn the controller model's friction and tyre-C scales (theta.model_mu_scale, "
+                             "theta.model_c_scale); default on, off with --preset paper")
     parser.add_argument("--seed-points", type=int, help="space-filling evaluations before the GP (default 12)")
     parser.add_argument("--active-set", type=int, help="most evaluations the GP is fit on (default 400)")
     parser.add_argument("--robust-samples", type=int, default=DEFAULT_ROBUST_SAMPLES, metavar="N",
@@ -334,7 +339,8 @@ def _add_job_options(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--controller", choices=("default", "paper"), default="default")
     parser.add_argument("--set", action="append", metavar="KEY=VALUE",
                         help="config override, e.g. plant.steer_lag_s=0.02")
-    parser.add_argument("--bound", action="append", metavar="NAME=LO:HI", help="theta bound, e.g. k=0:0.1")
+    parser.add_argument("--bound", action="append", metavar="NAME=LO:HI", help="theta bound, e.g. k=0:0.1 or "
+                        "model_c_scale=0.9:1.2")
 
 
 def build_parser() -> argparse.ArgumentParser:

@@ -77,13 +77,15 @@ def write_report(*, db_url: str, name: str, out_dir: str, baseline_samples: int 
              f"Theta at full precision. 'Tuning J': on the job's {spec.robust_samples} seeds (mean J over them, "
              f"an evaluation completes only if all do). 'Rescore': {rescore_samples} fresh seeds never used in "
              "tuning (J mean over all episodes, failures at their penalty).", "",
-             "| theta | c_lr | c_rl | dV (m/s) | k (rad/m) | tuning status | tuning J | rescore completed | "
-             "rescore J mean | rescore J worst |", "|---|---|---|---|---|---|---|---|---|---|"]
+             "| theta | c_lr | c_rl | dV (m/s) | k (rad/m) | model mu x | model C x | tuning status | tuning J | "
+             "rescore completed | rescore J mean | rescore J worst |", "|---" * 12 + "|"]
     summaries = [summarize(results) for results in rescored]
     for (label, theta, status, value), summary in zip(table, summaries, strict=True):
         tuning = (status or "-", "-" if value is None else f"{value:.3f}")
+        theta = {**Theta().as_dict(), **theta}  # stored before the model corrections: scales 1
         lines.append(f"| {label} | {theta['c_lr']!r} | {theta['c_rl']!r} | {theta['dV']!r} | {theta['k']!r} | "
-                     f"{tuning[0]} | {tuning[1]} | {summary['completed']}/{summary['samples']} | "
+                     f"{theta['model_mu_scale']!r} | {theta['model_c_scale']!r} | {tuning[0]} | {tuning[1]} | "
+                     f"{summary['completed']}/{summary['samples']} | "
                      f"{summary['J_mean']:.3f} | {summary['J_worst']:.3f} |")
     lines += _verdict(summaries[0], summaries[1], len(evals), spec.seed_points)
     lines += ["", "![best episode](best_episode.png)", "", "![convergence](convergence.png)", ""]

@@ -16,7 +16,9 @@ from driftlab.core.plant import PlantConfig
 from driftlab.core.validation import check_ranges
 from driftlab.core.vehicle import VehicleParams
 
-THETA_KEYS = ("c_lr", "c_rl", "dV", "k")
+# What a model correction may be: beyond this the model is another car, not a corrected one.
+MODEL_SCALE_LIMITS = (0.5, 2.0)
+THETA_KEYS = ("c_lr", "c_rl", "dV", "k", "model_mu_scale", "model_c_scale")
 
 
 @dataclass(frozen=True)
@@ -28,15 +30,26 @@ class Theta:
         c_rl: trigger fraction ending the right-hand drift [-].
         dV: speed correction added to the equilibrium speed, V_hat = V_eq + dV [m/s] (paper eq. 10).
         k: look-ahead steering feedback gain, delta_f = delta + k e_la [rad/m] (paper eq. 11).
+        model_mu_scale: the controller's model friction mu x this [-] (DriftLab's model correction, not in the
+            paper): the drift equilibria the MPC is linearized about and steers to move with it.
+        model_c_scale: the controller's model tyre shape factor C x this [-] (model correction, as above).
+
+    The two model corrections learn what dV alone cannot: on a plant whose own drift at the scenario's radius
+    and sideslip is 1-3 m/s off the model's, the additive disturbance estimate absorbs the linearization error
+    and the offset-free target lands away from the plant's drift (benchmarks/envelope.py). 1.0 is the model
+    as configured, so a theta stored without them means what it meant.
     """
 
     c_lr: float = 0.02
     c_rl: float = 0.02
     dV: float = 0.0
     k: float = 0.05
+    model_mu_scale: float = 1.0
+    model_c_scale: float = 1.0
 
     def __post_init__(self) -> None:
-        limits = {"c_lr": (0.0, 0.5), "c_rl": (0.0, 0.5), "dV": (-5.0, 5.0), "k": (-1.0, 1.0)}
+        limits = {"c_lr": (0.0, 0.5), "c_rl": (0.0, 0.5), "dV": (-5.0, 5.0), "k": (-1.0, 1.0),
+                  "model_mu_scale": MODEL_SCALE_LIMITS, "model_c_scale": MODEL_SCALE_LIMITS}
         check_ranges(self, "theta", limits)
 
     @classmethod
@@ -56,6 +69,20 @@ class Theta:
 
     def as_dict(self) -> dict[str, float]:
         return {k: float(getattr(self, k)) for k in THETA_KEYS}
+
+    def model_vehicle(self, vehicle: VehicleParams) -> VehicleParams:
+        """The car the controller's model assumes: ``vehicle`` with the model corrections applied (the plant
+        keeps ``vehicle`` and its own scales).
+
+        Raises:
+            ConfigError: a corrected value outside the vehicle's own range (naming the theta key).
+        """
+        if self.model_mu_scale == 1.0 and self.model_c_scale == 1.0:
+            return vehicle
+        try:
+            return vehicle.scaled(friction=self.model_mu_scale, tyre_c=self.model_c_scale)
+        except ConfigError as exc:
+            raise ConfigError(f"theta.model_mu_scale / theta.model_c_scale: {exc}", field="theta") from None
 
 
 PAPER_THETA = Theta(c_lr=0.0273, c_rl=0.0215, dV=0.12, k=0.21)

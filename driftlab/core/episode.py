@@ -95,7 +95,7 @@ def run_episode(theta: Theta, config: EpisodeConfig, *, seed: int = 0) -> Episod
     scenario = config.scenario
     track = FigureEight(scenario.left_radius_m, scenario.right_radius_m)
     try:
-        model = build_controller_model(config.vehicle, config.mpc, scenario.left_radius_m,
+        model = build_controller_model(theta.model_vehicle(config.vehicle), config.mpc, scenario.left_radius_m,
                                        scenario.right_radius_m, scenario.sideslip_rad, theta.k, scenario.lookahead_m)
     except NoEquilibriumError:
         empty = np.zeros((0, len(COLUMNS)))

@@ -28,7 +28,7 @@ from __future__ import annotations
 
 import math
 import warnings
-from collections.abc import Mapping
+from collections.abc import Mapping, Sequence
 
 import numpy as np
 from scipy.linalg import solve_triangular
@@ -55,6 +55,9 @@ _MIN_SUCCESS_PROBABILITY = 0.5
 _FAILURE_CLEARANCE = 0.015  # unit-cube distance over which a failure suppresses proposals
 _CLASSIFIER_POINTS = 150  # the classifier conditions on every failure and a spread of successes, this many
 _CLASSIFIER_FIT_ITERATIONS = 20
+# After this many failed evaluations in a row, propose near the best success instead (see _retreat).
+_FAILURE_STREAK = 5
+_RETREAT_SPREAD = 0.05  # unit-cube standard deviation of the first retreat; halved every _FAILURE_STREAK more
 
 
 def _bounded_lbfgs(obj_func, initial_theta, bounds):
@@ -96,14 +99,15 @@ class BayesianOptimizer:
 
     Args:
         bounds: name -> (lo, hi), lo < hi; proposals are dicts with these names.
-        seed_points: proposals from the Latin hypercube before the GP takes over.
+        seed_points: proposals before the GP takes over: ``initial_points`` first, then a Latin hypercube.
+        initial_points: points to ask first (e.g. the configuration known to work); each inside the box.
         active_set: most successful observations the GP is fit on.
         seed: random seed (Latin hypercube, candidate sets).
         refit_every: hyperparameter refit period in observations.
     """
 
     def __init__(self, bounds: Mapping[str, tuple[float, float]], *, seed_points: int = 20, active_set: int = 400,
-                 seed: int = 0, refit_every: int = 10) -> None:
+                 seed: int = 0, refit_every: int = 10, initial_points: Sequence[Mapping[str, float]] = ()) -> None:
         if not bounds:
             raise ConfigError("bounds must name at least one parameter")
         for name, pair in bounds.items():
@@ -120,7 +124,11 @@ class BayesianOptimizer:
         self.seed = seed
         self.refit_every = refit_every
         self.dim = len(self.names)
-        self._seed_design = qmc.LatinHypercube(d=self.dim, seed=seed).random(seed_points)
+        initial = [self._to_unit(p, clip=False) for p in initial_points][:seed_points]
+        if any(((u < 0.0) | (u > 1.0)).any() for u in initial):
+            raise ConfigError("initial_points must lie inside the bounds")
+        design = qmc.LatinHypercube(d=self.dim, seed=seed).random(seed_points - len(initial))
+        self._seed_design = np.vstack([*initial, design]) if initial else design
         self.x: list[np.ndarray] = []  # unit-cube inputs, told
         self.y: list[float | None] = []  # None: failed evaluation
         self.pending: list[np.ndarray] = []
@@ -165,12 +173,13 @@ class BayesianOptimizer:
     def _to_theta(self, unit: np.ndarray) -> dict[str, float]:
         return {n: float(v) for n, v in zip(self.names, self.lo + unit * (self.hi - self.lo), strict=True)}
 
-    def _to_unit(self, theta: Mapping[str, float]) -> np.ndarray:
+    def _to_unit(self, theta: Mapping[str, float], clip: bool = True) -> np.ndarray:
         missing = [n for n in self.names if n not in theta]
         if missing:
             raise ConfigError(f"theta is missing {', '.join(missing)}")
         raw = np.array([float(theta[n]) for n in self.names])
-        return np.clip((raw - self.lo) / (self.hi - self.lo), 0.0, 1.0)
+        unit = (raw - self.lo) / (self.hi - self.lo)
+        return np.clip(unit, 0.0, 1.0) if clip else unit
 
     def _rng(self) -> np.random.Generator:
         return np.random.default_rng([self.seed, len(self.x), len(self.pending)])
@@ -178,6 +187,10 @@ class BayesianOptimizer:
     def _propose(self) -> np.ndarray:
         x_all = np.array(self.x) if self.x else np.empty((0, self.dim))
         ok = np.array([v is not None for v in self.y], dtype=bool)
+        streak = self._failure_streak()
+        if ok.any() and streak >= _FAILURE_STREAK:
+            y_ok = np.array([v for v in self.y if v is not None])
+            return self._retreat(x_all[ok][int(np.argmin(y_ok))], x_all[~ok], streak)
         if ok.sum() < 2:
             # Nothing to model yet: keep filling space, away from what was tried.
             return self._farthest_candidate(x_all)
@@ -191,6 +204,27 @@ class BayesianOptimizer:
         classifier = self._classifier(x_all, ok) if not ok.all() else None
         best = float(y_ok.min())
         return self._maximize(gp, classifier, best, x_ok[int(np.argmin(y_ok))], x_all[~ok])
+
+    def _failure_streak(self) -> int:
+        """Failed evaluations told in a row, up to the latest."""
+        streak = 0
+        for value in reversed(self.y):
+            if value is not None:
+                break
+            streak += 1
+        return streak
+
+    def _retreat(self, x_best: np.ndarray, failed: np.ndarray, streak: int) -> np.ndarray:
+        """A point near the best success, as far from every failure as such a point gets; the neighbourhood
+        halves with every further run of failures (TuRBO's failure counter, Eriksson et al. 2019). Where the
+        feasible region is a small island (on some mismatched plants 2 of 100 evaluations complete), the
+        classifier smooths it away, rates every candidate below ``_MIN_SUCCESS_PROBABILITY`` and the search
+        would otherwise spend the rest of its budget on failures far from the island."""
+        rng = self._rng()
+        spread = max(_RETREAT_SPREAD * 0.5 ** ((streak - _FAILURE_STREAK) // _FAILURE_STREAK), 1e-3)
+        candidates = np.clip(x_best + rng.normal(0.0, spread, (_LOCAL_CANDIDATES, self.dim)), 0.0, 1.0)
+        d2 = np.min(((candidates[:, None, :] - failed[None, :, :]) ** 2).sum(axis=2), axis=1)
+        return candidates[int(np.argmax(d2))]
 
     def _active_indices(self, x: np.ndarray, y: np.ndarray, limit: int) -> np.ndarray:
         n = len(y)

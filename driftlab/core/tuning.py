@@ -10,7 +10,14 @@ import math
 from dataclasses import dataclass, field
 from typing import Any
 
-from driftlab.core.config import THETA_KEYS, EpisodeConfig, config_from_document, config_to_dict
+from driftlab.core.config import (
+    MODEL_SCALE_LIMITS,
+    THETA_KEYS,
+    EpisodeConfig,
+    Theta,
+    config_from_document,
+    config_to_dict,
+)
 from driftlab.core.errors import ConfigError
 from driftlab.core.limits import JOB_LIMITS, MAX_ROBUST_SAMPLES, check_int
 from driftlab.core.robust import tuning_seeds
@@ -19,9 +26,14 @@ from driftlab.core.robust import tuning_seeds
 # c outside [0.005, 0.04] or k above 0.12 fail nearly always).
 DEFAULT_BOUNDS: dict[str, tuple[float, float]] = {
     "c_lr": (0.005, 0.04), "c_rl": (0.005, 0.04), "dV": (-0.3, 0.3), "k": (0.0, 0.12)}
+# The model corrections a job learns by default (TuningSpec.model_correction). Their spans cover the grid of
+# benchmarks/envelope.py: with the untuned theta, the plants that fail with the model as configured complete
+# with the model's C x 0.9 (nominal plant, C x 0.9) to x 1.25 (default plant, C x 1.3), or mu x 0.85 to x 1.15.
+MODEL_BOUNDS: dict[str, tuple[float, float]] = {"model_mu_scale": (0.85, 1.2), "model_c_scale": (0.85, 1.3)}
 # What a bound may span: theta's own validity range.
 BOUND_LIMITS: dict[str, tuple[float, float]] = {"c_lr": (0.0, 0.5), "c_rl": (0.0, 0.5), "dV": (-5.0, 5.0),
-                                                "k": (-1.0, 1.0)}
+                                                "k": (-1.0, 1.0), "model_mu_scale": MODEL_SCALE_LIMITS,
+                                                "model_c_scale": MODEL_SCALE_LIMITS}
 MAX_ITERATIONS = JOB_LIMITS["iterations"][1]
 # Episodes per evaluation by default: with 4 seeds a theta that fails one run in ten still fails an evaluation
 # 34% of the time, enough for the failure model to steer away from it, at 4x the episodes (2 workers keep
@@ -33,17 +45,23 @@ DEFAULT_CONFIRM_SAMPLES = 4
 # 20 the best J after 25 evaluations is lower (median of 6 seeds -1.62 against -1.42) and level at 100
 # (benchmarks/peers.py). The paper's 500-run with its 20 is the `paper` preset.
 DEFAULT_SEED_POINTS = 12
-PAPER_PRESET = {"iterations": 500, "seed_points": 20, "active_set": 400}
+# The paper's 500-run learns the paper's four parameters only.
+PAPER_PRESET = {"iterations": 500, "seed_points": 20, "active_set": 400, "model_correction": False}
 
 
-def validate_bounds(bounds: dict[str, Any]) -> dict[str, tuple[float, float]]:
-    """Bounds for a subset of theta's keys (others take DEFAULT_BOUNDS)."""
+def validate_bounds(bounds: dict[str, Any], model_correction: bool = True) -> dict[str, tuple[float, float]]:
+    """Bounds for a subset of theta's keys (others take DEFAULT_BOUNDS, and MODEL_BOUNDS with
+    ``model_correction``; without it the model corrections stay at 1 and may not be given bounds)."""
     if not isinstance(bounds, dict):
         raise ConfigError("bounds must be an object {name: [lo, hi]}")
-    out = dict(DEFAULT_BOUNDS)
+    out = {**DEFAULT_BOUNDS, **(MODEL_BOUNDS if model_correction else {})}
+    allowed = THETA_KEYS if model_correction else tuple(DEFAULT_BOUNDS)
     for name, pair in bounds.items():
-        if name not in THETA_KEYS:
-            raise ConfigError(f"bounds.{name} is not a theta key; allowed: {', '.join(THETA_KEYS)}")
+        if name in MODEL_BOUNDS and not model_correction:
+            raise ConfigError(f"bounds.{name}: a model correction is learned only with model_correction true",
+                              field=f"bounds.{name}")
+        if name not in allowed:
+            raise ConfigError(f"bounds.{name} is not a theta key; allowed: {', '.join(allowed)}")
         if not isinstance(pair, (list, tuple)) or len(pair) != 2:
             raise ConfigError(f"bounds.{name} must be [lo, hi]")
         try:
@@ -70,6 +88,8 @@ class TuningSpec:
         confirm_samples: more seeded episodes an evaluation runs when it would become the best so far
             (0..64, robust_samples + confirm_samples <= 64); it is stored with all of them.
         bounds: theta name -> (lo, hi).
+        model_correction: also learn theta's model corrections (model_mu_scale, model_c_scale), in MODEL_BOUNDS
+            unless bounded otherwise. Off: the paper's four parameters (jobs stored before revision 8).
         config: the episode configuration (plant, controller, scenario ...).
     """
 
@@ -79,21 +99,44 @@ class TuningSpec:
     seed: int = 0
     robust_samples: int = DEFAULT_ROBUST_SAMPLES
     confirm_samples: int = DEFAULT_CONFIRM_SAMPLES
-    bounds: dict[str, tuple[float, float]] = field(default_factory=lambda: dict(DEFAULT_BOUNDS))
+    bounds: dict[str, tuple[float, float]] = field(default_factory=dict)
     config: EpisodeConfig = field(default_factory=EpisodeConfig)
+    model_correction: bool = True
 
     def __post_init__(self) -> None:
         for name in ("iterations", "seed_points", "active_set", "seed", "robust_samples"):
             check_int(name, getattr(self, name))
         # The confirmation seeds follow the evaluation seeds in the job's block of MAX_ROBUST_SAMPLES.
         check_int("confirm_samples", self.confirm_samples, 0, MAX_ROBUST_SAMPLES - self.robust_samples)
-        object.__setattr__(self, "bounds", validate_bounds(dict(self.bounds)))
+        if not isinstance(self.model_correction, bool):
+            raise ConfigError(f"model_correction must be true or false, got {self.model_correction!r}",
+                              field="model_correction")
+        object.__setattr__(self, "bounds", validate_bounds(dict(self.bounds), self.model_correction))
+        if self.model_correction:  # every corner of the box must be a valid car, or every episode would raise
+            (mu_lo, mu_hi), (c_lo, c_hi) = self.bounds["model_mu_scale"], self.bounds["model_c_scale"]
+            for mu, c in ((mu_lo, c_lo), (mu_hi, c_hi)):
+                try:
+                    Theta(model_mu_scale=mu, model_c_scale=c).model_vehicle(self.config.vehicle)
+                except ConfigError as exc:
+                    raise ConfigError(f"bounds.model_mu_scale / bounds.model_c_scale reach a model outside the "
+                                      f"vehicle's range ({exc})", field="bounds") from None
 
     def to_dict(self) -> dict[str, Any]:
         return {"iterations": self.iterations, "seed_points": self.seed_points, "active_set": self.active_set,
                 "seed": self.seed, "robust_samples": self.robust_samples, "confirm_samples": self.confirm_samples,
-                "bounds": {k: list(v) for k, v in self.bounds.items()},
+                "bounds": {k: list(v) for k, v in self.bounds.items()}, "model_correction": self.model_correction,
                 "config": config_to_dict(self.config)}
+
+    @property
+    def initial_points(self) -> list[dict[str, float]]:
+        """What the job asks first: with the model corrections, the untuned theta (the model as configured).
+        Most of the corrections' box fails on a plant the configured model already drives (default plant with
+        50 ms steering lag: 3 of 100 evaluations completed), and a job that never met the working point could
+        end worse than not tuning at all. Without them (the paper's BO, jobs stored before revision 8): none."""
+        start = Theta().as_dict()
+        if not self.model_correction or any(not lo <= start[k] <= hi for k, (lo, hi) in self.bounds.items()):
+            return []
+        return [{k: start[k] for k in self.bounds}]
 
     @property
     def episode_seeds(self) -> list[int]:
@@ -109,11 +152,12 @@ class TuningSpec:
     def from_dict(cls, data: dict[str, Any]) -> TuningSpec:
         """From a stored or posted document. ``config`` may be nested sections or flat dotted keys."""
         allowed = {"iterations", "seed_points", "active_set", "seed", "robust_samples", "confirm_samples", "bounds",
-                   "config"}
+                   "model_correction", "config"}
         unknown = set(data) - allowed
         if unknown:
             raise ConfigError(f"unknown field {sorted(unknown)[0]!r}; allowed: {', '.join(sorted(allowed))}")
         config = config_from_document(data.get("config"))
         scalars = ("iterations", "seed_points", "active_set", "seed", "robust_samples", "confirm_samples")
         kwargs = {k: data[k] for k in scalars if k in data}
-        return cls(**kwargs, bounds=data.get("bounds") or {}, config=config)
+        return cls(**kwargs, bounds=data.get("bounds") or {}, config=config,
+                   model_correction=data.get("model_correction", True))

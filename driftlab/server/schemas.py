@@ -8,7 +8,7 @@ from typing import Annotated, Any, Literal
 from fastapi import Path, Query
 from pydantic import BaseModel, ConfigDict, Field
 
-from driftlab.core.config import check_json_types
+from driftlab.core.config import THETA_KEYS, check_json_types
 from driftlab.core.errors import ConfigError
 from driftlab.core.limits import JOB_LIMITS
 from driftlab.core.tuning import DEFAULT_CONFIRM_SAMPLES, DEFAULT_ROBUST_SAMPLES, DEFAULT_SEED_POINTS
@@ -67,7 +67,10 @@ class JobCreate(BaseModel):
     confirm_samples: int = _limited("confirm_samples", DEFAULT_CONFIRM_SAMPLES,
                                     "more seeds an evaluation must also complete before it counts as the best "
                                     "so far (robust_samples + confirm_samples <= 64)")
-    bounds: dict[str, tuple[StrictNumber, StrictNumber]] | None = Field(default=None, max_length=4)
+    bounds: dict[str, tuple[StrictNumber, StrictNumber]] | None = Field(default=None, max_length=len(THETA_KEYS))
+    model_correction: bool = Field(default=True, strict=True,
+                                   description="also learn the controller model's friction and tyre-C scales "
+                                               "(theta.model_mu_scale, theta.model_c_scale)")
     config: dict[str, Any] | None = Field(default=None, description="dotted keys as `driftlab --set`, "
                                           "e.g. {\"plant.steer_lag_s\": 0.02}, or nested sections")
 

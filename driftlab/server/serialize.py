@@ -7,6 +7,7 @@ import io
 from datetime import UTC
 from typing import Any
 
+from driftlab.core.config import THETA_KEYS, Theta
 from driftlab.db import storage
 from driftlab.db.models import Evaluation, Job
 
@@ -18,8 +19,8 @@ def evaluation_dict(e: Evaluation) -> dict[str, Any]:
             "created_at": e.created_at.replace(tzinfo=UTC).isoformat()}
 
 
-CSV_FIELDS = ("id", "index", "status", "J", "c_lr", "c_rl", "dV", "k", "n_samples", "n_completed", "seeds",
-              "trajectory_seed", "mean_abs_e_m", "max_abs_e_m", "completed_fraction", "wall_ms", "created_at")
+CSV_FIELDS = ("id", "index", "status", "J", *THETA_KEYS, "n_samples", "n_completed", "seeds", "trajectory_seed",
+              "mean_abs_e_m", "max_abs_e_m", "completed_fraction", "wall_ms", "created_at")
 
 
 def evaluations_csv(rows: list[dict[str, Any]]) -> str:
@@ -29,8 +30,10 @@ def evaluations_csv(rows: list[dict[str, Any]]) -> str:
     writer.writerow(CSV_FIELDS)
     for row in rows:
         metrics, seeds = row["metrics"], row["seeds"] or []
-        flat = {**row, **row["theta"], **{k: metrics.get(k) for k in ("n_samples", "n_completed", "mean_abs_e_m",
-                                                                        "max_abs_e_m", "completed_fraction")},
+        # a theta stored before the model corrections ran the model as configured: scales 1
+        summary = {k: metrics.get(k) for k in ("n_samples", "n_completed", "mean_abs_e_m", "max_abs_e_m",
+                                                "completed_fraction")}
+        flat = {**row, **Theta().as_dict(), **row["theta"], **summary,
                 "seeds": " ".join(str(s["seed"]) for s in seeds)}
         writer.writerow([flat.get(name) for name in CSV_FIELDS])
     return buffer.getvalue()

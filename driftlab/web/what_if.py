@@ -11,7 +11,8 @@ from typing import Any
 import numpy as np
 import viser
 
-from driftlab.core.tuning import DEFAULT_BOUNDS
+from driftlab.core.config import Theta
+from driftlab.core.tuning import DEFAULT_BOUNDS, MODEL_BOUNDS
 from driftlab.web.frames import EpisodeFrames
 from driftlab.web.sources import JobHistory
 
@@ -20,6 +21,9 @@ PLANT_SLIDERS = (("plant.friction_scale", "mu scale", 0.8, 1.3, 0.01),
                  ("plant.tyre_c_scale", "tyre C scale", 0.8, 1.4, 0.01),
                  ("plant.steer_lag_s", "steer lag [s]", 0.0, 0.1, 0.005),
                  ("plant.cg_height_m", "CG height [m]", 0.0, 0.8, 0.05))
+
+# Every theta key has a slider, the model corrections too (a job that did not learn them shows them at 1).
+SLIDER_BOUNDS = {**DEFAULT_BOUNDS, **MODEL_BOUNDS}
 
 # request(theta, config_doc, plant overrides): run that episode, answer through WhatIfPanel.show_result.
 WhatIfRequest = Callable[[dict[str, float], dict[str, Any], dict[str, float]], None]
@@ -30,14 +34,14 @@ class WhatIfPanel:
         self.client = client
         self.request = request
         self.history: JobHistory | None = None
-        self.theta_bounds: dict[str, tuple[float, float]] = dict(DEFAULT_BOUNDS)
+        self.theta_bounds: dict[str, tuple[float, float]] = dict(SLIDER_BOUNDS)
         self._requested_at: float | None = None
         self.last_latency_s: float | None = None
         with gui.add_folder("What-if", expand_by_default=False):
             gui.add_markdown("Move a slider: that one episode runs in a worker and plays at once, with the "
                              "job's best episode as the blue ghost car.")
             self.theta_sliders = {k: gui.add_slider(k, lo, hi, (hi - lo) / 200.0, 0.5 * (lo + hi))
-                                  for k, (lo, hi) in DEFAULT_BOUNDS.items()}
+                                  for k, (lo, hi) in SLIDER_BOUNDS.items()}
             self.plant_sliders = {key: gui.add_slider(label, lo, hi, step, lo)
                                   for key, label, lo, hi, step in PLANT_SLIDERS}
             self.text = gui.add_markdown("")
@@ -47,17 +51,20 @@ class WhatIfPanel:
 
     def select_job(self, history: JobHistory) -> None:
         self.history = history
-        self.theta_bounds = {k: tuple(v) for k, v in history.spec.get("bounds", DEFAULT_BOUNDS).items()}
+        self.theta_bounds = {**SLIDER_BOUNDS,
+                             **{k: tuple(v) for k, v in history.spec.get("bounds", DEFAULT_BOUNDS).items()}}
 
     def reset_sliders(self, best: EpisodeFrames | None, run: bool = True) -> None:
         """Theta at the job's best (or the bounds' middle), the plant at the job's own."""
         if self.history is None:
             return
-        theta = best.theta if best is not None else {k: 0.5 * (lo + hi) for k, (lo, hi) in DEFAULT_BOUNDS.items()}
+        learned = self.history.spec.get("bounds", DEFAULT_BOUNDS)
+        middle = {k: 0.5 * (lo + hi) for k, (lo, hi) in learned.items()}
+        theta = {**Theta().as_dict(), **(best.theta if best is not None else middle)}
         plant = self.history.spec.get("config", {}).get("plant", {})
         with self.client.atomic():
             for key, slider in self.theta_sliders.items():
-                lo, hi = self.theta_bounds.get(key, DEFAULT_BOUNDS[key])
+                lo, hi = self.theta_bounds[key]
                 slider.min, slider.max, slider.step = lo, hi, (hi - lo) / 200.0
                 slider.value = float(np.clip(theta[key], lo, hi))
             for key, slider in self.plant_sliders.items():

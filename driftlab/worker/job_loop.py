@@ -41,7 +41,7 @@ class Progress:
 def restore_optimizer(spec: TuningSpec, history: list[tuple[dict[str, float], float | None]]) -> BayesianOptimizer:
     """An optimizer in the state it had after telling ``history`` (theta, J or None if failed)."""
     optimizer = BayesianOptimizer(spec.bounds, seed_points=spec.seed_points, active_set=spec.active_set,
-                                  seed=spec.seed)
+                                  seed=spec.seed, initial_points=spec.initial_points)
     for theta, value in history:
         optimizer.tell(theta, value)
     return optimizer

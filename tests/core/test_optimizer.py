@@ -87,6 +87,21 @@ def test_a_design_point_lost_in_a_crash_is_run_once_and_none_twice():
     assert len(told) == len(stored) + 1 + len(later)
 
 
+def test_initial_points_are_asked_first_then_the_design_and_a_resume_keeps_the_order():
+    start = {"x1": 0.0, "x2": 5.0}
+    opt = BayesianOptimizer(BRANIN_BOUNDS, seed_points=5, seed=0, initial_points=[start])
+    asked = [opt.ask() for _ in range(5)]
+    assert asked[0] == pytest.approx(start)
+    plain = BayesianOptimizer(BRANIN_BOUNDS, seed_points=4, seed=0)
+    assert asked[1:] == [plain.ask() for _ in range(4)]  # the hypercube fills the rest of the budget
+    resumed = BayesianOptimizer(BRANIN_BOUNDS, seed_points=5, seed=0, initial_points=[start])
+    for theta in asked[1:3]:  # the first was lost in flight
+        resumed.tell(theta, branin(theta))
+    assert resumed.ask() == pytest.approx(start)
+    with pytest.raises(ConfigError, match="initial_points"):
+        BayesianOptimizer(BRANIN_BOUNDS, seed_points=5, initial_points=[{"x1": 20.0, "x2": 5.0}])
+
+
 def test_pending_points_give_distinct_proposals():
     opt = BayesianOptimizer(BRANIN_BOUNDS, seed_points=5, seed=0)
     for _ in range(8):

@@ -78,11 +78,12 @@ def test_schema_1_database_upgrades_and_its_results_still_reproduce(tmp_path):
     with storage.transaction(factory) as session:
         job = session.get(Job, 1)
         evaluation = session.get(Evaluation, 1)
-        assert session.get(Meta, "schema_version").value == "7"
+        assert session.get(Meta, "schema_version").value == "8"
         spec = TuningSpec.from_dict(job.spec)
         assert spec.robust_samples == 1 and spec.confirm_samples == 0 and not spec.config.plant.varies
         assert not spec.config.mpc.feedback_in_model and spec.config.mpc.estimator_hold_s == 0.0  # pinned by 0005
         assert spec.config.mpc.qp_solver == "osqp"  # pinned by 0007
+        assert not spec.model_correction and set(spec.bounds) == {"c_lr", "c_rl", "dV", "k"}  # pinned by 0008
         assert evaluation.seeds == [{"seed": 0, "status": old.status, "J": old.J,
                                      "completed_fraction": old.metrics.completed_fraction}]
         assert evaluation.trajectory_seed == 0
@@ -95,7 +96,7 @@ def test_schema_1_database_upgrades_and_its_results_still_reproduce(tmp_path):
 
 def test_a_new_database_is_created_at_the_head_revision(tmp_path):
     factory = storage.open_database(f"sqlite:///{tmp_path / 'new.db'}")
-    assert schema.current_revision(storage.engine_of(factory)) == schema.head_revision() == "0007"
+    assert schema.current_revision(storage.engine_of(factory)) == schema.head_revision() == "0008"
     with storage.transaction(factory) as session:
         job = storage.create_job(session, name="fresh", spec=TuningSpec().to_dict(), seed=0)
         assert job.runner_id is None and job.heartbeat_at is None
@@ -145,7 +146,7 @@ def test_revision_0006_adds_studies_to_a_database_with_jobs(tmp_path):
         assert [c.settings for c in studies.cells(session, study_id=study.id)] == [{"plant.mass_scale": 1.0},
                                                                                   {"plant.mass_scale": 1.1}]
         assert [j.name for j in studies.study_jobs(session, study_id=study.id)] == ["member"]
-        assert session.get(Meta, "schema_version").value == "7"
+        assert session.get(Meta, "schema_version").value == "8"
 
 
 def test_revision_0007_pins_stored_jobs_and_studies_to_osqp(tmp_path):
@@ -176,3 +177,35 @@ def test_revision_0007_pins_stored_jobs_and_studies_to_osqp(tmp_path):
         assert TuningSpec.from_dict(session.get(Study, 3).spec["spec"]).config.mpc.qp_solver == "osqp"
         fresh = storage.create_job(session, name="new", spec=TuningSpec().to_dict(), seed=0)
         assert TuningSpec.from_dict(fresh.spec).config.mpc.qp_solver == "daqp"
+
+
+def test_revision_0008_keeps_stored_jobs_in_the_box_they_were_learned_in(tmp_path):
+    """Jobs and seeds studies stored before the model correction keep theta's four parameters; new jobs learn
+    the model's friction and tyre-C scales as well."""
+    from alembic import command
+    from sqlalchemy import create_engine
+
+    from driftlab.db.models import Job as JobRow
+    from driftlab.db.models import Study
+
+    url = f"sqlite:///{tmp_path / 'v7.db'}"
+    engine = create_engine(url)
+    job_spec = TuningSpec(model_correction=False).to_dict()
+    del job_spec["model_correction"]  # as revision 7 stored it
+    with engine.connect() as connection, connection.begin():
+        command.upgrade(schema._config(connection), "0007")
+        for i, (table, spec) in enumerate((("jobs", job_spec), ("studies", {"kind": "seeds", "spec": job_spec}),
+                                           ("studies", {"kind": "robustness", "theta": {"k": 0.05}}))):
+            extra, value = ("seed", 0) if table == "jobs" else ("kind", spec["kind"])
+            connection.exec_driver_sql(f"INSERT INTO {table} (id, name, spec, {extra}, status, created_at, updated_at) "
+                                       "VALUES (?, ?, ?, ?, 'finished', '2026-11-01', '2026-11-01')",
+                                       (i + 1, f"old{i}", json.dumps(spec), value))
+    four = {"c_lr", "c_rl", "dV", "k"}
+    factory = storage.open_database(url)
+    with storage.transaction(factory) as session:
+        old = TuningSpec.from_dict(session.get(JobRow, 1).spec)
+        assert not old.model_correction and set(old.bounds) == four
+        assert set(TuningSpec.from_dict(session.get(Study, 2).spec["spec"]).bounds) == four
+        assert session.get(Study, 3).spec == {"kind": "robustness", "theta": {"k": 0.05}}
+        fresh = TuningSpec.from_dict(storage.create_job(session, name="new", spec=TuningSpec().to_dict(), seed=0).spec)
+        assert fresh.model_correction and set(fresh.bounds) == four | {"model_mu_scale", "model_c_scale"}

@@ -7,6 +7,7 @@ import time
 import httpx
 import pytest
 
+from driftlab.core.config import THETA_KEYS, Theta
 from tests.server_process import free_port as _free_port
 from tests.server_process import start_server as _start
 from tests.server_process import wait_status as _wait_status
@@ -31,7 +32,9 @@ def test_a_small_job_runs_to_the_end(server):
     assert done["n_done"] == 12 and done["progress"] == 1.0
     evals = httpx.get(f"{url}/api/jobs/{job['id']}/evaluations").json()
     assert [e["index"] for e in evals] == list(range(12))
-    assert all(set(e["theta"]) == {"c_lr", "c_rl", "dV", "k"} for e in evals)
+    assert all(set(e["theta"]) == {"c_lr", "c_rl", "dV", "k", "model_mu_scale", "model_c_scale"} for e in evals)
+    # a job with the model corrections asks the untuned theta first (stored later if it runs confirmation seeds)
+    assert Theta().as_dict() in [e["theta"] for e in evals[:3]]
     later = httpx.get(f"{url}/api/jobs/{job['id']}/evaluations", params={"after": 8}).json()
     assert [e["index"] for e in later] == [9, 10, 11]
     best = httpx.get(f"{url}/api/jobs/{job['id']}/best").json()
@@ -65,7 +68,7 @@ def test_robust_job_stores_each_seed_and_exports_theta_at_full_precision(server)
     rows = list(csv.DictReader(io.StringIO(exported.text)))
     assert len(rows) == 3
     for row, e in zip(rows, evals, strict=True):
-        assert {k: float(row[k]) for k in ("c_lr", "c_rl", "dV", "k")} == e["theta"]  # bit-exact round trip
+        assert {k: float(row[k]) for k in THETA_KEYS} == e["theta"]  # bit-exact round trip
         assert float(row["J"]) == e["J"] and row["seeds"] == " ".join(str(s["seed"]) for s in e["seeds"])
 
 
@@ -74,6 +77,26 @@ def test_robust_samples_out_of_range_is_a_422_naming_it(server, value):
     url, _ = server
     r = httpx.post(f"{url}/api/jobs", json={"iterations": 3, "robust_samples": value})
     assert r.status_code == 422 and "robust_samples" in r.json()["detail"]
+
+
+@pytest.mark.parametrize(("body", "field"), [
+    ({"model_correction": "yes"}, "model_correction"),
+    ({"model_correction": False, "bounds": {"model_c_scale": [0.9, 1.1]}}, "bounds.model_c_scale"),
+    ({"bounds": {"model_mu_scale": [0.9, 2.5]}}, "bounds.model_mu_scale")])
+def test_model_correction_settings_are_checked_and_nothing_is_stored(server, body, field):
+    url, _ = server
+    before = len(httpx.get(f"{url}/api/jobs").json())
+    r = httpx.post(f"{url}/api/jobs", json={"iterations": 3, **body})
+    assert r.status_code == 422 and field in r.text, r.text
+    assert len(httpx.get(f"{url}/api/jobs").json()) == before
+
+
+def test_a_job_without_model_correction_learns_the_papers_four_parameters(server):
+    url, _ = server
+    r = httpx.post(f"{url}/api/jobs", json={"iterations": 3, "seed_points": 3, "model_correction": False})
+    assert r.status_code == 201, r.text
+    assert r.json()["spec"]["model_correction"] is False and set(r.json()["spec"]["bounds"]) == {"c_lr", "c_rl",
+                                                                                                  "dV", "k"}
 
 
 def test_trajectory_downloads_parse(server):

@@ -1,0 +1,54 @@
+"""theta's model corrections: the controller's model friction and tyre C, learned alongside the paper's theta."""
+
+import pytest
+
+from driftlab.core.config import EpisodeConfig, Theta, apply_overrides
+from driftlab.core.episode import run_episode
+from driftlab.core.errors import ConfigError
+from driftlab.core.tuning import MODEL_BOUNDS, TuningSpec
+
+
+def test_the_corrections_scale_the_models_friction_and_tyre_c_only():
+    vehicle = EpisodeConfig().vehicle
+    model = Theta(model_mu_scale=1.1, model_c_scale=0.9).model_vehicle(vehicle)
+    assert model.friction == pytest.approx(0.85 * 1.1) and model.tyre_c == pytest.approx(1.4478 * 0.9)
+    assert (model.mass_kg, model.tyre_b, model.cg_to_front_m) == (vehicle.mass_kg, vehicle.tyre_b,
+                                                                  vehicle.cg_to_front_m)
+    assert Theta().model_vehicle(vehicle) is vehicle
+
+
+def test_knowing_the_plants_tyre_c_brings_the_car_onto_the_line():
+    """Nominal plant with C x 1.2: the model as configured drifts the 8 ~1.3 m off the line; corrected by the
+    plant's own factor the offset-free target is the plant's drift and the error falls below 0.5 m."""
+    config = apply_overrides(EpisodeConfig.preset(plant="nominal"), {"plant.tyre_c_scale": 1.2})
+    plain = run_episode(Theta(), config)
+    corrected = run_episode(Theta(model_c_scale=1.2), config)
+    assert plain.completed and corrected.completed
+    assert plain.metrics.mean_abs_e_m > 1.0 > 0.5 > corrected.metrics.mean_abs_e_m
+    assert corrected.J < plain.J
+
+
+def test_a_correction_outside_the_cars_range_names_theta():
+    with pytest.raises(ConfigError, match="theta.model_mu_scale / theta.model_c_scale.*tyre_c"):
+        Theta(model_c_scale=1.9).model_vehicle(EpisodeConfig().vehicle)
+    with pytest.raises(ConfigError, match="model_c_scale"):
+        Theta(model_c_scale=2.5)
+
+
+def test_a_job_learns_the_corrections_unless_told_not_to():
+    assert set(MODEL_BOUNDS) <= set(TuningSpec().bounds)
+    paper = TuningSpec(model_correction=False)
+    assert set(paper.bounds) == {"c_lr", "c_rl", "dV", "k"}
+    with pytest.raises(ConfigError, match="bounds.model_c_scale.*model_correction"):
+        TuningSpec(model_correction=False, bounds={"model_c_scale": [0.9, 1.1]})
+    # every corner of the box must be a car: C x 1.8 on a vehicle with C 2.0 is not
+    with pytest.raises(ConfigError, match="tyre_c"):
+        TuningSpec(bounds={"model_c_scale": [0.9, 1.8]}, config=apply_overrides(EpisodeConfig(),
+                                                                                {"vehicle.tyre_c": 2.0}))
+    assert TuningSpec.from_dict(TuningSpec().to_dict()) == TuningSpec()
+
+
+def test_a_job_with_the_corrections_starts_from_the_untuned_theta():
+    assert TuningSpec().initial_points == [Theta().as_dict()]
+    assert TuningSpec(model_correction=False).initial_points == []
+    assert TuningSpec(bounds={"k": [0.06, 0.1]}).initial_points == []  # outside the box: not asked

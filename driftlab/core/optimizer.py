@@ -187,15 +187,14 @@ class BayesianOptimizer:
     def _propose(self) -> np.ndarray:
         x_all = np.array(self.x) if self.x else np.empty((0, self.dim))
         ok = np.array([v is not None for v in self.y], dtype=bool)
+        x_ok = x_all[ok]
+        y_ok = np.array([v for v in self.y if v is not None])
         streak = self._failure_streak()
         if ok.any() and streak >= _FAILURE_STREAK:
-            y_ok = np.array([v for v in self.y if v is not None])
-            return self._retreat(x_all[ok][int(np.argmin(y_ok))], x_all[~ok], streak)
+            return self._retreat(x_ok[int(np.argmin(y_ok))], x_all[~ok], streak)
         if ok.sum() < 2:
             # Nothing to model yet: keep filling space, away from what was tried.
             return self._farthest_candidate(x_all)
-        x_ok = x_all[ok]
-        y_ok = np.array([v for v in self.y if v is not None])
         active = self._active_indices(x_ok, y_ok, self.active_set)
         gp = GaussianProcess(x_ok[active], y_ok[active], self._regression_hyperparameters())
         if self.pending:  # kriging believer: pending points observed at the GP mean

@@ -25,7 +25,7 @@ PAPER_TABLE_I = {"V": 19.1, "beta": -0.4, "r": 0.434, "delta": -0.270, "Fxr": 43
 def write_report(*, db_url: str, name: str, out_dir: str, baseline_samples: int | None = None,
                  rescore_samples: int = 20, dask_address: str | None = None) -> Path:
     factory = storage.open_database(db_url)
-    with storage.transaction(factory) as session:
+    with storage.snapshot(factory) as session:
         job = storage.get_job_by_name(session, name=name)
         spec = TuningSpec.from_dict(job.spec)
         evals = storage.evaluations(session, job_id=job.id)

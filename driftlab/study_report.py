@@ -53,7 +53,7 @@ def write_study_report(*, db_url: str, name: str, out_dir: str) -> Path:
     factory = storage.open_database(db_url)
     out = Path(out_dir)
     out.mkdir(parents=True, exist_ok=True)
-    with storage.transaction(factory) as session:
+    with storage.snapshot(factory) as session:
         summary = study_views.study_summary(session, studies.get_study_by_name(session, name=name))
         header = [f"# DriftLab study report: {name}", "", f"A {summary['kind']} study, {summary['status']}. "
                   "Lower J is better.", ""]

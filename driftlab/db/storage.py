@@ -2,6 +2,12 @@
 
 SQLite by default (where: :func:`driftlab.settings.database_url`), opened in WAL mode with a busy timeout so
 readers never see "database is locked" while a worker commits.
+
+Transactions: :func:`transaction` takes SQLite's write lock when it begins (``BEGIN IMMEDIATE``), so a check and
+the write it guards see the same database (a budget lowered by the API while a runner stores an evaluation: one
+of the two waits for the other, neither acts on a count the other has already changed). :func:`snapshot` is for
+reads only: a consistent view that never blocks a writer. pysqlite's own transaction handling (BEGIN only before
+the first write, reads outside any transaction) is switched off for this, as SQLAlchemy's SQLite docs describe.
 """
 
 from __future__ import annotations
@@ -19,6 +25,7 @@ from driftlab.db import schema
 from driftlab.db.models import Evaluation, Job, Trajectory
 
 _BUSY_TIMEOUT_MS = 30_000
+_BEGIN_OPTION = "driftlab_sqlite_begin"
 
 
 class NotFound(LookupError):
@@ -30,11 +37,13 @@ def open_database(url: str) -> sessionmaker[Session]:
     engine = create_engine(url, connect_args={"timeout": _BUSY_TIMEOUT_MS / 1000} if url.startswith("sqlite") else {})
     if url.startswith("sqlite"):
         event.listen(engine, "connect", _sqlite_pragmas)
+        event.listen(engine, "begin", _sqlite_begin)
     schema.upgrade(engine)
     return sessionmaker(engine, expire_on_commit=False)
 
 
 def _sqlite_pragmas(dbapi_connection, _record) -> None:
+    dbapi_connection.isolation_level = None  # SQLAlchemy emits BEGIN itself: _sqlite_begin
     cursor = dbapi_connection.cursor()
     cursor.execute("PRAGMA journal_mode=WAL")
     cursor.execute(f"PRAGMA busy_timeout={_BUSY_TIMEOUT_MS}")
@@ -43,13 +52,27 @@ def _sqlite_pragmas(dbapi_connection, _record) -> None:
     cursor.close()
 
 
+def _sqlite_begin(connection) -> None:
+    mode = connection.get_execution_options().get(_BEGIN_OPTION, "DEFERRED")
+    connection.exec_driver_sql(f"BEGIN {mode}")
+
+
 def engine_of(factory: sessionmaker[Session]) -> Engine:
     return factory.kw["bind"]
 
 
 @contextmanager
 def transaction(factory: sessionmaker[Session]) -> Iterator[Session]:
-    with factory.begin() as session:
+    """A read-write transaction holding the write lock from its start (SQLite ``BEGIN IMMEDIATE``)."""
+    with factory() as session, session.begin():
+        session.connection(execution_options={_BEGIN_OPTION: "IMMEDIATE"})
+        yield session
+
+
+@contextmanager
+def snapshot(factory: sessionmaker[Session]) -> Iterator[Session]:
+    """A read-only transaction: one consistent view, no lock that would make a writer wait."""
+    with factory() as session, session.begin():
         yield session
 
 

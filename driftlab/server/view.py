@@ -51,7 +51,7 @@ class RecordingCache:
 
     def _record(self, evaluation_id: int, kind: str) -> bytes:
         frames = frames_of_evaluation(self.factory, evaluation_id)  # raises NotFound first
-        with storage.transaction(self.factory) as session:
+        with storage.snapshot(self.factory) as session:
             track = track_of_spec(storage.get_evaluation(session, evaluation_id=evaluation_id).job.spec)
         if kind == "viser":
             return self.recorder.viser_file(frames, track)

@@ -170,7 +170,7 @@ class Dashboard:
 
     # ----- polling storage -----------------------------------------------------------------------------------
     def _read_jobs(self) -> list[tuple[int, str, str]]:
-        with storage.transaction(self.factory) as session:
+        with storage.snapshot(self.factory) as session:
             return [(j.id, j.name, j.status) for j in storage.list_jobs(session)]
 
     def _poll_loop(self) -> None:

@@ -18,7 +18,7 @@ from driftlab.web.frames import EpisodeFrames
 
 def frames_of_evaluation(factory: sessionmaker[Session], evaluation_id: int) -> EpisodeFrames:
     """A stored evaluation with its trajectory (raises storage.NotFound)."""
-    with storage.transaction(factory) as session:
+    with storage.snapshot(factory) as session:
         e = storage.get_evaluation(session, evaluation_id=evaluation_id)
         columns, rows = storage.trajectory_array(session, evaluation_id=evaluation_id)
         return EpisodeFrames(tuple(columns), rows, tuple(e.trigger_points or ()), evaluation_id=e.id,
@@ -54,7 +54,7 @@ class JobHistory:
 
     def refresh(self, factory: sessionmaker[Session]) -> bool:
         """Read job status and evaluations newer than the last one held; True if anything changed."""
-        with self._lock, storage.transaction(factory) as session:
+        with self._lock, storage.snapshot(factory) as session:
             job = storage.get_job(session, job_id=self.job_id)
             rows: list[Evaluation] = storage.evaluations(session, job_id=self.job_id, after=len(self.ids) - 1)
             changed = bool(rows) or job.status != self.status
@@ -95,17 +95,17 @@ class JobHistory:
 
 def read_studies(factory: sessionmaker[Session]) -> list[tuple[int, str, str, str]]:
     """(id, name, kind, status) of every study, oldest first."""
-    with storage.transaction(factory) as session:
+    with storage.snapshot(factory) as session:
         return [(s.id, s.name, s.kind, studies.study_status(session, s)) for s in studies.list_studies(session)]
 
 
 def read_study(factory: sessionmaker[Session], study_id: int) -> dict[str, Any]:
     """A study as GET /api/studies/{id} shows it (raises storage.NotFound)."""
-    with storage.transaction(factory) as session:
+    with storage.snapshot(factory) as session:
         return study_views.study_summary(session, studies.get_study(session, study_id=study_id))
 
 
 def read_compare(factory: sessionmaker[Session], job_ids: list[int]) -> list[dict[str, Any]]:
     """Each job's best, n_done and convergence, as GET /api/compare shows them (raises storage.NotFound)."""
-    with storage.transaction(factory) as session:
+    with storage.snapshot(factory) as session:
         return study_views.compare_jobs(session, job_ids=job_ids)

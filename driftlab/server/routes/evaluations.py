@@ -21,7 +21,7 @@ Factory = Annotated[sessionmaker[Session], Depends(factory)]
 
 @router.get("/{evaluation_id}")
 def get_evaluation(evaluation_id: EvaluationId, db: Factory) -> dict[str, Any]:
-    with storage.transaction(db) as session:
+    with storage.snapshot(db) as session:
         return evaluation_dict(storage.get_evaluation(session, evaluation_id=evaluation_id))
 
 
@@ -29,7 +29,7 @@ def get_evaluation(evaluation_id: EvaluationId, db: Factory) -> dict[str, Any]:
 def trajectory(evaluation_id: EvaluationId, db: Factory,
                format: str = Query("csv", pattern="^(csv|json)$")) -> Response:  # noqa: A002
     """The stored episode (its seed: the evaluation's ``trajectory_seed``), one row per control step."""
-    with storage.transaction(db) as session:
+    with storage.snapshot(db) as session:
         columns, data = storage.trajectory_array(session, evaluation_id=evaluation_id)
     headers = {"Content-Disposition": f'attachment; filename="evaluation-{evaluation_id}.{format}"'}
     if format == "json":

@@ -43,13 +43,13 @@ def create_job(body: JobCreate, db: Factory, request: Request) -> dict[str, Any]
 
 @router.get("")
 def list_jobs(db: Factory) -> list[dict[str, Any]]:
-    with storage.transaction(db) as session:
+    with storage.snapshot(db) as session:
         return [job_dict(session, j) for j in storage.list_jobs(session)]
 
 
 @router.get("/{job_id}")
 def get_job(job_id: JobId, db: Factory) -> dict[str, Any]:
-    with storage.transaction(db) as session:
+    with storage.snapshot(db) as session:
         return job_dict(session, storage.get_job(session, job_id=job_id))
 
 
@@ -103,7 +103,7 @@ def list_evaluations(job_id: JobId, db: Factory, after: After = -1, limit: Limit
                      format: str = Query("json", pattern="^(csv|json)$")) -> Response:  # noqa: A002
     """Evaluations with index > after, in order, at most ``limit`` (page with the last index you have).
     ``format=csv``: one row per evaluation, theta at full precision (what you copy reproduces)."""
-    with storage.transaction(db) as session:
+    with storage.snapshot(db) as session:
         storage.get_job(session, job_id=job_id)
         rows = [evaluation_dict(e) for e in storage.evaluations(session, job_id=job_id, after=after, limit=limit)]
     if format == "csv":
@@ -115,7 +115,7 @@ def list_evaluations(job_id: JobId, db: Factory, after: After = -1, limit: Limit
 
 @router.get("/{job_id}/best")
 def best(job_id: JobId, db: Factory) -> dict[str, Any]:
-    with storage.transaction(db) as session:
+    with storage.snapshot(db) as session:
         storage.get_job(session, job_id=job_id)
         e = storage.best_evaluation(session, job_id=job_id)
         if e is None:

@@ -33,14 +33,14 @@ def create_study(body: StudyCreate, db: Factory, request: Request) -> dict[str, 
 
 @router.get("/api/studies")
 def list_studies(db: Factory) -> list[dict[str, Any]]:
-    with storage.transaction(db) as session:
+    with storage.snapshot(db) as session:
         return [{"id": s.id, "name": s.name, "kind": s.kind, "status": studies.study_status(session, s)}
                 for s in studies.list_studies(session)]
 
 
 @router.get("/api/studies/{study_id}")
 def get_study(study_id: StudyId, db: Factory) -> dict[str, Any]:
-    with storage.transaction(db) as session:
+    with storage.snapshot(db) as session:
         return study_views.study_summary(session, studies.get_study(session, study_id=study_id))
 
 
@@ -92,5 +92,5 @@ def compare(db: Factory, jobs: str = Query(..., max_length=400, description="job
             ) -> list[dict[str, Any]]:
     """For each job, in the order given: its best (theta, J), n_done and convergence (J and best so far)."""
     ids = _job_ids(jobs)
-    with storage.transaction(db) as session:
+    with storage.snapshot(db) as session:
         return study_views.compare_jobs(session, job_ids=ids)

@@ -1,0 +1,75 @@
+"""A check and the write it guards see the same database: two writers on a real SQLite file take turns."""
+
+import threading
+import time
+
+import numpy as np
+import pytest
+
+from driftlab.db import lifecycle, storage
+from driftlab.db.models import Job
+
+
+@pytest.fixture
+def factory(tmp_path):
+    factory = storage.open_database(f"sqlite:///{tmp_path / 'driftlab.db'}")
+    with storage.transaction(factory) as session:
+        storage.create_job(session, name="j", spec={"iterations": 5}, seed=0)
+    return factory
+
+
+def _store_slowly(factory, started: threading.Event, budget_seen: list[int]) -> None:
+    """A runner's store: read the budget, then (a moment later) append an evaluation, in one transaction."""
+    with storage.transaction(factory) as session:
+        budget_seen.append(int(session.get(Job, 1).spec["iterations"]))
+        started.set()
+        time.sleep(0.4)
+        storage.add_evaluation(session, job_id=1, theta={"k": 0.1}, J=1.0, status="completed", metrics={},
+                               trigger_points=[], wall_ms=1.0, columns=["t"], trajectory=np.zeros((2, 1)))
+
+
+def test_a_budget_cannot_be_lowered_under_an_evaluation_being_stored(factory):
+    started, budget_seen = threading.Event(), []
+    runner = threading.Thread(target=_store_slowly, args=(factory, started, budget_seen))
+    runner.start()
+    started.wait(5)
+    with storage.snapshot(factory) as session:  # what a client saw: nothing stored yet
+        assert storage.count_evaluations(session, job_id=1) == 0
+    # The client lowers the budget to what it saw. Without the write lock taken at BEGIN, this would count 0,
+    # commit, and leave a job with budget 0 and one evaluation (write skew); now it waits and counts 1.
+    with pytest.raises(lifecycle.TransitionError, match="at least the 1 evaluations"):
+        with storage.transaction(factory) as session:
+            lifecycle.extend(session, job_id=1, iterations=0)
+    runner.join()
+    assert budget_seen == [5]
+    with storage.snapshot(factory) as session:
+        assert session.get(Job, 1).spec["iterations"] == 5 and storage.count_evaluations(session, job_id=1) == 1
+
+
+def test_a_snapshot_reads_while_a_writer_holds_the_lock(factory):
+    started, budget_seen = threading.Event(), []
+    runner = threading.Thread(target=_store_slowly, args=(factory, started, budget_seen))
+    runner.start()
+    started.wait(5)
+    t0 = time.perf_counter()
+    with storage.snapshot(factory) as session:
+        assert storage.count_evaluations(session, job_id=1) == 0
+    waited_s = time.perf_counter() - t0
+    runner.join()
+    assert waited_s < 0.3  # the writer sleeps 0.4 s holding the lock: a reader that waited would see its row
+
+
+def test_two_writers_never_store_the_same_index(factory):
+    def store():
+        for _ in range(20):
+            with storage.transaction(factory) as session:
+                storage.add_evaluation(session, job_id=1, theta={"k": 0.1}, J=1.0, status="completed", metrics={},
+                                       trigger_points=[], wall_ms=1.0, columns=["t"], trajectory=np.zeros((2, 1)))
+
+    writers = [threading.Thread(target=store) for _ in range(2)]
+    for w in writers:
+        w.start()
+    for w in writers:
+        w.join()
+    with storage.snapshot(factory) as session:
+        assert sorted(e.index for e in storage.evaluations(session, job_id=1)) == list(range(40))

@@ -45,6 +45,17 @@ def wait_status(url, job_id, statuses, timeout_s=120):
     raise AssertionError(f"job {job_id} stuck in {job['status']}")
 
 
+def wait_released(url, job_id, timeout_s=60):
+    """The job once its runner has let go of it: whatever was in flight is stored, nothing more will be."""
+    deadline = time.time() + timeout_s
+    while time.time() < deadline:
+        job = httpx.get(f"{url}/api/jobs/{job_id}").json()
+        if job["runner_id"] is None:
+            return job
+        time.sleep(0.1)
+    raise AssertionError(f"job {job_id} still held by {job['runner_id']}")
+
+
 def serve_finished_job(iterations=8):
     """A server on a fresh SQLite file holding one finished job (tuned by the CLI): (process, url)."""
     db = Path(tempfile.mkdtemp()) / "driftlab.db"

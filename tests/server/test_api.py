@@ -10,6 +10,7 @@ import pytest
 from driftlab.core.config import THETA_KEYS, Theta
 from tests.server_process import free_port as _free_port
 from tests.server_process import start_server as _start
+from tests.server_process import wait_released
 from tests.server_process import wait_status as _wait_status
 
 
@@ -33,8 +34,9 @@ def test_a_small_job_runs_to_the_end(server):
     evals = httpx.get(f"{url}/api/jobs/{job['id']}/evaluations").json()
     assert [e["index"] for e in evals] == list(range(12))
     assert all(set(e["theta"]) == {"c_lr", "c_rl", "dV", "k", "model_mu_scale", "model_c_scale"} for e in evals)
-    # a job with the model corrections asks the untuned theta first (stored later if it runs confirmation seeds)
-    assert Theta().as_dict() in [e["theta"] for e in evals[:3]]
+    # A job with the model corrections asks the untuned theta first. Evaluations are stored in order of completion,
+    # and a completing one runs its confirmation seeds while failing ones end in milliseconds: it may land anywhere.
+    assert [e["theta"] for e in evals].count(Theta().as_dict()) == 1
     later = httpx.get(f"{url}/api/jobs/{job['id']}/evaluations", params={"after": 8}).json()
     assert [e["index"] for e in later] == [9, 10, 11]
     best = httpx.get(f"{url}/api/jobs/{job['id']}/best").json()
@@ -122,8 +124,7 @@ def test_pause_and_resume(server):
     paused = httpx.post(f"{url}/api/jobs/{job['id']}/pause")
     assert paused.status_code == 200
     job_now = _wait_status(url, job["id"], {"paused"})
-    time.sleep(1.5)  # evaluations in flight are stored, then nothing more
-    n_paused = httpx.get(f"{url}/api/jobs/{job['id']}").json()["n_done"]
+    n_paused = wait_released(url, job["id"])["n_done"]  # evaluations in flight are stored, then nothing more
     time.sleep(1.0)
     assert httpx.get(f"{url}/api/jobs/{job['id']}").json()["n_done"] == n_paused
     assert n_paused >= job_now["n_done"]

@@ -11,7 +11,7 @@ import time
 import httpx
 import pytest
 
-from tests.server_process import free_port, start_server, wait_status
+from tests.server_process import free_port, start_server, wait_released, wait_status
 
 
 def _cli(*args, env=None):
@@ -72,7 +72,7 @@ def test_a_second_runner_on_a_running_job_is_refused(server):
     assert httpx.get(f"{url}/api/jobs/{job['id']}").json()["status"] == "running"
     httpx.post(f"{url}/api/jobs/{job['id']}/pause")
     paused = wait_status(url, job["id"], {"paused"})
-    time.sleep(1.0)
+    wait_released(url, job["id"])
     evals = httpx.get(f"{url}/api/jobs/{job['id']}/evaluations").json()
     assert [e["index"] for e in evals] == list(range(len(evals))) and len(evals) >= paused["n_done"]
 
@@ -193,9 +193,8 @@ def test_a_pause_stops_after_the_evaluations_in_flight(server):
     job = httpx.post(f"{url}/api/jobs", json={"iterations": 300, "seed_points": 100, "robust_samples": 1}).json()
     _wait_done(url, job["id"], 3)
     at_pause = httpx.post(f"{url}/api/jobs/{job['id']}/pause").json()["n_done"]
-    time.sleep(1.0)
-    after = httpx.get(f"{url}/api/jobs/{job['id']}").json()
-    assert after["status"] == "paused" and after["runner_id"] is None
+    after = wait_released(url, job["id"])
+    assert after["status"] == "paused"
     assert at_pause <= after["n_done"] <= at_pause + 2  # 2 workers: two in flight at most
 
 
@@ -228,7 +227,7 @@ def test_delete_extend_and_paging(server):
     assert httpx.delete(f"{url}/api/jobs/{running['id']}").status_code == 409
     httpx.post(f"{url}/api/jobs/{running['id']}/pause")
     wait_status(url, running["id"], {"paused"})
-    time.sleep(0.5)
+    wait_released(url, running["id"])  # 409 until the runner has stored what was in flight and let go
     assert httpx.delete(f"{url}/api/jobs/{running['id']}").status_code == 204
     assert httpx.get(f"{url}/api/jobs/{running['id']}").status_code == 404
     assert httpx.get(f"{url}/api/evaluations/{evals[0]['id']}").status_code == 200  # other jobs untouched

@@ -353,7 +353,8 @@ def build_parser() -> argparse.ArgumentParser:
     eq.add_argument("--set", action="append", metavar="KEY=VALUE", help="config override, e.g. plant.cg_height_m=0.3")
     eq.set_defaults(func=_cmd_equilibrium)
     ep = sub.add_parser("episode", help="run one 30 s figure-8 episode and print its metrics as JSON")
-    ep.add_argument("--theta", help="c_lr=..,c_rl=..,dV=..,k=.. (defaults: 0.02, 0.02, 0, 0.05)")
+    ep.add_argument("--theta", help="c_lr=..,c_rl=..,dV=..,k=..,model_mu_scale=..,model_c_scale=.. (any subset; "
+                    "defaults: 0.02, 0.02, 0, 0.05, 1, 1)")
     ep.add_argument("--plant", choices=("default", "nominal"), default="default")
     ep.add_argument("--controller", choices=("default", "paper"), default="default",
                     help="default: DriftLab's MPC with path states and actuator lags; paper: the paper's MPC")

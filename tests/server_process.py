@@ -35,25 +35,25 @@ def start_server(db_path, port, env_extra=None, extra_args=()):
     raise RuntimeError(Path(log.name).read_text())
 
 
-def wait_status(url, job_id, statuses, timeout_s=120):
+def wait_for(resource_url, done, timeout_s=120, poll_s=0.2):
+    """GET ``resource_url`` until ``done(body)`` holds and return that body (AssertionError on timeout)."""
     deadline = time.time() + timeout_s
-    while time.time() < deadline:
-        job = httpx.get(f"{url}/api/jobs/{job_id}").json()
-        if job["status"] in statuses:
-            return job
-        time.sleep(0.2)
-    raise AssertionError(f"job {job_id} stuck in {job['status']}")
+    while True:
+        body = httpx.get(resource_url).json()
+        if done(body):
+            return body
+        if time.time() > deadline:
+            raise AssertionError(f"{resource_url} did not get there in {timeout_s} s: {body}")
+        time.sleep(poll_s)
+
+
+def wait_status(url, job_id, statuses, timeout_s=120):
+    return wait_for(f"{url}/api/jobs/{job_id}", lambda job: job["status"] in statuses, timeout_s)
 
 
 def wait_released(url, job_id, timeout_s=60):
     """The job once its runner has let go of it: whatever was in flight is stored, nothing more will be."""
-    deadline = time.time() + timeout_s
-    while time.time() < deadline:
-        job = httpx.get(f"{url}/api/jobs/{job_id}").json()
-        if job["runner_id"] is None:
-            return job
-        time.sleep(0.1)
-    raise AssertionError(f"job {job_id} still held by {job['runner_id']}")
+    return wait_for(f"{url}/api/jobs/{job_id}", lambda job: job["runner_id"] is None, timeout_s, poll_s=0.1)
 
 
 def serve_finished_job(iterations=8):

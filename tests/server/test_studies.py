@@ -15,7 +15,7 @@ import httpx
 import pytest
 
 from driftlab.core.robust import tuning_seeds
-from tests.server_process import free_port, start_server
+from tests.server_process import free_port, start_server, wait_for
 
 JOB_SPEC = {"iterations": 5, "seed_points": 5, "robust_samples": 1, "confirm_samples": 0}
 
@@ -30,13 +30,7 @@ def server(tmp_path_factory):
 
 
 def _wait_study(url, study_id, statuses, timeout_s=180):
-    deadline = time.time() + timeout_s
-    while time.time() < deadline:
-        study = httpx.get(f"{url}/api/studies/{study_id}").json()
-        if study["status"] in statuses:
-            return study
-        time.sleep(0.3)
-    raise AssertionError(f"study {study_id} stuck in {study['status']}")
+    return wait_for(f"{url}/api/studies/{study_id}", lambda study: study["status"] in statuses, timeout_s, poll_s=0.3)
 
 
 def _best_so_far(evaluations):

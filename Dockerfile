@@ -5,9 +5,12 @@ ENV PYTHONDONTWRITEBYTECODE=1 PYTHONUNBUFFERED=1 OMP_NUM_THREADS=1 \
     NUMBA_CACHE_DIR=/opt/driftlab/numba-cache DRIFTLAB_DATABASE_URL=sqlite:////data/driftlab.db
 
 WORKDIR /opt/driftlab
+COPY requirements ./requirements
+# The lock first (its layer is cached while only the code changes), then the package without resolving anything.
+RUN pip install --no-cache-dir -r requirements/app.txt
 COPY pyproject.toml README.md ./
 COPY driftlab ./driftlab
-RUN pip install --no-cache-dir ".[dask]" \
+RUN pip install --no-cache-dir --no-deps --no-build-isolation . \
     && useradd --create-home --uid 1000 driftlab \
     && mkdir -p /data "$NUMBA_CACHE_DIR" \
     # Warm the numba cache at build time: the first episode would otherwise compile for ~5 s.

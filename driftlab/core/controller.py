@@ -15,6 +15,7 @@ from functools import lru_cache
 import numpy as np
 from numba import njit
 
+from driftlab.core.blas_threads import with_one_blas_thread
 from driftlab.core.equilibrium import Equilibrium, drift_equilibrium
 from driftlab.core.mpc import KN, MpcConfig, ReferenceQp
 from driftlab.core.track import LEFT
@@ -52,6 +53,7 @@ def _reference_equilibria(vehicle: VehicleParams, left_radius_m: float, right_ra
 
 
 @lru_cache(maxsize=16)
+@with_one_blas_thread  # cached: its bits must not depend on the first caller's threads
 def build_controller_model(vehicle: VehicleParams, mpc: MpcConfig, left_radius_m: float,
                            right_radius_m: float, sideslip_rad: float, feedback_gain_radpm: float = 0.0,
                            lookahead_m: float = 0.0) -> ControllerModel:

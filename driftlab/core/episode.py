@@ -11,6 +11,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
+from driftlab.core.blas_threads import with_one_blas_thread
 from driftlab.core.closed_loop import (
     COL,
     COLUMNS,
@@ -82,12 +83,14 @@ def failure_penalty(completed_fraction: float) -> float:
     return 3.5 + 5.0 * (1.0 - min(max(completed_fraction, 0.0), 1.0))
 
 
+@with_one_blas_thread
 def run_episode(theta: Theta, config: EpisodeConfig, *, seed: int = 0) -> EpisodeResult:
     """Run the paper's figure-8 scenario once (paper Algorithm 1, inner loop) and score it (paper eq. 12).
 
     A pure function of its arguments: ``seed`` draws the episode's plant variation, start and measurement
     noise (:mod:`driftlab.core.variation`; none in a plant whose spreads are zero), and no state survives
-    from one call to the next. The same arguments give a bit-identical trajectory in any process.
+    from one call to the next. The same arguments give a bit-identical trajectory in any process on one
+    machine and lock, whatever its BLAS thread settings (:mod:`driftlab.core.blas_threads`).
     """
     if isinstance(seed, bool) or not isinstance(seed, int) or not 0 <= seed <= MAX_SEED:
         raise ConfigError(f"seed must be an integer in [0, {MAX_SEED}], got {seed!r}")

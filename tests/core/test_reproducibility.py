@@ -2,6 +2,7 @@
 process and in any order; the seed varies the default plant and nothing else."""
 
 import json
+import os
 import subprocess
 import sys
 
@@ -40,6 +41,30 @@ def test_same_result_in_a_fresh_process(reference):
     data = json.loads(out.stdout)
     assert data["J"] == reference.J and data["status"] == reference.status  # JSON floats round-trip exactly
     assert data["seed"] == 3 and data["theta"] == CLIFF_THETA.as_dict()
+
+
+_EPISODE_TO_FILE = """
+import sys
+import numpy as np
+from driftlab.core.config import EpisodeConfig, Theta
+from driftlab.core.episode import run_episode
+result = run_episode(Theta(c_lr=0.0237, c_rl=0.0221, dV=-0.029, k=0.117), EpisodeConfig(), seed=3)
+np.save(sys.argv[1], np.vstack([np.full((1, result.trajectory.shape[1]), result.J), result.trajectory]))
+"""
+
+
+@pytest.mark.parametrize("threads", [None, "1", "2"])
+def test_same_bits_whatever_the_blas_thread_count(reference, threads, tmp_path):
+    # OpenBLAS with two threads sums a product's partial results in another order: before the episode pinned
+    # one thread, this seed's J was ...3076 with OMP_NUM_THREADS unset and ...3151 with 1.
+    env = {k: v for k, v in os.environ.items() if k not in ("OMP_NUM_THREADS", "OPENBLAS_NUM_THREADS")}
+    if threads is not None:
+        env["OMP_NUM_THREADS"] = env["OPENBLAS_NUM_THREADS"] = threads
+    out = tmp_path / "episode.npy"
+    subprocess.run([sys.executable, "-c", _EPISODE_TO_FILE, str(out)], env=env, check=True, timeout=300)
+    saved = np.load(out)
+    assert saved[0, 0] == reference.J
+    assert np.array_equal(saved[1:], reference.trajectory)
 
 
 def test_same_result_in_a_pool_worker_after_other_episodes(reference):

@@ -38,6 +38,10 @@ RELEASE_MPC = {"dt_s": 0.05, "horizon": 20, "q_speed": 4.2, "q_sideslip": 1800.0
                "model_drive_lag_s": 0.05, "osqp_eps": 1e-05, "path_states": True, "q_lateral_error": 0.05,
                "q_course_error": 6.6, "terminal_cost": False}
 RELEASE_J = -0.7103497996442939
+# RELEASE_J was computed on another machine: with the same lock, numpy's CPU-dispatched SIMD math differs in the
+# last bits between CPUs (seen: ...6494677 against ...6442939, 5e-12), so a stored release is matched to this
+# tolerance; on one machine and lock an episode is bit-identical (checked below with `again`).
+ACROSS_CPUS_J = 1e-9
 
 
 def _schema_1_spec() -> dict:
@@ -63,7 +67,7 @@ def test_schema_1_database_upgrades_and_its_results_still_reproduce(tmp_path):
                                                                "mpc.estimator_uses_actuators": False,
                                                                "mpc.estimator_model": "nonlinear",
                                                                "mpc.qp_solver": "osqp"}))
-    assert old.J == RELEASE_J
+    assert abs(old.J - RELEASE_J) <= ACROSS_CPUS_J
     with sqlite3.connect(path) as db:
         db.executescript(SCHEMA_1)
         db.execute("INSERT INTO meta VALUES ('schema_version', '1')")
@@ -88,7 +92,7 @@ def test_schema_1_database_upgrades_and_its_results_still_reproduce(tmp_path):
                                      "completed_fraction": old.metrics.completed_fraction}]
         assert evaluation.trajectory_seed == 0
     again = run_episode(theta, spec.config, seed=evaluation.trajectory_seed)
-    assert again.J == RELEASE_J
+    assert again.J == old.J and np.array_equal(again.trajectory, old.trajectory)
     engine = storage.engine_of(factory)
     assert schema.current_revision(engine) == schema.head_revision()
     storage.open_database(f"sqlite:///{path}")  # a second open is a no-op

@@ -3,7 +3,6 @@
 from __future__ import annotations
 
 import argparse
-import csv
 import json
 import math
 import os
@@ -11,7 +10,7 @@ import sys
 import time
 from typing import Any
 
-from driftlab.core.config import EpisodeConfig, Theta, apply_overrides
+from driftlab.core.config import EpisodeConfig, Theta, apply_overrides, config_to_dict
 from driftlab.core.drivability import check_drivable
 from driftlab.core.equilibrium import drift_equilibrium
 from driftlab.core.errors import ConfigError, NoEquilibriumError
@@ -125,10 +124,12 @@ def _cmd_episode(args: argparse.Namespace) -> int:
     result = run_episode(theta, config, seed=args.seed)
     print(json.dumps(_finite(result.summary())))
     if args.csv:
+        from driftlab.export import trajectory_csv
+
+        metadata = {"theta": theta.as_dict(), "seed": args.seed, "J_episode": result.J, "episode_status": result.status,
+                    "J": result.J, "status": result.status, "n_seeds": 1, "config": config_to_dict(config)}
         with open(args.csv, "w", newline="") as handle:
-            writer = csv.writer(handle)
-            writer.writerow(COLUMNS)
-            writer.writerows(result.trajectory.tolist())
+            handle.write(trajectory_csv(list(COLUMNS), result.trajectory, metadata))
     if args.plot:
         from driftlab.plotting import plot_episode
 
@@ -159,7 +160,8 @@ def _tuning_spec(args: argparse.Namespace):
     correction = preset["model_correction"] if args.model_correction is None else args.model_correction == "on"
     return TuningSpec(iterations=iterations, seed_points=seed_points, active_set=active_set,
                       seed=args.seed, robust_samples=args.robust_samples, confirm_samples=args.confirm_samples,
-                      bounds=bounds, config=config, model_correction=correction)
+                      bounds=bounds, config=config, model_correction=correction,
+                      deterministic=bool(args.deterministic))
 
 
 def _open_tuning_job(factory, args: argparse.Namespace, runner: str) -> tuple[int, str]:
@@ -192,6 +194,7 @@ def _open_tuning_job(factory, args: argparse.Namespace, runner: str) -> tuple[in
 
 
 def _cmd_tune(args: argparse.Namespace) -> int:
+    from driftlab.core.compiled import episode_kernels_cached
     from driftlab.db import lifecycle, storage
     from driftlab.worker.executor import open_executor
     from driftlab.worker.job_loop import Progress, run_job
@@ -213,6 +216,8 @@ def _cmd_tune(args: argparse.Namespace) -> int:
     started = time.perf_counter()
     with storage.transaction(factory) as session:
         status = storage.get_job(session, job_id=job_id).status
+    if status == lifecycle.JobStatus.RUNNING and episode_kernels_cached() is False:
+        sys.stderr.write("compiling the simulation (numba, once after an install); the first evaluation follows\n")
     if status == lifecycle.JobStatus.RUNNING:  # ours now
         executor, workers = open_executor(args.workers, _dask_address(args))
         try:
@@ -231,8 +236,7 @@ def _cmd_tune(args: argparse.Namespace) -> int:
         best = storage.best_evaluation(session, job_id=job_id)
         out = {"job": name, "id": job_id, "status": str(status), "wall_s": round(time.perf_counter() - started, 2),
                "n_done": storage.count_evaluations(session, job_id=job_id),
-               "best": None if best is None else {"index": best.index, "theta": best.theta, "J": best.J,
-                                                   "status": best.status, "seeds": best.seeds}}
+               "best": storage.best_summary(best)}
     sys.stderr.write("\n")
     print(json.dumps(out))
     return 0 if status != "failed" else 1
@@ -325,6 +329,9 @@ def _add_job_options(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--model-correction", choices=("on", "off"),
                         help="also learn the controller model's friction and tyre-C scales (theta.model_mu_scale, "
                              "theta.model_c_scale); default on, off with --preset paper")
+    parser.add_argument("--deterministic", action="store_true", default=None,
+                        help="one evaluation at a time (its seeds still in parallel): the thetas depend on the seed "
+                             "and settings only, not on the number of workers or which episode finishes first")
     parser.add_argument("--seed-points", type=int, help="space-filling evaluations before the GP (default 12)")
     parser.add_argument("--active-set", type=int, help="most evaluations the GP is fit on (default 400)")
     parser.add_argument("--robust-samples", type=int, default=DEFAULT_ROBUST_SAMPLES, metavar="N",

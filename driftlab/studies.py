@@ -96,8 +96,7 @@ def job_summary(session: Session, job: Job) -> dict[str, Any]:
     convergence = job_convergence(session, job_id=job.id)
     return {"id": job.id, "name": job.name, "status": job.status, "seed": job.seed, "study_id": job.study_id,
             "iterations": job.spec["iterations"], "n_done": len(convergence["index"]),
-            "best": None if best is None else {"evaluation_id": best.id, "index": best.index, "theta": best.theta,
-                                               "J": best.J, "status": best.status},
+            "best": storage.best_summary(best),
             "convergence": convergence}
 
 

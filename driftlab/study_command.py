@@ -58,7 +58,9 @@ def study_doc(args: argparse.Namespace, tuning_spec) -> dict[str, Any]:
     return doc
 
 
-def _open_study(factory, args: argparse.Namespace, tuning_spec) -> int:
+def _open_study(factory, args: argparse.Namespace, tuning_spec, runner: str) -> int:
+    """Create the study (or take it up by name); a seeds study is held by ``runner`` in the same transaction, so a
+    server on the same database cannot start one of its jobs (raises LeaseHeld if another runner holds it)."""
     from driftlab import studies as study_views
     from driftlab.db import storage, studies
 
@@ -72,6 +74,8 @@ def _open_study(factory, args: argparse.Namespace, tuning_spec) -> int:
         else:
             sys.stderr.write(f"resuming study {study.name} (id {study.id}) with its stored settings (arguments "
                              f"given now that differ are not applied; a new --name starts a new study)\n")
+        if study.kind == "seeds":
+            studies.hold_seeds_study(session, study_id=study.id, runner=runner)
         return study.id
 
 
@@ -148,10 +152,10 @@ def cmd_study(args: argparse.Namespace, tuning_spec, db_url: str, dask_address: 
             summary = study_views.study_summary(session, studies.get_study_by_name(session, name=args.name))
         print(json.dumps(brief_summary(summary, args.every)))
         return 0
-    study_id = _open_study(factory, args, tuning_spec)
+    runner = lifecycle.new_runner_id("study")
+    study_id = _open_study(factory, args, tuning_spec, runner)
     with storage.transaction(factory) as session:
         kind = studies.get_study(session, study_id=study_id).kind
-    runner = lifecycle.new_runner_id("study")
     executor, workers = open_executor(args.workers, dask_address)
     started = time.perf_counter()
     try:
@@ -164,6 +168,9 @@ def cmd_study(args: argparse.Namespace, tuning_spec, db_url: str, dask_address: 
         return 130
     finally:
         executor.shutdown()
+        if kind == "seeds":
+            with storage.transaction(factory) as session:
+                studies.let_go_seeds_study(session, study_id=study_id, runner=runner)
     with storage.transaction(factory) as session:
         summary = study_views.study_summary(session, studies.get_study(session, study_id=study_id))
     print(json.dumps({**brief_summary(summary, args.every), "wall_s": round(time.perf_counter() - started, 2)}))

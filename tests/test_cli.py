@@ -6,6 +6,8 @@ import sys
 
 import pytest
 
+from driftlab.export import read_csv_metadata
+
 EPISODE_KEYS = {"status", "J", "theta", "seed", "completed_fraction", "mean_abs_e_m", "max_abs_e_m",
                 "mean_abs_beta_err_rad", "beta_flip_s", "min_speed_mps", "trigger_times_s", "wall_ms"}
 
@@ -62,7 +64,12 @@ def test_episode_json_has_the_documented_keys(tmp_path):
     assert EPISODE_KEYS <= set(data)
     assert data["status"] == "completed"
     lines = csv_file.read_text().splitlines()
-    assert lines[0].startswith("t_s,x_m,y_m") and len(lines) > 500
+    meta = read_csv_metadata(csv_file.read_text())
+    assert meta["J"] == data["J"] and meta["seed"] == 0 and meta["theta"] == data["theta"]
+    assert meta["config"]["plant"]["friction_spread"] == 0.0  # the nominal plant, as run
+    assert lines[1].startswith("t_s,x_m,y_m") and len(lines) > 500
+    phase = lines[1].split(",").index("phase")
+    assert all(row.split(",")[phase] in {"0", "1", "2", "3", "4", "5"} for row in lines[2:])
 
 
 @pytest.mark.parametrize("args, field", [

@@ -90,6 +90,11 @@ class TuningSpec:
         bounds: theta name -> (lo, hi).
         model_correction: also learn theta's model corrections (model_mu_scale, model_c_scale), in MODEL_BOUNDS
             unless bounded otherwise. Off: the paper's four parameters (jobs stored before revision 8).
+        deterministic: the next theta is asked only once every evaluation asked before is stored and told, so the
+            sequence of thetas is a function of the seed and the settings whatever the number of workers or
+            their speed. Off (the default): a new theta is asked as soon as a worker is free, and the order in
+            which parallel episodes complete changes what the optimizer has seen (two runs of a job with the
+            same seed agree on the first evaluation, then may differ).
         config: the episode configuration (plant, controller, scenario ...).
     """
 
@@ -102,6 +107,7 @@ class TuningSpec:
     bounds: dict[str, tuple[float, float]] = field(default_factory=dict)
     config: EpisodeConfig = field(default_factory=EpisodeConfig)
     model_correction: bool = True
+    deterministic: bool = False
 
     def __post_init__(self) -> None:
         for name in ("iterations", "seed_points", "active_set", "seed", "robust_samples"):
@@ -111,6 +117,9 @@ class TuningSpec:
         if not isinstance(self.model_correction, bool):
             raise ConfigError(f"model_correction must be true or false, got {self.model_correction!r}",
                               field="model_correction")
+        if not isinstance(self.deterministic, bool):
+            raise ConfigError(f"deterministic must be true or false, got {self.deterministic!r}",
+                              field="deterministic")
         object.__setattr__(self, "bounds", validate_bounds(dict(self.bounds), self.model_correction))
         if self.model_correction:  # every corner of the box must be a valid car, or every episode would raise
             (mu_lo, mu_hi), (c_lo, c_hi) = self.bounds["model_mu_scale"], self.bounds["model_c_scale"]
@@ -125,7 +134,7 @@ class TuningSpec:
         return {"iterations": self.iterations, "seed_points": self.seed_points, "active_set": self.active_set,
                 "seed": self.seed, "robust_samples": self.robust_samples, "confirm_samples": self.confirm_samples,
                 "bounds": {k: list(v) for k, v in self.bounds.items()}, "model_correction": self.model_correction,
-                "config": config_to_dict(self.config)}
+                "deterministic": self.deterministic, "config": config_to_dict(self.config)}
 
     @property
     def initial_points(self) -> list[dict[str, float]]:
@@ -152,7 +161,7 @@ class TuningSpec:
     def from_dict(cls, data: dict[str, Any]) -> TuningSpec:
         """From a stored or posted document. ``config`` may be nested sections or flat dotted keys."""
         allowed = {"iterations", "seed_points", "active_set", "seed", "robust_samples", "confirm_samples", "bounds",
-                   "model_correction", "config"}
+                   "model_correction", "deterministic", "config"}
         unknown = set(data) - allowed
         if unknown:
             raise ConfigError(f"unknown field {sorted(unknown)[0]!r}; allowed: {', '.join(sorted(allowed))}")
@@ -160,4 +169,5 @@ class TuningSpec:
         scalars = ("iterations", "seed_points", "active_set", "seed", "robust_samples", "confirm_samples")
         kwargs = {k: data[k] for k in scalars if k in data}
         return cls(**kwargs, bounds=data.get("bounds") or {}, config=config,
-                   model_correction=data.get("model_correction", True))
+                   model_correction=data.get("model_correction", True),
+                   deterministic=data.get("deterministic", False))

@@ -22,7 +22,7 @@ from enum import StrEnum
 from sqlalchemy import delete, or_, select, update
 from sqlalchemy.orm import Session
 
-from driftlab.db.models import Evaluation, Job, Trajectory, utcnow
+from driftlab.db.models import Evaluation, Job, Study, Trajectory, utcnow
 from driftlab.db.storage import count_evaluations, get_job
 
 LEASE_TIMEOUT_S = 15.0  # a runner renews every HEARTBEAT_S; three missed renewals and more mean it is gone
@@ -63,6 +63,17 @@ def _lease_is_stale(now: datetime):
     return or_(Job.heartbeat_at.is_(None), Job.heartbeat_at < _stale_before(now))
 
 
+def _study_held_by_another(now: datetime, runner: str | None):
+    """SQL: the job belongs to a seeds study that another live runner holds (``driftlab study seeds`` runs its
+    jobs one after another and holds the study from the moment it creates it, so no other runner starts one).
+    False, not NULL, for a job of no study (NOT NULL would be NULL and filter the job out)."""
+    holders = select(Study.id).where(Study.kind == "seeds", Study.runner_id.is_not(None),
+                                     Study.heartbeat_at >= _stale_before(now))
+    if runner is not None:
+        holders = holders.where(Study.runner_id != runner)
+    return Job.study_id.is_not(None) & Job.study_id.in_(holders)
+
+
 def lease_is_live(job: Job, now: datetime | None = None) -> bool:
     now = now or utcnow()
     return (job.status == JobStatus.RUNNING and job.runner_id is not None and job.heartbeat_at is not None
@@ -80,27 +91,38 @@ def claim(session: Session, *, job_id: int, runner: str, from_statuses: tuple[Jo
     """
     now = utcnow()
     claimable = or_(Job.status.in_([str(s) for s in from_statuses]),
-                    (Job.status == JobStatus.RUNNING) & _lease_is_stale(now))
+                    (Job.status == JobStatus.RUNNING) & _lease_is_stale(now)) & ~_study_held_by_another(now, runner)
     result = session.execute(update(Job).where(Job.id == job_id, claimable)
                              .values(status=JobStatus.RUNNING, runner_id=runner, heartbeat_at=_naive(now), error=None)
                              .execution_options(synchronize_session=False))
     job = get_job(session, job_id=job_id)
     session.refresh(job)
     if result.rowcount == 1:
-        job.started_at = job.started_at or now
+        job.started_at = now  # this run's start: the ETA counts only the time since (pauses excluded)
         return job
     if lease_is_live(job, now):
         age = (_naive(now) - _naive(job.heartbeat_at)).total_seconds()
         raise LeaseHeld(f"job {job.name!r} is being run by {job.runner_id} (last heartbeat {age:.1f} s ago); "
                         "pause it first, or wait for it to finish")
+    if job.study_id is not None:
+        study = session.get(Study, job.study_id)
+        if study is not None and session.scalar(select(Job.id).where(Job.id == job_id,
+                                                                     _study_held_by_another(now, runner))):
+            raise LeaseHeld(f"job {job.name!r} belongs to study {study.name!r} (id {study.id}), which "
+                            f"{study.runner_id} is running; pause the study first, or wait for it to finish")
     raise TransitionError(f"job {job.name!r} is {job.status}; it can be run from {', '.join(from_statuses)}")
 
 
 def heartbeat(session: Session, *, job_id: int, runner: str) -> bool:
-    """Renew the lease; False when the runner no longer holds it (paused, deleted or taken over): stop."""
+    """Renew the lease (and the runner's hold on the job's seeds study, if it holds it); False when the runner
+    no longer holds the job (paused, deleted or taken over): stop."""
+    now = _naive(utcnow())
     result = session.execute(update(Job).where(Job.id == job_id, Job.runner_id == runner,
                                                Job.status == JobStatus.RUNNING)
-                             .values(heartbeat_at=_naive(utcnow())).execution_options(synchronize_session=False))
+                             .values(heartbeat_at=now).execution_options(synchronize_session=False))
+    study_of_job = select(Job.study_id).where(Job.id == job_id).scalar_subquery()
+    session.execute(update(Study).where(Study.id == study_of_job, Study.kind == "seeds", Study.runner_id == runner)
+                    .values(heartbeat_at=now).execution_options(synchronize_session=False))
     return result.rowcount == 1
 
 
@@ -144,8 +166,15 @@ def extend(session: Session, *, job_id: int, iterations: int) -> Job:
     return job
 
 
-def delete_job(session: Session, *, job_id: int) -> None:
+def delete_job(session: Session, *, job_id: int, with_its_study: bool = False) -> None:
+    """The job, its evaluations and trajectories. A seeds study's job goes only with its study
+    (``with_its_study``): deleting one alone would silently change the study's band and spread."""
     job = get_job(session, job_id=job_id)
+    if job.study_id is not None and not with_its_study:
+        study = session.get(Study, job.study_id)
+        name = f"{study.name!r} (id {study.id})" if study is not None else f"id {job.study_id}"
+        raise TransitionError(f"job {job_id} belongs to seeds study {name}; delete the study "
+                              f"(DELETE /api/studies/{job.study_id}) to delete its jobs")
     if lease_is_live(job):
         raise TransitionError(f"job {job_id} is running; pause it first")
     ids = select(Evaluation.id).where(Evaluation.job_id == job_id)
@@ -155,8 +184,10 @@ def delete_job(session: Session, *, job_id: int) -> None:
 
 
 def next_claimable(session: Session) -> int | None:
-    """The oldest queued job, or one whose runner died."""
-    stale = (Job.status == JobStatus.RUNNING) & _lease_is_stale(utcnow())
-    query = select(Job.id).where(or_(Job.status == JobStatus.QUEUED, stale)).order_by(Job.id).limit(1)
+    """The oldest queued job, or one whose runner died (not of a seeds study another runner holds)."""
+    now = utcnow()
+    stale = (Job.status == JobStatus.RUNNING) & _lease_is_stale(now)
+    query = (select(Job.id).where(or_(Job.status == JobStatus.QUEUED, stale), ~_study_held_by_another(now, None))
+             .order_by(Job.id).limit(1))
     return session.scalar(query)
 

@@ -15,6 +15,7 @@ from __future__ import annotations
 import zlib
 from collections.abc import Iterator
 from contextlib import contextmanager
+from datetime import datetime
 from typing import Any
 
 import numpy as np
@@ -152,14 +153,21 @@ def evaluations(session: Session, *, job_id: int, after: int = -1, limit: int | 
     return list(session.scalars(query))
 
 
-def seconds_per_evaluation(session: Session, *, job_id: int, window: int = 20) -> float | None:
-    """Mean time between the job's last ``window`` evaluations (None with fewer than two): an ETA that a
-    pause, a resume or a crash does not distort."""
+def seconds_per_evaluation(session: Session, *, job_id: int, since: datetime | None = None,
+                           window: int = 20) -> float | None:
+    """Seconds per evaluation over the job's running time only: the last ``window`` evaluations stored since
+    ``since`` (the current run's claim; a pause, a resume or a crash before it does not count), or, with fewer,
+    the time from ``since`` to the last of them per evaluation. None before the run's first evaluation."""
     stamps = list(session.scalars(select(Evaluation.created_at).where(Evaluation.job_id == job_id)
                                   .order_by(Evaluation.index.desc()).limit(window)))
-    if len(stamps) < 2:
+    if since is not None:
+        start = since.replace(tzinfo=None)
+        stamps = [t for t in stamps if t.replace(tzinfo=None) >= start]
+    if len(stamps) >= window or (since is None and len(stamps) >= 2):
+        return (stamps[0] - stamps[-1]).total_seconds() / (len(stamps) - 1)
+    if since is None or not stamps:
         return None
-    return (stamps[0] - stamps[-1]).total_seconds() / (len(stamps) - 1)
+    return (stamps[0].replace(tzinfo=None) - since.replace(tzinfo=None)).total_seconds() / len(stamps)
 
 
 def get_evaluation(session: Session, *, evaluation_id: int) -> Evaluation:
@@ -177,6 +185,15 @@ def best_evaluation(session: Session, *, job_id: int) -> Evaluation | None:
         if best is not None:
             return best
     return None
+
+
+def best_summary(best: Evaluation | None) -> dict[str, Any] | None:
+    """The best evaluation as a job (and compare) shows it. ``id`` is the evaluation's id, the name every
+    evaluation carries in the API (``/api/jobs/{id}/best``, ``/evaluations``)."""
+    if best is None:
+        return None
+    return {"id": best.id, "index": best.index, "theta": best.theta, "J": best.J, "status": best.status,
+            "seeds": best.seeds, "trajectory_seed": best.trajectory_seed}
 
 
 def trajectory_array(session: Session, *, evaluation_id: int) -> tuple[list[str], np.ndarray]:

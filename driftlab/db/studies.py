@@ -144,6 +144,30 @@ def release_study(session: Session, *, study_id: int, runner: str, status: str, 
                     .values(runner_id=None, heartbeat_at=None).execution_options(synchronize_session=False))
 
 
+def hold_seeds_study(session: Session, *, study_id: int, runner: str) -> None:
+    """``runner`` runs this seeds study's jobs one after another: no other runner claims them while it holds it
+    (renewed with each job's heartbeat, see lifecycle.heartbeat; free again LEASE_TIMEOUT_S after the holder
+    died). Taken in the transaction that creates the study, so no server can start a job first.
+
+    Raises:
+        LeaseHeld: another live runner holds the study.
+    """
+    now = utcnow()
+    free = or_(Study.runner_id.is_(None), Study.runner_id == runner, _lease_is_stale(now))
+    result = session.execute(update(Study).where(Study.id == study_id, Study.kind == "seeds", free)
+                             .values(runner_id=runner, heartbeat_at=now.replace(tzinfo=None))
+                             .execution_options(synchronize_session=False))
+    if result.rowcount != 1:
+        study = get_study(session, study_id=study_id)
+        raise lifecycle.LeaseHeld(f"study {study.name!r} (id {study_id}) is being run by {study.runner_id}; "
+                                  "pause it first, or wait for it to finish")
+
+
+def let_go_seeds_study(session: Session, *, study_id: int, runner: str) -> None:
+    session.execute(update(Study).where(Study.id == study_id, Study.runner_id == runner)
+                    .values(runner_id=None, heartbeat_at=None).execution_options(synchronize_session=False))
+
+
 def pause_study(session: Session, *, study_id: int) -> Study:
     """Pauses a robustness study, or each queued or running job of a seeds study (TransitionError if none)."""
     study = get_study(session, study_id=study_id)
@@ -183,6 +207,6 @@ def delete_study(session: Session, *, study_id: int) -> None:
     if _lease_is_live(study) or any(lifecycle.lease_is_live(j) for j in jobs):
         raise TransitionError(f"study {study_id} is running; pause it first")
     for job in jobs:
-        lifecycle.delete_job(session, job_id=job.id)
+        lifecycle.delete_job(session, job_id=job.id, with_its_study=True)
     session.execute(delete(StudyCell).where(StudyCell.study_id == study_id))
     session.execute(delete(Study).where(Study.id == study_id))

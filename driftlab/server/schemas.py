@@ -71,6 +71,10 @@ class JobCreate(BaseModel):
     model_correction: bool = Field(default=True, strict=True,
                                    description="also learn the controller model's friction and tyre-C scales "
                                                "(theta.model_mu_scale, theta.model_c_scale)")
+    deterministic: bool = Field(default=False, strict=True,
+                                description="ask the next theta only when every earlier evaluation is stored: the "
+                                            "thetas then depend on the seed and settings only, not on how many "
+                                            "workers there are or which episode finishes first")
     config: dict[str, Any] | None = Field(default=None, description="dotted keys as `driftlab --set`, "
                                           "e.g. {\"plant.steer_lag_s\": 0.02}, or nested sections")
 

@@ -7,6 +7,7 @@ import io
 from datetime import UTC
 from typing import Any
 
+from driftlab.core.compiled import episode_kernels_cached
 from driftlab.core.config import THETA_KEYS, Theta
 from driftlab.db import storage
 from driftlab.db.models import Evaluation, Job
@@ -43,11 +44,34 @@ def job_dict(session, job: Job) -> dict[str, Any]:
     n_done = storage.count_evaluations(session, job_id=job.id)
     iterations = job.spec["iterations"]
     best = storage.best_evaluation(session, job_id=job.id)
-    rate = storage.seconds_per_evaluation(session, job_id=job.id) if job.status == "running" else None
+    running = job.status == "running"
+    rate = storage.seconds_per_evaluation(session, job_id=job.id, since=job.started_at) if running else None
     eta = None if rate is None else rate * (iterations - n_done)
-    return {"id": job.id, "name": job.name, "status": job.status, "seed": job.seed, "n_done": n_done,
+    return {"id": job.id, "name": job.name, "status": job.status, "detail": job_detail(job.status, rate),
+            "seed": job.seed, "n_done": n_done,
             "iterations": iterations, "progress": n_done / iterations, "eta_s": eta, "error": job.error,
-            "best": None if best is None else {"evaluation_id": best.id, "index": best.index, "theta": best.theta,
-                                               "J": best.J, "status": best.status, "seeds": best.seeds},
+            "best": storage.best_summary(best),
             "runner_id": job.runner_id, "study_id": job.study_id, "spec": job.spec,
             "created_at": job.created_at.replace(tzinfo=UTC).isoformat()}
+
+
+COMPILING = "compiling the simulation (numba, once after an install; no evaluation until it is done)"
+
+
+def job_detail(status: str, seconds_per_evaluation: float | None) -> str | None:
+    """What a running job does when its status alone does not say: compiling before its run's first evaluation."""
+    if status == "running" and seconds_per_evaluation is None and episode_kernels_cached() is False:
+        return COMPILING
+    return None
+
+
+def trajectory_metadata(e: Evaluation, job: Job) -> dict[str, Any]:
+    """What a downloaded trajectory is: the evaluation, its job, theta, the drawn episode's seed and J (the worst
+    of the evaluation's seeds), the evaluation's J over all its seeds, and the config to re-run it with."""
+    seeds = list(e.seeds or ())
+    seed = e.trajectory_seed if e.trajectory_seed is not None else (seeds[0]["seed"] if seeds else 0)
+    episode = next((s for s in seeds if s["seed"] == seed), {"J": e.J, "status": e.status})
+    return {"evaluation_id": e.id, "job_id": job.id, "job_name": job.name, "index": e.index,
+            "theta": {**Theta().as_dict(), **e.theta}, "seed": seed, "J_episode": episode["J"],
+            "episode_status": episode["status"], "J": e.J, "status": e.status, "n_seeds": max(len(seeds), 1),
+            "config": job.spec.get("config", {})}

@@ -224,6 +224,6 @@ class ComparePanel:
             # Cars in the order played: the first is the red car, the next the ghosts (the plot's colours when
             # every job has an evaluation).
             captions = [f"{COLOR_NAMES[k]}{' car' if k == 0 else ' ghost'}: {j['name']}, best J "
-                        f"{j['best']['J']:.3f}, evaluation id {j['best']['evaluation_id']}"
+                        f"{j['best']['J']:.3f}, evaluation id {j['best']['id']}"
                         for k, (_, j) in enumerate(chosen)]
-            self.play_together([j["best"]["evaluation_id"] for _, j in chosen], captions)
+            self.play_together([j["best"]["id"] for _, j in chosen], captions)

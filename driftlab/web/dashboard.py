@@ -32,8 +32,8 @@ from driftlab.web.sources import (
 )
 from driftlab.web.viser_server import quiet_viser_server
 
-# run_episode(theta, config_doc) -> Future of an EpisodeOutcome (see driftlab.worker.executor).
-EpisodeRunner = Callable[[dict[str, float], dict[str, Any]], Future]
+# run_episode(theta, config_doc, seed) -> Future of an EpisodeOutcome (see driftlab.worker.executor).
+EpisodeRunner = Callable[[dict[str, float], dict[str, Any], int], Future]
 COMPARE_EVERY_POLLS = 4  # studies and comparisons every 2 s at the default 0.5 s poll
 
 
@@ -44,36 +44,36 @@ class WhatIfRunner:
         self.run_episode = run_episode
         self._lock = threading.Lock()
         self._busy: set[int] = set()
-        self._waiting: dict[int, tuple[ClientSession, dict, dict, dict]] = {}
+        self._waiting: dict[int, tuple[ClientSession, dict, dict, dict, int]] = {}
 
     def request(self, session: ClientSession, theta: dict[str, float], config_doc: dict[str, Any],
-                plant_overrides: dict[str, float]) -> None:
+                plant_overrides: dict[str, float], seed: int) -> None:
         if self.run_episode is None:
             session.on_what_if_result(None, "what-if needs a worker (the server was started without one)", 0.0)
             return
         key = session.client.client_id
         with self._lock:
             if key in self._busy:
-                self._waiting[key] = (session, theta, config_doc, plant_overrides)
+                self._waiting[key] = (session, theta, config_doc, plant_overrides, seed)
                 return
             self._busy.add(key)
-        self._submit(session, theta, config_doc, plant_overrides)
+        self._submit(session, theta, config_doc, plant_overrides, seed)
 
-    def _submit(self, session: ClientSession, theta: dict, config_doc: dict, overrides: dict) -> None:
+    def _submit(self, session: ClientSession, theta: dict, config_doc: dict, overrides: dict, seed: int) -> None:
         try:
             config = apply_overrides(config_from_dict(config_doc), overrides)
             check_drivable(config)
-            future = self.run_episode(theta, config_to_dict(config))
+            future = self.run_episode(theta, config_to_dict(config), seed)
         except (ConfigError, ValueError) as exc:
             session.on_what_if_result(None, str(exc), 0.0)
             self._next(session)
             return
-        future.add_done_callback(lambda f: self._done(session, f))
+        future.add_done_callback(lambda f: self._done(session, f, overrides))
 
-    def _done(self, session: ClientSession, future: Future) -> None:
+    def _done(self, session: ClientSession, future: Future, overrides: dict) -> None:
         try:
             outcome = future.result()
-            session.on_what_if_result(frames_of_outcome(outcome), None, outcome.wall_ms)
+            session.on_what_if_result(frames_of_outcome(outcome, overrides), None, outcome.wall_ms)
         except Exception as exc:  # a dead worker process is a message in the panel, not a dead view
             session.on_what_if_result(None, f"{type(exc).__name__}: {exc}", 0.0)
         finally:
@@ -151,8 +151,8 @@ class Dashboard:
         return read_compare(self.factory, job_ids)
 
     def request_what_if(self, session: ClientSession, theta: dict[str, float], config_doc: dict[str, Any],
-                        plant_overrides: dict[str, float]) -> None:
-        self.what_if.request(session, theta, config_doc, plant_overrides)
+                        plant_overrides: dict[str, float], seed: int) -> None:
+        self.what_if.request(session, theta, config_doc, plant_overrides, seed)
 
     # ----- clients -----------------------------------------------------------------------------------------
     def _on_connect(self, client: viser.ClientHandle) -> None:

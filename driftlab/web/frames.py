@@ -36,7 +36,11 @@ class EpisodeFrames:
     index: int | None = None
     theta: dict[str, float] = field(default_factory=dict)
     status: str = ""
-    J: float = float("nan")
+    J: float = float("nan")  # a stored evaluation's J: the mean over its seeds; a what-if episode's own J
+    seed: int | None = None  # the seed of the episode drawn (a stored evaluation's worst seed)
+    episode_J: float = float("nan")  # J of the episode drawn, on ``seed``
+    n_seeds: int = 1  # how many episodes J averages
+    plant: dict[str, float] = field(default_factory=dict)  # plant settings a what-if episode changed
 
     def __post_init__(self) -> None:
         if self.rows.ndim != 2 or self.rows.shape[1] != len(self.columns):
@@ -83,6 +87,15 @@ class EpisodeFrames:
             return "what-if episode"
         return f"evaluation id {self.evaluation_id} (index {self.index} in its job)"
 
+    def j_text(self) -> str:
+        """What J is: one episode on its seed, or a mean over seeds with the drawn episode's own J beside it."""
+        if self.n_seeds <= 1:
+            seed = "" if self.seed is None else f", seed {self.seed}"
+            return f"J {self.J:.4g} (one episode{seed}; lower is better)"
+        return (f"J {self.J:.4g} (mean of {self.n_seeds} seeds; lower is better); episode drawn: seed {self.seed}, "
+                f"J {self.episode_J:.4g}")
+
     def caption(self) -> str:
         theta = ", ".join(f"{k} {v!r}" for k, v in self.theta.items())  # full precision: copied, it reproduces
-        return f"{self.name()}: {self.status}, J {self.J:.3f} (lower is better) | {theta}"
+        plant = " | plant: " + ", ".join(f"{k} {v:.4g}" for k, v in self.plant.items()) if self.plant else ""
+        return f"{self.name()}: {self.status}, {self.j_text()} | {theta}{plant}"

@@ -127,10 +127,12 @@ class Playback:
         self.playing = True
         self.load(self.frames_of(history.ids[index]))
 
-    def play_what_if(self, frames: EpisodeFrames) -> None:
+    def play_what_if(self, frames: EpisodeFrames, ghost: EpisodeFrames | None) -> None:
+        """A what-if episode beside the ghost it was asked against (the best evaluation's episode on the same seed
+        when it was asked; the best may have moved on since)."""
         self.mode = "what-if"
         self.playing = True
-        self.load(frames, ghost=self.best())
+        self.load(frames, ghost=ghost)
 
     def play_together(self, episodes: list[EpisodeFrames], captions: list[str]) -> None:
         """Several episodes at once: the first as the car, the others as ghost cars (compare mode)."""

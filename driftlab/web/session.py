@@ -16,6 +16,7 @@ import numpy as np
 import viser
 import viser.uplot
 
+from driftlab.core.compiled import episode_kernels_cached
 from driftlab.web.compare import ComparePanel
 from driftlab.web.frames import EpisodeFrames
 from driftlab.web.playback import Playback
@@ -43,7 +44,7 @@ class TabData(Protocol):
     def compare(self, job_ids: list[int]) -> list[dict[str, Any]]: ...
 
     def request_what_if(self, session: ClientSession, theta: dict[str, float], config_doc: dict[str, Any],
-                        plant_overrides: dict[str, float]) -> None: ...
+                        plant_overrides: dict[str, float], seed: int) -> None: ...
 
 
 def job_label(job_id: int, name: str, status: str) -> str:
@@ -65,7 +66,7 @@ class ClientSession:
         self._build_job_gui(gui)
         self.playback = Playback(client, history=lambda: self.history, frames_of=data.frames, best=self._best,
                                  lock=self.lock)
-        self.what_if = WhatIfPanel(gui, client, lambda *args: data.request_what_if(self, *args))
+        self.what_if = WhatIfPanel(gui, client, lambda *args: data.request_what_if(self, *args), self._best)
         self.what_if.gui_reset.on_click(lambda _: self.what_if.reset_sliders(self._best()))
         self.playback.build_downloads(gui)
         self.compare = ComparePanel(gui, read_studies=data.studies, read_study=data.study,
@@ -135,8 +136,11 @@ class ClientSession:
         best_text = "none completed yet" if best_pos is None else (
             f"**{history.values[best_pos]:.3f}** (lower is better), evaluation id {history.ids[best_pos]} "
             f"(index {best_pos})")
-        self.job_text.content = (f"**{history.name}**: {history.status}, {history.n_done} / {history.iterations} "
-                                 f"evaluations, {sum(history.completed)} completed; best J {best_text}")
+        compiling = " (**compiling the simulation**: numba, once after an install)" if (
+            history.status == "running" and episode_kernels_cached() is False) else ""
+        self.job_text.content = (f"**{history.name}**: {history.status}{compiling}, {history.n_done} / "
+                                 f"{history.iterations} evaluations, {sum(history.completed)} completed; "
+                                 f"best J {best_text}")
 
     def _best(self) -> EpisodeFrames | None:
         if self.history is None:
@@ -155,7 +159,7 @@ class ClientSession:
             if error is not None:
                 self.what_if.show_error(error)
                 return
-            self.playback.play_what_if(frames)
+            self.playback.play_what_if(frames, ghost=self.what_if.ghost)
             self.what_if.show_result(frames, worker_ms)
 
     @property

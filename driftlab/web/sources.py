@@ -21,14 +21,19 @@ def frames_of_evaluation(factory: sessionmaker[Session], evaluation_id: int) -> 
     with storage.snapshot(factory) as session:
         e = storage.get_evaluation(session, evaluation_id=evaluation_id)
         columns, rows = storage.trajectory_array(session, evaluation_id=evaluation_id)
+        seeds = list(e.seeds or ())
+        seed = e.trajectory_seed if e.trajectory_seed is not None else (seeds[0]["seed"] if seeds else 0)
+        episode_j = next((float(s["J"]) for s in seeds if s["seed"] == seed), float(e.J))
         return EpisodeFrames(tuple(columns), rows, tuple(e.trigger_points or ()), evaluation_id=e.id,
-                             index=e.index, theta=dict(e.theta), status=e.status, J=float(e.J))
+                             index=e.index, theta=dict(e.theta), status=e.status, J=float(e.J), seed=int(seed),
+                             episode_J=episode_j, n_seeds=max(len(seeds), 1))
 
 
-def frames_of_outcome(outcome: Any) -> EpisodeFrames:
-    """An episode the worker ran (an ``EpisodeOutcome``), not stored."""
+def frames_of_outcome(outcome: Any, plant: dict[str, float] | None = None) -> EpisodeFrames:
+    """An episode the worker ran (an ``EpisodeOutcome``), not stored; ``plant``: the settings it changed."""
     return EpisodeFrames(tuple(outcome.columns), np.asarray(outcome.trajectory), tuple(outcome.trigger_points),
-                         theta=dict(outcome.theta), status=outcome.status, J=float(outcome.J))
+                         theta=dict(outcome.theta), status=outcome.status, J=float(outcome.J),
+                         seed=int(outcome.seed), episode_J=float(outcome.J), plant=dict(plant or {}))
 
 
 def track_of_spec(spec: dict[str, Any]) -> FigureEight:

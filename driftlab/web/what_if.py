@@ -1,5 +1,10 @@
 """A tab's what-if panel: sliders for theta (within the job's bounds) and the main plant mismatch settings;
 moving one asks for that episode (the dashboard's what-if runner runs it in a worker) and reports its result.
+
+The episode runs on the seed of the ghost it is compared with (the best evaluation's drawn episode, its worst
+seed), so the two J beside each other are one episode each on the same car and noise: with no slider moved the
+what-if episode is the ghost's, bit for bit. A slider left where the panel put it contributes the stored value
+itself, not the slider's (clipped, stepped) one.
 """
 
 from __future__ import annotations
@@ -11,7 +16,7 @@ from typing import Any
 import numpy as np
 import viser
 
-from driftlab.core.config import Theta
+from driftlab.core.config import Theta, config_from_dict, config_to_dict
 from driftlab.core.tuning import DEFAULT_BOUNDS, MODEL_BOUNDS
 from driftlab.web.frames import EpisodeFrames
 from driftlab.web.sources import JobHistory
@@ -25,21 +30,26 @@ PLANT_SLIDERS = (("plant.friction_scale", "mu scale", 0.8, 1.3, 0.01),
 # Every theta key has a slider, the model corrections too (a job that did not learn them shows them at 1).
 SLIDER_BOUNDS = {**DEFAULT_BOUNDS, **MODEL_BOUNDS}
 
-# request(theta, config_doc, plant overrides): run that episode, answer through WhatIfPanel.show_result.
-WhatIfRequest = Callable[[dict[str, float], dict[str, Any], dict[str, float]], None]
+# request(theta, config_doc, plant overrides, seed): run that episode, answer through WhatIfPanel.show_result.
+WhatIfRequest = Callable[[dict[str, float], dict[str, Any], dict[str, float], int], None]
 
 
 class WhatIfPanel:
-    def __init__(self, gui: viser.GuiApi, client: viser.ClientHandle, request: WhatIfRequest) -> None:
+    def __init__(self, gui: viser.GuiApi, client: viser.ClientHandle, request: WhatIfRequest,
+                 best: Callable[[], EpisodeFrames | None]) -> None:
         self.client = client
         self.request = request
+        self.best = best
+        self.ghost: EpisodeFrames | None = None  # the episode the last request is compared with
+        self._placed: dict[str, tuple[float, float]] = {}  # slider key -> (value the panel set, the exact value)
         self.history: JobHistory | None = None
         self.theta_bounds: dict[str, tuple[float, float]] = dict(SLIDER_BOUNDS)
         self._requested_at: float | None = None
         self.last_latency_s: float | None = None
         with gui.add_folder("What-if", expand_by_default=False):
             gui.add_markdown("Move a slider: that one episode runs in a worker and plays at once, with the "
-                             "job's best episode as the blue ghost car.")
+                             "job's best episode as the blue ghost car, on the ghost's seed (the same car and "
+                             "noise: the two J compare one episode with one episode).")
             self.theta_sliders = {k: gui.add_slider(k, lo, hi, (hi - lo) / 200.0, 0.5 * (lo + hi))
                                   for k, (lo, hi) in SLIDER_BOUNDS.items()}
             self.plant_sliders = {key: gui.add_slider(label, lo, hi, step, lo)
@@ -61,15 +71,19 @@ class WhatIfPanel:
         learned = self.history.spec.get("bounds", DEFAULT_BOUNDS)
         middle = {k: 0.5 * (lo + hi) for k, (lo, hi) in learned.items()}
         theta = {**Theta().as_dict(), **(best.theta if best is not None else middle)}
-        plant = self.history.spec.get("config", {}).get("plant", {})
+        plant = config_to_dict(config_from_dict(self.history.spec.get("config", {})))["plant"]  # defaults filled
+        placed: dict[str, tuple[float, float]] = {}
         with self.client.atomic():
             for key, slider in self.theta_sliders.items():
                 lo, hi = self.theta_bounds[key]
                 slider.min, slider.max, slider.step = lo, hi, (hi - lo) / 200.0
                 slider.value = float(np.clip(theta[key], lo, hi))
+                placed[key] = (float(slider.value), float(theta[key]))
             for key, slider in self.plant_sliders.items():
-                value = plant.get(key.split(".", 1)[1], slider.value)
-                slider.value = float(np.clip(value, slider.min, slider.max))
+                name = key.split(".", 1)[1]
+                slider.value = float(np.clip(plant[name], slider.min, slider.max))
+                placed[key] = (float(slider.value), float(plant[name]))
+        self._placed = placed
         if run:
             self.ask()
 
@@ -77,14 +91,21 @@ class WhatIfPanel:
         if event.client is not None:
             self.ask()
 
+    def _moved(self, key: str, slider: Any) -> bool:
+        placed = self._placed.get(key)
+        return placed is None or float(slider.value) != placed[0]
+
     def ask(self) -> None:
         if self.history is None:
             return
-        theta = {k: float(s.value) for k, s in self.theta_sliders.items()}
-        overrides = {k: float(s.value) for k, s in self.plant_sliders.items()}
+        theta = {k: float(s.value) if self._moved(k, s) else self._placed[k][1] for k, s in self.theta_sliders.items()}
+        # Only the plant settings a user moved: the job's own config holds the rest exactly.
+        overrides = {k: float(s.value) for k, s in self.plant_sliders.items() if self._moved(k, s)}
+        self.ghost = self.best()
+        seed = self.ghost.seed if self.ghost is not None and self.ghost.seed is not None else 0
         self._requested_at = time.perf_counter()
         self.text.content = "running..."
-        self.request(theta, self.history.spec.get("config", {}), overrides)
+        self.request(theta, self.history.spec.get("config", {}), overrides, seed)
 
     def show_error(self, error: str) -> None:
         self.text.content = f"**error**: {error}"
@@ -95,4 +116,10 @@ class WhatIfPanel:
         if self._requested_at is not None:  # the first frame of the new episode is queued by now
             self.last_latency_s = time.perf_counter() - self._requested_at
             latency = f", first frame **{1000 * self.last_latency_s:.0f} ms** after the slider"
-        self.text.content = f"{frames.status}, J {frames.J:.3f}; episode {worker_ms:.0f} ms in the worker{latency}"
+        ghost = "no ghost: the job has no completed evaluation yet"
+        if self.ghost is not None:
+            ghost = (f"ghost (evaluation id {self.ghost.evaluation_id}, same seed): J **{self.ghost.episode_J:.4g}**"
+                     f" (its mean over {self.ghost.n_seeds} seeds: {self.ghost.J:.4g})")
+        plant = ", ".join(f"{k.split('.', 1)[1]} {v:.4g}" for k, v in frames.plant.items()) or "the job's"
+        self.text.content = (f"what-if: {frames.status}, J **{frames.J:.4g}** (one episode, seed {frames.seed}); "
+                             f"{ghost}; plant: {plant}; episode {worker_ms:.0f} ms in the worker{latency}")

@@ -169,12 +169,15 @@ def run_job(factory: sessionmaker[Session], job_id: int, executor: EpisodeExecut
             lease.renew_if_due()
             shutting_down = shutting_down or should_stop()
             stopping = shutting_down or not lease.held
-            while (not stopping and len(episodes) < workers
-                   and n_done + len(evaluations) < lease.iterations):
+            # Deterministic: one evaluation at a time (its seeds still run in parallel), so the optimizer's
+            # history never depends on which worker finished first.
+            free = not evaluations if spec.deterministic else len(episodes) < workers
+            while (not stopping and free and n_done + len(evaluations) < lease.iterations):
                 evaluation = _PendingEvaluation(optimizer.ask(), seeds)
                 evaluations.append(evaluation)
                 for seed in seeds:
                     episodes[executor.submit(evaluation.theta, config_doc, seed)] = evaluation
+                free = not spec.deterministic and len(episodes) < workers
             if not episodes:
                 break
             finished, _ = wait(list(episodes), timeout=lifecycle.HEARTBEAT_S, return_when=FIRST_COMPLETED)

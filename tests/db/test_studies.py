@@ -68,3 +68,53 @@ def test_a_seeds_studys_status_and_lifecycle_are_its_jobs(factory):
         studies.delete_study(session, study_id=study.id)
     with storage.transaction(factory) as session:
         assert storage.list_jobs(session) == [] and studies.list_studies(session) == []
+
+
+def _seeds_study(factory, seeds=(0, 1)):
+    with storage.transaction(factory) as session:
+        study = studies.create_study(session, name="s", kind="seeds", spec={}, status="jobs")
+        ids = [storage.create_job(session, name=f"s-{seed}", spec=TuningSpec().to_dict(), seed=seed,
+                                  study_id=study.id).id for seed in seeds]
+        return study.id, ids
+
+
+def test_a_seeds_studys_job_is_deleted_only_with_its_study(factory):
+    study_id, ids = _seeds_study(factory)
+    with storage.transaction(factory) as session, pytest.raises(lifecycle.TransitionError,
+                                                                   match=r"seeds study 's' \(id 1\)"):
+        lifecycle.delete_job(session, job_id=ids[0])
+    with storage.transaction(factory) as session:
+        assert [j.id for j in studies.study_jobs(session, study_id=study_id)] == ids  # nothing changed
+        studies.delete_study(session, study_id=study_id)
+    with storage.transaction(factory) as session:
+        assert storage.list_jobs(session) == []
+
+
+def test_a_held_seeds_study_is_run_by_its_holder_only_until_the_holder_dies(factory):
+    study_id, ids = _seeds_study(factory)
+    with storage.transaction(factory) as session:
+        studies.hold_seeds_study(session, study_id=study_id, runner="cli")
+    with storage.transaction(factory) as session:
+        assert lifecycle.next_claimable(session) is None  # a server's runner leaves the study's jobs alone
+        with pytest.raises(lifecycle.LeaseHeld, match="belongs to study 's'"):
+            lifecycle.claim(session, job_id=ids[0], runner="server")
+        with pytest.raises(lifecycle.LeaseHeld, match="being run by cli"):
+            studies.hold_seeds_study(session, study_id=study_id, runner="another-cli")
+    with storage.transaction(factory) as session:
+        lifecycle.claim(session, job_id=ids[0], runner="cli")
+    with storage.transaction(factory) as session:  # the job's heartbeat renews the study's hold
+        session.get(Study, study_id).heartbeat_at = (utcnow() - timedelta(seconds=10)).replace(tzinfo=None)
+    with storage.transaction(factory) as session:
+        assert lifecycle.heartbeat(session, job_id=ids[0], runner="cli")
+        age = utcnow().replace(tzinfo=None) - session.get(Study, study_id).heartbeat_at
+        assert age < timedelta(seconds=5)
+    with storage.transaction(factory) as session:  # the holder dies: its hold and its job's lease get old
+        old = (utcnow() - timedelta(seconds=60)).replace(tzinfo=None)
+        session.get(Study, study_id).heartbeat_at = old
+        storage.get_job(session, job_id=ids[0]).heartbeat_at = old
+    with storage.transaction(factory) as session:
+        assert lifecycle.next_claimable(session) == ids[0]
+        lifecycle.claim(session, job_id=ids[1], runner="server")
+    with storage.transaction(factory) as session:
+        studies.let_go_seeds_study(session, study_id=study_id, runner="cli")
+        assert session.get(Study, study_id).runner_id is None

@@ -8,6 +8,7 @@ import httpx
 import pytest
 
 from driftlab.core.config import THETA_KEYS, Theta
+from driftlab.export import read_csv_metadata
 from tests.server_process import free_port as _free_port
 from tests.server_process import start_server as _start
 from tests.server_process import wait_released
@@ -43,7 +44,7 @@ def test_a_small_job_runs_to_the_end(server):
     completed = [e["J"] for e in evals if e["completed"]]
     if completed:
         assert best["J"] == min(completed)
-    assert done["best"]["evaluation_id"] == best["id"]
+    assert done["best"]["id"] == best["id"]
     assert db.exists() and db.stat().st_size > 0
 
 
@@ -107,14 +108,22 @@ def test_trajectory_downloads_parse(server):
     evaluation = httpx.get(f"{url}/api/jobs/{job['id']}/best").json()
     r = httpx.get(f"{url}/api/evaluations/{evaluation['id']}/trajectory", params={"format": "csv"})
     assert r.status_code == 200 and "attachment" in r.headers["content-disposition"]
-    rows = list(csv.reader(io.StringIO(r.text)))
+    meta = read_csv_metadata(r.text)
+    seed = evaluation["trajectory_seed"]
+    assert meta["evaluation_id"] == evaluation["id"] and meta["job_id"] == job["id"] and meta["seed"] == seed
+    assert meta["theta"] == {**Theta().as_dict(), **evaluation["theta"]} and meta["J"] == evaluation["J"]
+    assert meta["J_episode"] == next(s["J"] for s in evaluation["seeds"] if s["seed"] == seed)
+    assert meta["n_seeds"] == len(evaluation["seeds"]) and meta["config"] == job["spec"]["config"]
+    rows = list(csv.reader(io.StringIO(r.text)))[1:]
     header, body = rows[0], rows[1:]
     assert "beta_rad" in header and "t_s" in header
     assert len(body) == round(evaluation["metrics"]["duration_s"] / 0.05) + 1 or len(body) > 10
     t = [float(row[header.index("t_s")]) for row in body]
     assert t == sorted(t) and t[0] == 0.0
+    assert {row[header.index("phase")] for row in body} <= {"0", "1", "2", "3", "4", "5"}  # integers, not 2.0
     js = httpx.get(f"{url}/api/evaluations/{evaluation['id']}/trajectory", params={"format": "json"}).json()
-    assert js["columns"] == header and len(js["rows"]) == len(body)
+    assert js["columns"] == header and len(js["rows"]) == len(body) and js["metadata"] == meta
+    assert all(isinstance(row[header.index("phase")], int) for row in js["rows"])
 
 
 def test_pause_and_resume(server):

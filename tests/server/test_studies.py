@@ -82,7 +82,7 @@ def test_compare_gives_each_jobs_best_n_done_and_convergence(server, seeds_study
         evaluations = httpx.get(f"{server}/api/jobs/{row['id']}/evaluations").json()
         best = httpx.get(f"{server}/api/jobs/{row['id']}/best").json()
         assert row["n_done"] == len(evaluations) == 5
-        assert row["best"]["evaluation_id"] == best["id"] and row["best"]["J"] == best["J"]
+        assert row["best"]["id"] == best["id"] and row["best"]["J"] == best["J"]
         assert row["best"]["theta"] == best["theta"]
         assert row["convergence"]["J"] == [e["J"] for e in evaluations]
         assert row["convergence"]["best_so_far"] == _best_so_far(evaluations)
@@ -174,6 +174,11 @@ def test_pause_resume_and_delete_a_seeds_study_apply_to_its_jobs(server):
     while any(httpx.get(f"{server}/api/jobs/{i}").json()["runner_id"] for i in paused["job_ids"]):
         assert time.time() < deadline
         time.sleep(0.2)
+    before = httpx.get(url).json()
+    refused = httpx.delete(f"{server}/api/jobs/{paused['job_ids'][0]}")  # a study's job goes only with its study
+    assert refused.status_code == 409
+    assert f"seeds study {before['name']!r} (id {study['id']})" in refused.json()["detail"]
+    assert httpx.get(url).json()["job_ids"] == before["job_ids"]
     assert httpx.delete(url).status_code == 204
     assert httpx.get(url).status_code == 404
     assert all(httpx.get(f"{server}/api/jobs/{i}").status_code == 404 for i in paused["job_ids"])

@@ -142,6 +142,30 @@ def test_what_if_slider_replays_a_new_episode(server, browser, job):
     page.close()
 
 
+def test_what_if_with_no_slider_moved_scores_what_the_ghost_scores(server, browser, job):
+    # The what-if episode runs on the ghost's seed: the best theta itself, unmoved, is the ghost's episode.
+    _wait_for_evaluations(server, job["id"], 16)
+    best = httpx.get(f"{server}/api/jobs/{job['id']}/best").json()
+    page, log = _open(browser, f"{server}/viser/")
+    log.wait_for("Connected!")
+    page.get_by_text("Live (follows the job)").wait_for(timeout=60_000)
+    page.get_by_text("What-if", exact=True).click()
+    page.get_by_role("button", name="Reset to the best theta and the job's plant").click()
+    result = page.get_by_text("after the slider")
+    result.wait_for(timeout=60_000)
+    text = result.inner_text()
+    found = re.search(r"what-if: (\w+), J (\S+) \(one episode, seed (\d+)\); ghost \(evaluation id (\d+), same seed\): "
+                      r"J (\S+) \(its mean over (\d+) seeds: (\S+)\); plant: the job's", text)
+    assert found, text
+    status, j_what_if, seed, ghost_id, j_ghost, n_seeds, j_mean = found.groups()
+    assert status == "completed" and j_what_if == j_ghost
+    assert int(ghost_id) == best["id"] and int(seed) == best["trajectory_seed"]
+    worst = [s for s in best["seeds"] if s["seed"] == int(seed)][0]
+    assert float(j_ghost) == float(f"{worst['J']:.4g}") and float(j_mean) == float(f"{best['J']:.4g}")
+    assert int(n_seeds) == len(best["seeds"])
+    page.close()
+
+
 def test_recording_plays_back_from_storage(server, browser, job):
     best = httpx.get(f"{server}/api/jobs/{job['id']}/best").json()
     recording = httpx.get(f"{server}/api/evaluations/{best['id']}/recording.viser")

@@ -2,18 +2,16 @@
 
 from __future__ import annotations
 
-import csv
-import io
-import json
 from typing import Annotated, Any
 
 from fastapi import APIRouter, Depends, Query, Response
 from sqlalchemy.orm import Session, sessionmaker
 
 from driftlab.db import storage
+from driftlab.export import trajectory_csv, trajectory_json
 from driftlab.server.routes.deps import factory
 from driftlab.server.schemas import EvaluationId
-from driftlab.server.serialize import evaluation_dict
+from driftlab.server.serialize import evaluation_dict, trajectory_metadata
 
 router = APIRouter(prefix="/api/evaluations", tags=["evaluations"])
 Factory = Annotated[sessionmaker[Session], Depends(factory)]
@@ -28,15 +26,13 @@ def get_evaluation(evaluation_id: EvaluationId, db: Factory) -> dict[str, Any]:
 @router.get("/{evaluation_id}/trajectory")
 def trajectory(evaluation_id: EvaluationId, db: Factory,
                format: str = Query("csv", pattern="^(csv|json)$")) -> Response:  # noqa: A002
-    """The stored episode (its seed: the evaluation's ``trajectory_seed``), one row per control step."""
+    """The stored episode (its seed: the evaluation's ``trajectory_seed``), one row per control step, with its
+    metadata: a ``metadata`` object in JSON, a ``# driftlab: {...}`` first line in CSV."""
     with storage.snapshot(db) as session:
         columns, data = storage.trajectory_array(session, evaluation_id=evaluation_id)
+        e = storage.get_evaluation(session, evaluation_id=evaluation_id)
+        metadata = trajectory_metadata(e, storage.get_job(session, job_id=e.job_id))
     headers = {"Content-Disposition": f'attachment; filename="evaluation-{evaluation_id}.{format}"'}
     if format == "json":
-        return Response(json.dumps({"columns": columns, "rows": data.tolist()}), media_type="application/json",
-                        headers=headers)
-    buffer = io.StringIO()
-    writer = csv.writer(buffer)
-    writer.writerow(columns)
-    writer.writerows(data.tolist())
-    return Response(buffer.getvalue(), media_type="text/csv", headers=headers)
+        return Response(trajectory_json(columns, data, metadata), media_type="application/json", headers=headers)
+    return Response(trajectory_csv(columns, data, metadata), media_type="text/csv", headers=headers)

@@ -1,0 +1,48 @@
+"""Trajectory files, CSV and JSON, that say what they are: the API's downloads and `driftlab episode --csv`.
+
+Each carries its metadata (the evaluation and job, theta, the seed of the episode and that episode's J beside the
+evaluation's mean, the config): JSON as a ``metadata`` object beside ``columns`` and ``rows``; CSV as one comment
+line before the header, ``# driftlab: {...JSON...}`` (``pandas.read_csv(f, comment="#")`` and
+``numpy.loadtxt`` skip it). Integer columns stay integers; floats are written with ``repr`` (they read back as
+the same doubles).
+"""
+
+from __future__ import annotations
+
+import csv
+import io
+import json
+from typing import Any
+
+import numpy as np
+
+# Columns whose values are integers (the planner's phase, the solver flag); the rest are SI floats.
+INTEGER_COLUMNS = frozenset({"phase", "osqp"})
+
+
+def _typed_rows(columns: list[str], rows: np.ndarray) -> list[list[Any]]:
+    integer = [i for i, name in enumerate(columns) if name in INTEGER_COLUMNS]
+    out = rows.tolist()
+    for row in out:
+        for i in integer:
+            row[i] = int(row[i])
+    return out
+
+
+def trajectory_json(columns: list[str], rows: np.ndarray, metadata: dict[str, Any]) -> str:
+    return json.dumps({"metadata": metadata, "columns": list(columns), "rows": _typed_rows(list(columns), rows)})
+
+
+def trajectory_csv(columns: list[str], rows: np.ndarray, metadata: dict[str, Any]) -> str:
+    buffer = io.StringIO()
+    buffer.write("# driftlab: " + json.dumps(metadata) + "\n")
+    writer = csv.writer(buffer, lineterminator="\n")
+    writer.writerow(columns)
+    writer.writerows(_typed_rows(list(columns), rows))
+    return buffer.getvalue()
+
+
+def read_csv_metadata(text: str) -> dict[str, Any]:
+    """The metadata of a trajectory CSV written by :func:`trajectory_csv` ({} for a file without it)."""
+    first = text.split("\n", 1)[0]
+    return json.loads(first[len("# driftlab: "):]) if first.startswith("# driftlab: ") else {}

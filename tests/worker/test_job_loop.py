@@ -1,0 +1,69 @@
+"""The job loop with a fake executor (in-process, cheap episodes that finish in a random order) on a real SQLite
+file: what a job seed fixes, and the deterministic mode that makes the thetas independent of the workers."""
+
+import random
+import threading
+import time
+from concurrent.futures import Future
+
+import numpy as np
+import pytest
+
+from driftlab.core.tuning import TuningSpec
+from driftlab.db import storage
+from driftlab.worker.executor import EpisodeOutcome
+from driftlab.worker.job_loop import claim_job, run_job
+
+
+class ShuffledExecutor:
+    """Episodes as a smooth function of theta and seed, each finished after a random delay on its own thread."""
+
+    def __init__(self, rng_seed: int) -> None:
+        self.rng = random.Random(rng_seed)
+
+    def submit(self, theta, config_doc, seed=0) -> Future:
+        future: Future = Future()
+        delay_s = self.rng.uniform(0.0, 0.01)
+
+        def finish():
+            time.sleep(delay_s)
+            j = (theta["k"] - 0.05) ** 2 * 100 + (theta["dV"] - 0.1) ** 2 + 0.01 * seed - 2.0
+            future.set_result(EpisodeOutcome(theta=dict(theta), seed=seed, status="completed", J=j,
+                                             metrics={"completed_fraction": 1.0, "mean_abs_e_m": 0.1},
+                                             trigger_points=[], wall_ms=1.0, columns=["t_s"],
+                                             trajectory=np.zeros((2, 1))))
+
+        threading.Thread(target=finish, daemon=True).start()
+        return future
+
+    def shutdown(self) -> None:
+        pass
+
+
+def _thetas(tmp_path, name, deterministic, workers, rng_seed):
+    factory = storage.open_database(f"sqlite:///{tmp_path / (name + '.db')}")
+    spec = TuningSpec(iterations=14, seed_points=4, seed=3, robust_samples=2, confirm_samples=1,
+                      deterministic=deterministic)
+    with storage.transaction(factory) as session:
+        job_id = storage.create_job(session, name=name, spec=spec.to_dict(), seed=spec.seed).id
+    claim_job(factory, job_id, "runner")
+    assert run_job(factory, job_id, ShuffledExecutor(rng_seed), runner="runner", workers=workers) == "finished"
+    with storage.snapshot(factory) as session:
+        return [e.theta for e in storage.evaluations(session, job_id=job_id)]
+
+
+@pytest.mark.parametrize("rng_seed", [1, 2])
+def test_deterministic_jobs_ask_the_same_thetas_with_any_workers_and_finishing_order(tmp_path, rng_seed):
+    one = _thetas(tmp_path, "one", True, 1, 0)
+    many = _thetas(tmp_path, "many", True, 4, rng_seed)
+    assert len(one) == 14 and one == many
+
+
+def test_a_job_seed_fixes_the_design_and_parallel_completion_may_change_the_order_and_the_rest(tmp_path):
+    # The untuned theta and the rest of the space-filling design (seed_points in all) are asked before any tell:
+    # the seed fixes them.
+    # They are stored in the order their episodes complete, and what the GP asks next depends on that order.
+    design = {tuple(sorted(t.items())) for t in _thetas(tmp_path, "det", True, 1, 0)[:4]}  # seed_points 4
+    for i in range(3):
+        stored = {tuple(sorted(t.items())) for t in _thetas(tmp_path, f"run{i}", False, 4, i)}
+        assert design <= stored and len(stored) == 14

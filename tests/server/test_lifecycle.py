@@ -274,3 +274,25 @@ def test_schemathesis_finds_no_server_error(server, tmp_path):
                          capture_output=True, text=True, timeout=900, cwd=tmp_path,
                          env={**os.environ, "PATH": os.path.dirname(sys.executable) + os.pathsep + os.environ["PATH"]})
     assert out.returncode == 0, out.stdout[-4000:] + out.stderr[-2000:]
+
+
+def test_a_job_says_compiling_until_its_first_evaluation_after_an_install(tmp_path):
+    # An empty numba cache is what a fresh install has: the first episode compiles the loop (~25 s on 2 cores).
+    proc, url = start_server(tmp_path / "fresh.db", free_port(), env_extra={"NUMBA_CACHE_DIR": str(tmp_path / "nb")})
+    try:
+        job = httpx.post(f"{url}/api/jobs", json={"iterations": 2, "seed_points": 2}).json()
+        seen = []
+        deadline = time.time() + 300
+        while time.time() < deadline:
+            body = httpx.get(f"{url}/api/jobs/{job['id']}").json()
+            seen.append((body["status"], body["n_done"], body["detail"]))
+            if body["n_done"] > 0:
+                break
+            time.sleep(0.5)
+        compiling = [s for s in seen if s[2] is not None]
+        assert compiling and all(n == 0 and status == "running" for status, n, _ in compiling), seen
+        assert "compiling" in compiling[0][2]
+        assert seen[-1][1] > 0 and seen[-1][2] is None  # the loop is cached once the first evaluation is in
+    finally:
+        proc.terminate()
+        proc.wait(timeout=30)

@@ -10,7 +10,7 @@ import sys
 import time
 from typing import Any
 
-from driftlab.core.config import EpisodeConfig, Theta, apply_overrides, config_to_dict
+from driftlab.core.config import PLANT_PRESETS, EpisodeConfig, Theta, apply_overrides, config_to_dict
 from driftlab.core.drivability import check_drivable
 from driftlab.core.equilibrium import drift_equilibrium
 from driftlab.core.errors import ConfigError, NoEquilibriumError
@@ -84,9 +84,38 @@ def _key_values(items: list[str], what: str) -> dict[str, str]:
     return pairs
 
 
+PLANT_CHOICES = tuple(PLANT_PRESETS)
+
+
 def _config(args: argparse.Namespace) -> EpisodeConfig:
     preset = EpisodeConfig.preset(args.plant or "default", getattr(args, "controller", "default"))
     return apply_overrides(preset, _key_values(args.set or [], "--set"))
+
+
+def _commonroad_family(config: EpisodeConfig, radius_m: float, beta_rad: float, model_eq) -> dict[str, Any]:
+    """A CommonRoad plant's drift family at (radius, beta): its main (fastest) drift with the mismatch to the
+    model, every other steady drift, and why the scenario's drift cannot be held where the main one does not
+    countersteer."""
+    from driftlab.core.commonroad.equilibrium import commonroad_drifts, describe_family
+
+    plant = config.plant
+    family = commonroad_drifts(plant.commonroad_vehicle, radius_m, beta_rad, plant.friction_scale, plant.mass_scale,
+                               right=beta_rad > 0)
+    branches = []
+    for drift in family:
+        d = drift.as_dict()
+        d["drive_n"] = drift.acceleration_mps2 * config.vehicle.mass_kg
+        branches.append(d)
+    out: dict[str, Any] = {"branches": branches, "countersteer": bool(family and family[0].countersteer)}
+    why = describe_family(family)
+    if why is not None:
+        out["error"] = f"not drivable at radius {radius_m:g} m, beta {beta_rad:g} rad: {why}"
+    if branches:
+        main = branches[0]
+        out.update({k: main[k] for k in ("V", "beta", "r", "delta", "Fxr", "drive_n", "rear_slip", "front_slip")})
+        out["mismatch"] = {"dV": main["V"] - model_eq.speed_mps, "ddelta": main["delta"] - model_eq.steer_rad,
+                           "dFxr": main["drive_n"] - model_eq.drive_force_n}
+    return out
 
 
 def _cmd_equilibrium(args: argparse.Namespace) -> int:
@@ -97,7 +126,9 @@ def _cmd_equilibrium(args: argparse.Namespace) -> int:
         sys.stderr.write(f"driftlab: error: {exc}\n")
         return 2
     out: dict[str, Any] = eq.as_dict()
-    if args.plant:
+    if args.plant and config.plant.model != "driftlab":
+        out["plant"] = _commonroad_family(config, args.radius, args.beta, eq)
+    elif args.plant:
         try:
             plant_eq = drift_equilibrium(args.radius, args.beta, config.plant.packed_params(config.vehicle))
             out["plant"] = plant_eq.as_dict()
@@ -341,8 +372,9 @@ def _add_job_options(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--confirm-samples", type=int, default=DEFAULT_CONFIRM_SAMPLES, metavar="N",
                         help=f"more seeds an evaluation must also complete before it counts as the best so far "
                              f"(0..64, default {DEFAULT_CONFIRM_SAMPLES}; 0: off)")
-    parser.add_argument("--plant", choices=("default", "nominal"), default="default",
-                        help="the plant preset the --set overrides start from")
+    parser.add_argument("--plant", choices=PLANT_CHOICES, default="default",
+                        help="the plant preset the --set overrides start from (commonroad_std: CommonRoad's STD, "
+                             "vehicle 2, sideslip 0.5, needs the commonroad extra)")
     parser.add_argument("--controller", choices=("default", "paper"), default="default")
     parser.add_argument("--set", action="append", metavar="KEY=VALUE",
                         help="config override, e.g. plant.steer_lag_s=0.02")
@@ -356,13 +388,14 @@ def build_parser() -> argparse.ArgumentParser:
     eq = sub.add_parser("equilibrium", help="drift equilibrium of the model (and a plant) at radius and beta")
     eq.add_argument("--radius", type=float, default=44.0, help="path radius R [m]")
     eq.add_argument("--beta", type=float, default=-0.4, help="sideslip [rad]; < 0 left-hand drift")
-    eq.add_argument("--plant", choices=("default", "nominal"), help="also solve this plant's own equilibrium")
+    eq.add_argument("--plant", choices=PLANT_CHOICES, help="also solve this plant's own equilibrium (for a CommonRoad "
+                    "plant its drift family: every steady drift, and whether the main one countersteers)")
     eq.add_argument("--set", action="append", metavar="KEY=VALUE", help="config override, e.g. plant.cg_height_m=0.3")
     eq.set_defaults(func=_cmd_equilibrium)
     ep = sub.add_parser("episode", help="run one 30 s figure-8 episode and print its metrics as JSON")
     ep.add_argument("--theta", help="c_lr=..,c_rl=..,dV=..,k=..,model_mu_scale=..,model_c_scale=.. (any subset; "
                     "defaults: 0.02, 0.02, 0, 0.05, 1, 1)")
-    ep.add_argument("--plant", choices=("default", "nominal"), default="default")
+    ep.add_argument("--plant", choices=PLANT_CHOICES, default="default")
     ep.add_argument("--controller", choices=("default", "paper"), default="default",
                     help="default: DriftLab's MPC with path states and actuator lags; paper: the paper's MPC")
     ep.add_argument("--set", action="append", metavar="KEY=VALUE", help="config override, e.g. mpc.q_sideslip=400")

@@ -19,6 +19,7 @@ from typing import NamedTuple
 import numpy as np
 from numba import njit
 
+from driftlab.core.commonroad.plant import std_plant_step
 from driftlab.core.controller import (
     DISTURBANCE_LIMIT,
     drift_reference,
@@ -39,7 +40,18 @@ from driftlab.core.mpc import (
     update_estimate,
 )
 from driftlab.core.planner import PLAN_PHASE, advance_phase, phase_direction
-from driftlab.core.plant import DRIVE, HEADING, SIDESLIP, SPEED, STEER, X_POS, Y_POS, YAW_RATE, plant_step
+from driftlab.core.plant import (
+    DRIVE,
+    HEADING,
+    PLANT_COMMONROAD_STD,
+    SIDESLIP,
+    SPEED,
+    STEER,
+    X_POS,
+    Y_POS,
+    YAW_RATE,
+    plant_step,
+)
 from driftlab.core.track import LEFT, circle_errors
 from driftlab.core.variation import (
     NOISE_HEADING,
@@ -105,6 +117,7 @@ class LoopSettings(NamedTuple):
     gripup_grace_s: float
     substep_s: float
     noisy: bool
+    plant_kind: int  # driftlab.core.plant.PLANT_DRIFTLAB or PLANT_COMMONROAD_STD
 
 
 class LoopState(NamedTuple):
@@ -309,5 +322,9 @@ def finish_step(cfg, st, qa, plant_params, actuator_params, du, ok, used_osqp):
     if not ok:
         ints[I_STATUS] = SOLVER_FAILED
         return
-    st.plant[:] = plant_step(st.plant, steer, drive_n, cfg.dt_s, cfg.substep_s, plant_params, actuator_params)
+    if cfg.plant_kind == PLANT_COMMONROAD_STD:
+        st.plant[:] = std_plant_step(st.plant, steer, drive_n, cfg.dt_s, cfg.substep_s, plant_params,
+                                     actuator_params)
+    else:
+        st.plant[:] = plant_step(st.plant, steer, drive_n, cfg.dt_s, cfg.substep_s, plant_params, actuator_params)
     ints[I_STEP] += 1

@@ -154,15 +154,35 @@ class EpisodeConfig:
 
     @classmethod
     def preset(cls, plant: str = "default", controller: str = "default") -> EpisodeConfig:
-        """Preset by name. plant: "default" (mismatched) or "nominal" (equals the controller's model);
+        """Preset by name. plant: "default" (mismatched), "nominal" (equals the controller's model) or
+        "commonroad_std" (CommonRoad's STD, vehicle 2, with the controller's model of that car);
         controller: "default" (DriftLab's extended MPC) or "paper" (the paper's formulation)."""
-        plants = {"default": PlantConfig, "nominal": PlantConfig.nominal}
         controllers = {"default": MpcConfig, "paper": MpcConfig.paper}
-        if plant not in plants:
-            raise ConfigError(f"plant must be 'default' or 'nominal', got {plant!r}")
+        if plant != "default" and plant != "nominal":
+            controllers["default"] = MpcConfig.commonroad  # the default controller's weights for that car
+        if plant not in PLANT_PRESETS:
+            raise ConfigError(f"plant must be one of {', '.join(PLANT_PRESETS)}, got {plant!r}")
         if controller not in controllers:
             raise ConfigError(f"controller must be 'default' or 'paper', got {controller!r}")
-        return cls(plant=plants[plant](), mpc=controllers[controller]())
+        plant_config = PLANT_PRESETS[plant]()
+        # A CommonRoad car countersteers only from ~0.45 rad at 44 m (its drift family): its preset drifts at 0.5.
+        scenario = ScenarioConfig() if plant_config.model == "driftlab" else ScenarioConfig(sideslip_rad=0.5)
+        return cls(plant=plant_config, vehicle=model_vehicle_for(plant_config, scenario), scenario=scenario,
+                   mpc=controllers[controller]())
+
+
+PLANT_PRESETS = {"default": PlantConfig, "nominal": PlantConfig.nominal, "commonroad_std": PlantConfig.commonroad_std}
+
+
+def model_vehicle_for(plant: PlantConfig, scenario: ScenarioConfig) -> VehicleParams:
+    """The controller's vehicle a plant comes with: the paper's Table I for DriftLab's plants; for a CommonRoad
+    plant the car's own mass, geometry and tyre shape, placed at its drift at the scenario's (left) radius and
+    sideslip (raises ConfigError naming scenario.sideslip_rad where the car has no countersteer drift)."""
+    if plant.model == "driftlab":
+        return VehicleParams()
+    from driftlab.core.commonroad.model_fit import fitted_model_vehicle
+
+    return fitted_model_vehicle(plant.commonroad_vehicle, scenario.left_radius_m, scenario.sideslip_rad)
 
 
 def _coerce(section: str, name: str, current: Any, raw: Any) -> Any:
@@ -212,8 +232,40 @@ def apply_overrides(config: EpisodeConfig, overrides: dict[str, Any]) -> Episode
                               field=dotted)
         current = getattr(sections[section], name)
         changes.setdefault(section, {})[name] = _coerce(section, name, current, raw)
+    _switch_plant_model(sections, changes)
     updated = {s: replace(sections[s], **c) for s, c in changes.items()}
-    return replace(config, **updated)
+    return _refit_model_vehicle(replace(config, **{**sections, **updated}), changes)
+
+
+def _switch_plant_model(sections: dict[str, Any], changes: dict[str, dict[str, Any]]) -> None:
+    """Setting ``plant.model`` (or ``plant.commonroad_vehicle``) to another car starts from that car's preset: the
+    plant keys given apply on top. The plant's car needs no other keys either way."""
+    plant_changes = changes.get("plant", {})
+    current = sections["plant"]
+    model = plant_changes.get("model", current.model)
+    vehicle_id = plant_changes.get("commonroad_vehicle", current.commonroad_vehicle)
+    if model == current.model and (model == "driftlab" or vehicle_id == current.commonroad_vehicle):
+        return
+    if model == "driftlab":
+        sections["plant"] = PlantConfig()
+    elif model in PLANT_PRESETS and isinstance(vehicle_id, int) and not isinstance(vehicle_id, bool):
+        sections["plant"] = PLANT_PRESETS[model](vehicle_id)
+    # else: PlantConfig refuses the value, naming it
+
+
+def _refit_model_vehicle(config: EpisodeConfig, changes: dict[str, dict[str, Any]]) -> EpisodeConfig:
+    """The controller follows the plant's car: switching back to DriftLab's plant restores Table I and the default
+    weights, switching to a CommonRoad car takes MpcConfig.commonroad() (unless ``mpc.*`` keys are given), and a
+    CommonRoad plant's model is fitted to the car's drift at the scenario's radius and sideslip whenever the plant
+    or the scenario changes (driftlab.core.commonroad.model_fit), unless ``vehicle.*`` keys are given."""
+    plant_switched = "model" in changes.get("plant", {}) or "commonroad_vehicle" in changes.get("plant", {})
+    if plant_switched and "mpc" not in changes:  # and the default controller's weights for that car
+        config = replace(config, mpc=MpcConfig() if config.plant.model == "driftlab" else MpcConfig.commonroad())
+    if "vehicle" in changes or not ({"plant", "scenario"} & set(changes)):
+        return config
+    if config.plant.model == "driftlab" and not plant_switched:
+        return config
+    return replace(config, vehicle=model_vehicle_for(config.plant, config.scenario))
 
 
 def dotted_config(document: Any) -> dict[str, Any]:

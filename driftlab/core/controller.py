@@ -47,9 +47,9 @@ DISTURBANCE_LIMIT = np.array([5.0, 2.0, 5.0])
 @lru_cache(maxsize=16)
 def _reference_equilibria(vehicle: VehicleParams, left_radius_m: float, right_radius_m: float,
                           sideslip_rad: float) -> tuple[Equilibrium, Equilibrium]:
-    params = pack_params(vehicle)
-    return (drift_equilibrium(left_radius_m, -abs(sideslip_rad), params),
-            drift_equilibrium(right_radius_m, abs(sideslip_rad), params))
+    # drift_equilibrium solves the left-hand form and mirrors it: the right side's offsets in that form.
+    return (drift_equilibrium(left_radius_m, -abs(sideslip_rad), pack_params(vehicle)),
+            drift_equilibrium(right_radius_m, abs(sideslip_rad), pack_params(vehicle, right=True)))
 
 
 @lru_cache(maxsize=16)
@@ -70,7 +70,8 @@ def build_controller_model(vehicle: VehicleParams, mpc: MpcConfig, left_radius_m
     params = pack_params(vehicle)
     left, right = _reference_equilibria(vehicle, left_radius_m, right_radius_m, sideslip_rad)
     return ControllerModel(params, left, right, ReferenceQp(mpc, left, params, feedback_gain_radpm, lookahead_m),
-                           ReferenceQp(mpc, right, params, feedback_gain_radpm, lookahead_m))
+                           ReferenceQp(mpc, right, pack_params(vehicle, right=True, mirrored=True), feedback_gain_radpm,
+                                       lookahead_m))
 
 
 @njit(cache=True)

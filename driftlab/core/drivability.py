@@ -43,6 +43,9 @@ def drivable_reason(config: EpisodeConfig) -> str | None:
 def _reason(vehicle: VehicleParams, plant: PlantConfig, left_radius_m: float, right_radius_m: float,
             sideslip_rad: float) -> str | None:
     # A right-hand drift mirrors a left-hand one (same V, delta, Fxr): one solve per radius is enough.
+    if plant.model != "driftlab":
+        reason = _model_reason(vehicle, left_radius_m, right_radius_m, sideslip_rad)
+        return reason or _commonroad_reason(plant, left_radius_m, right_radius_m, sideslip_rad)
     for label, params in (("the controller's model", pack_params(vehicle)),
                           ("the plant", plant.packed_params(vehicle))):
         for circle, radius in (("left", left_radius_m), ("right", right_radius_m)):
@@ -54,4 +57,30 @@ def _reason(vehicle: VehicleParams, plant: PlantConfig, left_radius_m: float, ri
                         f"(e.g. plant.friction_scale, plant.tyre_c_scale, plant.cg_height_m) or the scenario")
             if left_radius_m == right_radius_m:
                 break
+    return None
+
+
+def _model_reason(vehicle: VehicleParams, left_radius_m: float, right_radius_m: float,
+                  sideslip_rad: float) -> str | None:
+    for circle, radius in (("left", left_radius_m), ("right", right_radius_m)):
+        try:
+            drift_equilibrium(radius, -abs(sideslip_rad), pack_params(vehicle))
+        except NoEquilibriumError:
+            return (f"config is not drivable: the controller's model has no countersteer drift equilibrium on the "
+                    f"{circle} circle (scenario radius {radius:g} m, sideslip {abs(sideslip_rad):g} rad)")
+    return None
+
+
+def _commonroad_reason(plant: PlantConfig, left_radius_m: float, right_radius_m: float,
+                       sideslip_rad: float) -> str | None:
+    from driftlab.core.commonroad.equilibrium import commonroad_drifts, describe_family
+
+    for circle, radius in (("left", left_radius_m), ("right", right_radius_m)):
+        family = commonroad_drifts(plant.commonroad_vehicle, radius, sideslip_rad, plant.friction_scale,
+                                   plant.mass_scale, right=circle == "right")
+        why = describe_family(family)
+        if why is not None:
+            return (f"config is not drivable on the {circle} circle (scenario radius {radius:g} m, sideslip "
+                    f"{abs(sideslip_rad):g} rad): {why}; try another scenario.sideslip_rad (CommonRoad vehicle "
+                    f"{plant.commonroad_vehicle} countersteers from about 0.45 rad at 44 m)")
     return None

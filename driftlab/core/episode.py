@@ -31,7 +31,18 @@ from driftlab.core.controller import build_controller_model
 from driftlab.core.errors import ConfigError, NoEquilibriumError
 from driftlab.core.metrics import EpisodeMetrics, compute_metrics
 from driftlab.core.planner import Phase, initial_plan_state
-from driftlab.core.plant import DRIVE, HEADING, N_PLANT_STATES, SIDESLIP, SPEED, STEER, X_POS, Y_POS, YAW_RATE, Plant
+from driftlab.core.plant import (
+    DRIVE,
+    HEADING,
+    N_PLANT_STATES,
+    SIDESLIP,
+    SPEED,
+    STEER,
+    X_POS,
+    Y_POS,
+    YAW_RATE,
+    make_plant,
+)
 from driftlab.core.track import LEFT, RIGHT, FigureEight, wrap_angle
 from driftlab.core.variation import MAX_SEED, draw_variation
 
@@ -107,11 +118,12 @@ def run_episode(theta: Theta, config: EpisodeConfig, *, seed: int = 0) -> Episod
     dt = config.mpc.dt_s
     n_steps = int(round(scenario.max_time_s / dt))
     variation = draw_variation(config.plant, seed, n_steps + 1)
-    plant = Plant(variation.plant, config.vehicle)
+    plant = make_plant(variation.plant, config.vehicle)
     start = model.left
     offset = variation.start_offset
-    state = initial_plant_state(config, track, start.speed_mps + theta.dV + offset[0], start.sideslip_rad + offset[1],
-                                start.yaw_rate_radps + offset[2], start.steer_rad, start.drive_force_n)
+    state = plant.start_state(initial_plant_state(
+        config, track, start.speed_mps + theta.dV + offset[0], start.sideslip_rad + offset[1],
+        start.yaw_rate_radps + offset[2], start.steer_rad, start.drive_force_n))
     settings = _loop_settings(config, theta, track, n_steps, variation.noisy)
     loop = new_loop_state(state, initial_plan_state(), start.inputs, n_steps, len(model.left_qp.step_limit))
     # OSQP runs here, between stretches of the compiled loop; its warm start lives and dies with the episode.
@@ -156,4 +168,5 @@ def _loop_settings(config: EpisodeConfig, theta: Theta, track: FigureEight, n_st
         max_sideslip_rad=float(failure.max_sideslip_rad), max_yaw_rate_radps=float(failure.max_yaw_rate_radps),
         max_lateral_error_m=float(failure.max_lateral_error_m), min_speed_mps=float(failure.min_speed_mps),
         gripup_sideslip_rad=float(failure.gripup_sideslip_rad), gripup_time_s=float(failure.gripup_time_s),
-        gripup_grace_s=float(failure.gripup_grace_s), substep_s=float(config.plant.substep_s), noisy=bool(noisy))
+        gripup_grace_s=float(failure.gripup_grace_s), substep_s=float(config.plant.substep_s), noisy=bool(noisy),
+        plant_kind=int(config.plant.plant_kind))

@@ -18,6 +18,7 @@ from scipy.optimize import root
 
 from driftlab.core.errors import NoEquilibriumError
 from driftlab.core.vehicle import (
+    P_STEER_OFFSET,
     P_TYRE_B,
     P_TYRE_C,
     drift_derivatives,
@@ -76,9 +77,10 @@ def peak_slip_rad(p: np.ndarray) -> float:
 
 
 def _is_countersteer_drift(eq: Equilibrium, p: np.ndarray) -> bool:
-    alpha_f, alpha_r = slip_angles(eq.speed_mps, eq.sideslip_rad, eq.yaw_rate_radps, eq.steer_rad, p)
+    steer = eq.steer_rad + p[P_STEER_OFFSET]  # what the model's tyres see
+    alpha_f, alpha_r = slip_angles(eq.speed_mps, eq.sideslip_rad, eq.yaw_rate_radps, steer, p)
     peak = peak_slip_rad(p)
-    return (eq.steer_rad * eq.yaw_rate_radps < 0.0 and abs(alpha_f) < peak < abs(alpha_r)
+    return (steer * eq.yaw_rate_radps < 0.0 and abs(alpha_f) < peak < abs(alpha_r)
             and abs(eq.steer_rad) < 1.0)
 
 

@@ -41,12 +41,20 @@ PLANT_LIMITS: dict[str, tuple[float, float]] = {
     "friction_scale": (0.5, 2.0), "mass_scale": (0.5, 2.0), "yaw_inertia_scale": (0.5, 2.0),
     "tyre_b_scale": (0.5, 2.0), "tyre_c_scale": (0.5, 1.6), "cg_height_m": (0.0, 1.5),
     "steer_lag_s": (0.0, 0.5), "steer_rate_radps": (0.1, 100.0), "drive_lag_s": (0.0, 1.0),
-    "drive_rate_nps": (100.0, 1e7), "substep_s": (1e-4, 0.01),
+    "drive_rate_nps": (100.0, 1e7), "substep_s": (1e-4, 0.01), "initial_rear_slip": (-3.0, 0.0),
     **{name: (0.0, hi) for name, hi in VARIATION_LIMITS.items()},
 }
 
 # Actuator parameter layout: [steer lag s, steer rate rad/s, drive lag s, drive rate N/s].
 A_STEER_LAG, A_STEER_RATE, A_DRIVE_LAG, A_DRIVE_RATE = range(4)
+
+# Which plant the episode loop steps (plant.model): DriftLab's own, or CommonRoad's single-track drift model (STD).
+PLANT_MODELS = ("driftlab", "commonroad_std")
+PLANT_DRIFTLAB, PLANT_COMMONROAD_STD = range(len(PLANT_MODELS))
+# Settings that shape DriftLab's own car and tyres; a CommonRoad plant has its own (PAC2002 tyres, load transfer,
+# combined slip) and keeps these at 1 / off.
+_DRIFTLAB_ONLY = {"yaw_inertia_scale": 1.0, "tyre_b_scale": 1.0, "tyre_c_scale": 1.0, "friction_circle": False,
+                  "load_transfer": False}
 
 
 @dataclass(frozen=True)
@@ -74,6 +82,13 @@ class PlantConfig:
         drive_lag_s: drive-force actuator time constant [s] (0: follows at once).
         drive_rate_nps: drive-force rate limit [N/s].
         substep_s: RK4 integration step [s].
+        model: "driftlab" (this module's plant) or "commonroad_std" (CommonRoad's STD, the parameter set
+            ``commonroad_vehicle``: 2 BMW 320i, 3 VW Vanagon; 1, front-wheel drive, is refused). For a
+            CommonRoad plant, friction_scale scales PAC2002's peak friction, mass_scale its mass and yaw inertia,
+            the actuator settings shape the steering servo and the drive mapping (driftlab.core.commonroad.plant);
+            the tyre and load settings above do not apply and must stay at 1 / off.
+        commonroad_vehicle: CommonRoad parameter set (2 or 3).
+        initial_rear_slip: a CommonRoad plant's rear wheel slip ratio at the start (negative: spinning) [-].
 
     Per-episode variation, drawn from the episode's seed (:mod:`driftlab.core.variation`); a real car never
     drives the same episode twice. Spreads are half-widths of uniform draws, noise levels standard deviations
@@ -115,9 +130,26 @@ class PlantConfig:
     noise_yaw_rate_radps: float = 0.002
     noise_position_m: float = 0.01
     noise_heading_rad: float = 0.002
+    model: str = "driftlab"
+    commonroad_vehicle: int = 2
+    initial_rear_slip: float = -0.5
 
     def __post_init__(self) -> None:
         check_ranges(self, "plant", PLANT_LIMITS)
+        if self.model not in PLANT_MODELS:
+            raise ConfigError(f"plant.model must be one of {', '.join(PLANT_MODELS)}, got {self.model!r}",
+                              field="plant.model")
+        if self.model != "driftlab":
+            from driftlab.core.commonroad.parameters import check_vehicle
+
+            check_vehicle(self.commonroad_vehicle)
+            for name, value in _DRIFTLAB_ONLY.items():
+                if getattr(self, name) != value:
+                    raise ConfigError(f"plant.{name} shapes DriftLab's own plant; a CommonRoad plant has its own "
+                                      f"tyres and loads (keep it at {value!r})", field=f"plant.{name}")
+            if self.steer_lag_s <= 0.0:
+                raise ConfigError("plant.steer_lag_s must be > 0 for a CommonRoad plant (the steering servo's time "
+                                  "constant)", field="plant.steer_lag_s")
         if self.steer_lag_spread_s > self.steer_lag_s:
             raise ConfigError(f"plant.steer_lag_spread_s must be in [0, plant.steer_lag_s = {self.steer_lag_s}], "
                               f"got {self.steer_lag_spread_s!r}")
@@ -132,6 +164,17 @@ class PlantConfig:
                    steer_lag_s=0.0, steer_rate_radps=100.0, drive_lag_s=0.0, drive_rate_nps=1e7,
                    **{name: 0.0 for name in VARIATION_LIMITS})
 
+    @classmethod
+    def commonroad_std(cls, vehicle_id: int = 2) -> PlantConfig:
+        """CommonRoad's STD with vehicle ``vehicle_id``: its own car and tyres, DriftLab's actuators (30 ms / 8
+        rad/s steering servo, 50 ms drive), RK4 at 2 ms, the default plant's per-episode variation."""
+        return cls(model="commonroad_std", commonroad_vehicle=vehicle_id, friction_scale=1.0, substep_s=0.002,
+                   **_DRIFTLAB_ONLY)
+
+    @property
+    def plant_kind(self) -> int:
+        return PLANT_MODELS.index(self.model)
+
     @property
     def varies(self) -> bool:
         """Whether episodes of this plant differ by seed."""
@@ -142,7 +185,9 @@ class PlantConfig:
         scaled = model_vehicle.scaled(friction=self.friction_scale, mass_kg=self.mass_scale,
                                       yaw_inertia_kgm2=self.yaw_inertia_scale, tyre_b=self.tyre_b_scale,
                                       tyre_c=self.tyre_c_scale)
-        return replace(scaled, cg_height_m=self.cg_height_m)
+        # The plant's own car: a model's equilibrium offsets are the model's, not the car's.
+        return replace(scaled, cg_height_m=self.cg_height_m, steer_offset_rad=0.0, drive_offset_n=0.0,
+                       steer_offset_right_rad=0.0, drive_offset_right_n=0.0)
 
     def packed_params(self, model_vehicle: VehicleParams) -> np.ndarray:
         """Parameter vector for the compiled dynamics of this plant."""
@@ -203,7 +248,15 @@ def plant_step(state, steer_cmd, drive_cmd, duration_s, substep_s, p, act):
 
 
 class Plant:
-    """A plant instance: configuration resolved against the controller's vehicle, ready to step."""
+    """A plant instance, what the episode loop steps: configuration resolved against the controller's vehicle.
+
+    Attributes:
+        kind: which compiled step the loop calls (PLANT_DRIFTLAB, PLANT_COMMONROAD_STD).
+        params: the packed parameters of that step.
+        actuators: actuator parameters (layout A_STEER_LAG ... A_DRIVE_RATE).
+    """
+
+    kind = PLANT_DRIFTLAB
 
     def __init__(self, config: PlantConfig, model_vehicle: VehicleParams) -> None:
         self.config = config
@@ -211,6 +264,20 @@ class Plant:
         self.params = config.packed_params(model_vehicle)
         self.actuators = config.actuator_params()
 
+    def start_state(self, loop_state: np.ndarray) -> np.ndarray:
+        """The full state to start from, given the loop's eight (X_POS ... DRIVE); a plant with states of its own
+        (wheel speeds, ...) appends them."""
+        return loop_state.copy()
+
     def step(self, state: np.ndarray, steer_cmd_rad: float, drive_cmd_n: float, duration_s: float) -> np.ndarray:
         return plant_step(state, steer_cmd_rad, drive_cmd_n, duration_s, self.config.substep_s,
                           self.params, self.actuators)
+
+
+def make_plant(config: PlantConfig, model_vehicle: VehicleParams) -> Plant:
+    """The plant ``config.model`` names (DriftLab's own, or a CommonRoad model)."""
+    if config.model == "driftlab":
+        return Plant(config, model_vehicle)
+    from driftlab.core.commonroad.plant import CommonRoadStdPlant
+
+    return CommonRoadStdPlant(config)

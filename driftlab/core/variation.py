@@ -65,7 +65,9 @@ def draw_variation(plant: PlantConfig, seed: int, n_steps: int) -> EpisodeVariat
         friction_scale=_within("friction_scale", plant.friction_scale * friction_factor),
         # A heavier load raises the yaw inertia with it (m k^2, the radius of gyration unchanged).
         mass_scale=_within("mass_scale", plant.mass_scale * mass_factor),
-        yaw_inertia_scale=_within("yaw_inertia_scale", plant.yaw_inertia_scale * mass_factor),
+        # (A CommonRoad plant scales its yaw inertia with mass_scale itself.)
+        yaw_inertia_scale=_within("yaw_inertia_scale", plant.yaw_inertia_scale * mass_factor)
+        if plant.model == "driftlab" else plant.yaw_inertia_scale,
         steer_lag_s=_within("steer_lag_s", steer_lag_s),
         **{name: 0.0 for name in VARIATION_LIMITS},
     )

@@ -25,6 +25,7 @@ class EpisodePlayer:
         self.track = track or FigureEight()
         self._highlights = draw_track(scene, self.track)
         self._tracked: int | None = None
+        self._geometry = (1.39, 1.0)
         self.car = CarModel(scene, "car", color=CAR_COLOR)
         self.ghost = CarModel(scene, "ghost", color=GHOST_COLOR, opacity=0.45)
         self.ghost.visible = False
@@ -36,6 +37,20 @@ class EpisodePlayer:
         self.more_ghosts: list[tuple[CarModel, Trail]] = []  # created on first use
         self.more_ghost_frames: list[EpisodeFrames] = []
         self.t_s = 0.0
+
+    def set_car(self, cg_to_front_m: float, cg_to_rear_m: float) -> None:
+        """Draw the car (and its ghost) at a job's vehicle geometry (a CommonRoad car is shorter than Table I's)."""
+        if (cg_to_front_m, cg_to_rear_m) == self._geometry:
+            return
+        self._geometry = (cg_to_front_m, cg_to_rear_m)
+        visible, ghost_visible = self.car.visible, self.ghost.visible
+        self.car = CarModel(self.scene, "car", cg_to_front_m=cg_to_front_m, cg_to_rear_m=cg_to_rear_m,
+                            color=CAR_COLOR)  # same node names: replaces the old car
+        self.ghost = CarModel(self.scene, "ghost", cg_to_front_m=cg_to_front_m, cg_to_rear_m=cg_to_rear_m,
+                              color=GHOST_COLOR, opacity=0.45)
+        self.car.visible, self.ghost.visible = visible, ghost_visible
+        if self.frames is not None:
+            self.seek(self.t_s)
 
     def set_track(self, track: FigureEight) -> None:
         if track != self.track:

@@ -22,7 +22,7 @@ from driftlab.web.frames import EpisodeFrames
 from driftlab.web.playback import Playback
 from driftlab.web.plots import padded_range, series
 from driftlab.web.scene import set_overview_camera
-from driftlab.web.sources import JobHistory, track_of_spec
+from driftlab.web.sources import JobHistory, car_geometry_of_spec, track_of_spec
 from driftlab.web.what_if import WhatIfPanel
 
 FRAME_RATE_HZ = 30.0
@@ -114,6 +114,7 @@ class ClientSession:
             self.history = history
             self.best_frames = None
             self.playback.player.set_track(track_of_spec(history.spec))
+            self.playback.player.set_car(*car_geometry_of_spec(history.spec))
             self.what_if.select_job(history)
             self.on_history(history)
             self.what_if.reset_sliders(self._best(), run=False)

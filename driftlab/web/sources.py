@@ -36,6 +36,13 @@ def frames_of_outcome(outcome: Any, plant: dict[str, float] | None = None) -> Ep
                          seed=int(outcome.seed), episode_J=float(outcome.J), plant=dict(plant or {}))
 
 
+def car_geometry_of_spec(spec: dict[str, Any]) -> tuple[float, float]:
+    """(CG to front axle, CG to rear axle) [m] of a job's car: the geometry its config's vehicle has (a CommonRoad
+    plant's model carries the car's own)."""
+    vehicle = spec.get("config", {}).get("vehicle", {})
+    return float(vehicle.get("cg_to_front_m", 1.39)), float(vehicle.get("cg_to_rear_m", 1.0008))
+
+
 def track_of_spec(spec: dict[str, Any]) -> FigureEight:
     scenario = spec.get("config", {}).get("scenario", {})
     return FigureEight(scenario.get("left_radius_m", 44.0), scenario.get("right_radius_m", 44.0))

@@ -1,0 +1,151 @@
+"""The STD plant's own steady drifts: its drift family at a radius and sideslip.
+
+Unknowns V, delta, omega_f, omega_r and the acceleration input u (beta and r = V / R given); equations: every
+derivative of STD zero but the pose's. Unlike the 3-state model, the family is not unique: besides the drift near
+the model's speed there are low-speed, high-wheelspin branches (e.g. vehicle 2, R 44, beta -0.52: V 13.8-14.2,
+delta -0.73..-0.84, rear slip -1.3..-1.4), so the solve starts from a grid of guesses and returns every distinct
+physical solution. The *main* drift is the fastest one (lowest wheelspin): the one a car at drift speed settles
+in; an episode can hold the scenario's drift only if the main drift countersteers.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+from functools import lru_cache
+from itertools import product
+
+import numpy as np
+from scipy.optimize import root
+
+from driftlab.core.commonroad.parameters import CR_CG_TO_FRONT, CR_MASS, CR_STEER_MAX, CR_WHEEL_RADIUS, pack_commonroad
+from driftlab.core.commonroad.std import (
+    N_STD,
+    S_OMEGA_F,
+    S_OMEGA_R,
+    S_SIDESLIP,
+    S_SPEED,
+    S_STEER,
+    S_YAW_RATE,
+    acceleration_constraints,
+    rear_tyre_state,
+    std_derivatives,
+)
+from driftlab.core.equilibrium import Equilibrium
+
+_GUESS_SPEEDS_MPS = (8.0, 10.0, 12.0, 14.0, 17.0, 20.0, 23.0)
+_GUESS_STEERS_RAD = (-0.9, -0.6, -0.3, 0.0, 0.2)
+_GUESS_REAR_SLIPS = (-0.3, -0.8, -1.4, -2.0)
+
+
+@dataclass(frozen=True)
+class PlantDrift:
+    """One steady drift of the STD plant (left-hand: beta < 0, r > 0; right-hand: beta > 0, r < 0); it
+    countersteers when delta has the sign of beta. PAC2002's shifts make the car slightly asymmetric: vehicle 2
+    at R 44, |beta| 0.5 drifts left at V 20.50, delta -0.264 and right at V 20.40, delta +0.225."""
+
+    speed_mps: float
+    sideslip_rad: float
+    yaw_rate_radps: float
+    steer_rad: float
+    rear_force_n: float  # the rear tyre's longitudinal force
+    acceleration_mps2: float  # the input u (m u is the drive force the loop commands)
+    front_slip: float
+    rear_slip: float
+
+    @property
+    def countersteer(self) -> bool:
+        return self.steer_rad * self.sideslip_rad > 0.0
+
+    def equilibrium(self, mass_kg: float) -> Equilibrium:
+        """As the loop's equilibrium: the drive force it commands is m u."""
+        return Equilibrium(self.speed_mps, self.sideslip_rad, self.yaw_rate_radps, self.steer_rad,
+                           mass_kg * self.acceleration_mps2)
+
+    def as_dict(self) -> dict[str, float | bool]:
+        return {"V": self.speed_mps, "beta": self.sideslip_rad, "r": self.yaw_rate_radps, "delta": self.steer_rad,
+                "Fxr": self.rear_force_n, "acceleration_mps2": self.acceleration_mps2, "front_slip": self.front_slip,
+                "rear_slip": self.rear_slip, "countersteer": self.countersteer}
+
+
+def _state(speed, sideslip, radius, steer, omega_f, omega_r):
+    """A steady-drift state; the turn's direction follows the sideslip's sign (beta < 0: left, r > 0)."""
+    x = np.zeros(N_STD)
+    x[S_STEER], x[S_SPEED], x[S_SIDESLIP] = steer, speed, sideslip
+    x[S_YAW_RATE] = -math.copysign(speed / radius, sideslip)
+    x[S_OMEGA_F], x[S_OMEGA_R] = omega_f, omega_r
+    return x
+
+
+def _residual(unknowns, radius_m, sideslip_rad, cp):
+    speed, steer, omega_f, omega_r, accel = unknowns
+    f = std_derivatives(_state(speed, sideslip_rad, radius_m, steer, omega_f, omega_r), np.array([0.0, accel]), cp)
+    # V, r, beta and both wheel speeds steady; scaled to comparable magnitudes.
+    return np.array([f[S_SPEED], f[S_YAW_RATE], f[S_SIDESLIP], f[S_OMEGA_F] * 1e-2, f[S_OMEGA_R] * 1e-2])
+
+
+def _physical(x, cp, radius_m, sideslip_rad) -> bool:
+    speed, steer, omega_f, omega_r, accel = x
+    return (speed > 2.0 and omega_f >= 0.0 and omega_r >= 0.0 and abs(steer) < cp[CR_STEER_MAX]
+            and acceleration_constraints(speed, accel, cp) == accel)
+
+
+def plant_drifts(radius_m: float, sideslip_rad: float, cp: np.ndarray) -> list[PlantDrift]:
+    """Every distinct steady drift at ``radius_m`` and ``sideslip_rad`` (beta < 0: left-hand, > 0: right-hand),
+    fastest first."""
+    found: list[np.ndarray] = []
+    wheel = cp[CR_WHEEL_RADIUS]
+    side = -1.0 if sideslip_rad < 0 else 1.0
+    for speed, steer, slip in product(_GUESS_SPEEDS_MPS, _GUESS_STEERS_RAD, _GUESS_REAR_SLIPS):
+        ground = speed * math.cos(sideslip_rad) / wheel
+        guess = np.array([speed, -side * steer, ground, ground * (1.0 - slip), 3.0])
+        sol = root(_residual, guess, args=(radius_m, sideslip_rad, cp), method="hybr", options={"xtol": 1e-12})
+        if not sol.success or np.max(np.abs(_residual(sol.x, radius_m, sideslip_rad, cp))) > 1e-7:
+            continue
+        if not _physical(sol.x, cp, radius_m, sideslip_rad):
+            continue
+        if all(np.max(np.abs(sol.x[:2] - f[:2])) > 1e-5 for f in found):
+            found.append(sol.x)
+    drifts = [_drift(x, radius_m, sideslip_rad, cp) for x in found]
+    return sorted(drifts, key=lambda d: -d.speed_mps)
+
+
+def _drift(x, radius_m, sideslip_rad, cp) -> PlantDrift:
+    speed, steer, omega_f, omega_r, accel = (float(v) for v in x)
+    state = _state(speed, sideslip_rad, radius_m, steer, omega_f, omega_r)
+    rear_slip, rear_force = rear_tyre_state(state, accel, cp)
+    u_wf = max(0.0, speed * math.cos(sideslip_rad) * math.cos(steer)
+               + (speed * math.sin(sideslip_rad) + cp[CR_CG_TO_FRONT] * state[S_YAW_RATE]) * math.sin(steer))
+    front_slip = 1.0 - cp[CR_WHEEL_RADIUS] * omega_f / max(u_wf, 0.1)
+    return PlantDrift(speed, sideslip_rad, float(state[S_YAW_RATE]), steer, float(rear_force), accel,
+                      float(front_slip), float(rear_slip))
+
+
+@lru_cache(maxsize=256)
+def commonroad_drifts(vehicle_id: int, radius_m: float, sideslip_rad: float, friction_scale: float = 1.0,
+                      mass_scale: float = 1.0, right: bool = False) -> tuple[PlantDrift, ...]:
+    """The drift family of a CommonRoad vehicle at a radius and |sideslip| (left-hand, or ``right``-hand),
+    fastest first."""
+    cp = pack_commonroad(vehicle_id, friction_scale=friction_scale, mass_scale=mass_scale)
+    return tuple(plant_drifts(radius_m, abs(sideslip_rad) if right else -abs(sideslip_rad), cp))
+
+
+def describe_family(drifts: tuple[PlantDrift, ...]) -> str | None:
+    """None when the main (fastest) drift countersteers; else why the scenario's drift cannot be held."""
+    if not drifts:
+        return "the plant has no steady drift at all there"
+    main = drifts[0]
+    if main.countersteer:
+        return None
+    others = [d for d in drifts if d.countersteer]
+    reason = (f"the plant's drift near drift speed steers into the turn (V {main.speed_mps:.2f} m/s, delta "
+              f"{main.steer_rad:+.3f} rad): no countersteer drift to hold")
+    if others:
+        low = others[0]
+        reason += (f"; the only countersteer drift there is a low-speed, high-wheelspin one (V {low.speed_mps:.2f} "
+                   f"m/s, delta {low.steer_rad:+.3f} rad, rear slip ratio {low.rear_slip:.2f})")
+    return reason
+
+
+def mass_of(vehicle_id: int) -> float:
+    return float(pack_commonroad(vehicle_id)[CR_MASS])

@@ -1,0 +1,82 @@
+"""CommonRoad's STD as a plant: the compiled port equals the package (the reference), the plant's drift family
+matches the published parameter set's numbers, the controller's model sits at the car's drift, and the config
+refuses what cannot drift."""
+
+import sys
+
+import numpy as np
+import pytest
+from vehiclemodels.vehicle_dynamics_std import vehicle_dynamics_std
+
+from driftlab.core.commonroad.equilibrium import commonroad_drifts, describe_family
+from driftlab.core.commonroad.model_fit import fitted_model_vehicle
+from driftlab.core.commonroad.parameters import _vehiclemodels, pack_commonroad, package_parameters
+from driftlab.core.commonroad.std import std_derivatives
+from driftlab.core.config import EpisodeConfig, Theta, apply_overrides
+from driftlab.core.drivability import drivable_reason
+from driftlab.core.episode import run_episode
+from driftlab.core.equilibrium import drift_equilibrium
+from driftlab.core.errors import ConfigError
+from driftlab.core.vehicle import pack_params
+
+
+@pytest.mark.parametrize("vehicle_id", [2, 3])
+def test_the_compiled_std_equals_the_package_on_random_states(vehicle_id):
+    p, cp = package_parameters(vehicle_id), pack_commonroad(vehicle_id)
+    rng = np.random.default_rng(vehicle_id)
+    for i in range(500):
+        speed = rng.uniform(0.0, 0.4) if i % 10 == 0 else rng.uniform(0.5, 30.0)  # the kinematic blend too
+        beta = rng.uniform(-0.8, 0.8)
+        rolling = speed * np.cos(beta) / p.R_w
+        x = [rng.uniform(-50, 50), rng.uniform(-50, 50), rng.uniform(-0.6, 0.6), speed, rng.uniform(-3, 3),
+             rng.uniform(-1.5, 1.5), beta, rolling * rng.uniform(0.7, 1.3), rolling * rng.uniform(0.5, 2.5)]
+        u = [rng.uniform(-2.0, 2.0), rng.uniform(-8.0, 8.0)]
+        expected = np.array(vehicle_dynamics_std(list(x), u, p))
+        assert np.array_equal(std_derivatives(np.array(x), np.array(u), cp), expected), (x, u)
+
+
+def test_the_plants_drift_family_at_44_m():
+    main = commonroad_drifts(2, 44.0, 0.5)[0]
+    assert main.countersteer and abs(main.speed_mps - 20.50) <= 0.05 and abs(main.steer_rad + 0.264) <= 0.005
+    assert abs(main.rear_force_n - 3636) < 10 and abs(main.rear_slip + 0.51) < 0.01
+    into_turn = commonroad_drifts(2, 44.0, 0.4)
+    why = describe_family(into_turn)
+    assert not into_turn[0].countersteer and "steers into the turn (V 19.61 m/s, delta +0.067 rad)" in why
+
+
+def test_the_controllers_model_drifts_where_the_car_does_on_both_circles():
+    vehicle = fitted_model_vehicle(2, 44.0, 0.5)
+    car = commonroad_drifts(2, 44.0, 0.5)[0]
+    left = drift_equilibrium(44.0, -0.5, pack_params(vehicle))
+    right = drift_equilibrium(44.0, 0.5, pack_params(vehicle))
+    assert abs(left.speed_mps - car.speed_mps) < 1e-6 and abs(left.steer_rad - car.steer_rad) < 1e-6
+    assert abs(left.drive_force_n - vehicle.mass_kg * car.acceleration_mps2) < 1e-3
+    assert right.speed_mps == left.speed_mps and right.steer_rad == -left.steer_rad
+    # The offsets are the model's: the plant's own car never carries them.
+    assert EpisodeConfig.preset("commonroad_std").plant.vehicle(vehicle).steer_offset_rad == 0.0
+
+
+def test_a_commonroad_config_is_one_key_and_refuses_what_cannot_drift():
+    config = apply_overrides(EpisodeConfig(), {"plant.model": "commonroad_std", "scenario.sideslip_rad": 0.5})
+    assert config == EpisodeConfig.preset("commonroad_std") and drivable_reason(config) is None
+    with pytest.raises(ConfigError, match="front-wheel drive"):
+        apply_overrides(config, {"plant.commonroad_vehicle": 1})
+    with pytest.raises(ConfigError, match="plant.tyre_c_scale shapes DriftLab's own plant"):
+        apply_overrides(config, {"plant.tyre_c_scale": 1.1})
+    with pytest.raises(ConfigError, match="steers into the turn"):
+        apply_overrides(config, {"scenario.sideslip_rad": 0.4})
+    with pytest.raises(ConfigError, match="plant.model must be one of"):
+        apply_overrides(config, {"plant.model": "carsim"})
+
+
+def test_without_the_package_the_error_names_the_extra(monkeypatch):
+    monkeypatch.setitem(sys.modules, "vehiclemodels.vehicle_parameters", None)
+    with pytest.raises(ConfigError, match=r"driftlab\[commonroad\]"):
+        _vehiclemodels()
+
+
+def test_an_std_episode_is_a_pure_function_of_its_arguments():
+    config = EpisodeConfig.preset("commonroad_std")
+    first, again = (run_episode(Theta(), config, seed=4) for _ in range(2))
+    assert first.J == again.J and np.array_equal(first.trajectory, again.trajectory)
+    assert first.trajectory[0, 4] == pytest.approx(commonroad_drifts(2, 44.0, 0.5)[0].speed_mps, abs=0.5)

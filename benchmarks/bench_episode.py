@@ -28,10 +28,15 @@ CASES = {
     ("nominal", "paper"): Theta(c_lr=0.02, c_rl=0.02, dV=0.0, k=0.05),
     ("nominal", "default"): Theta(c_lr=0.0225, c_rl=0.0218, dV=-0.064, k=0.057),
     ("default", "default"): Theta(c_lr=0.0225, c_rl=0.0218, dV=-0.064, k=0.057),
+    # The best theta of `driftlab tune --plant commonroad_std --iterations 150` (40/40 fresh seeds).
+    ("commonroad_std", "default"): Theta(c_lr=0.02262810577223354, c_rl=0.024522631460998034, dV=-0.09616088562347275,
+                                         k=0.03917159665094941, model_mu_scale=1.013467793294224,
+                                         model_c_scale=1.014977910718866),
 }
 
 
 def main() -> None:
+    medians = {}
     for (plant, controller), theta in CASES.items():
         config = EpisodeConfig.preset(plant, controller)
         OSQP_US.clear()
@@ -44,11 +49,14 @@ def main() -> None:
         mpc.QpSession.solve_constrained = timed_solve
         run_episode(theta, config)
         mpc.QpSession.solve_constrained = _solve
+        medians[plant, controller] = statistics.median(walls)
         print(f"plant={plant:8s} controller={controller:8s} status={result.status:10s} "
               f"steps={len(result.trajectory)} episode wall median {statistics.median(walls):.1f} ms (7 runs)")
         solver = config.mpc.qp_solver
         print(f"    constrained QP ({solver}) in {len(OSQP_US)}/{len(result.trajectory)} steps, "
               f"median {np.median(OSQP_US):.0f} us, {np.sum(OSQP_US) / 1e3:.1f} ms of the episode")
+    ratio = medians["commonroad_std", "default"] / medians["default", "default"]
+    print(f"CommonRoad STD episode / default episode: {ratio:.2f}x")
 
 
 if __name__ == "__main__":

@@ -7,7 +7,7 @@ Robustness first: a weight set picked for the best J on one deterministic episod
 knife edge (0.003 rad of sideslip noise gripped it up in half the episodes).
 
 Run: OMP_NUM_THREADS=1 python benchmarks/tune_weights.py [--sets 300] [--seeds 4] [--plant default]
-         [--around '{"mpc.q_sideslip": 619, ...}']   (two processes)
+         [--around '{"mpc.q_sideslip": 619, ...}'] [--thetas '[{"k": 0.03}, {}]']   (two processes)
 --plant is a --plant preset (commonroad_std: CommonRoad's STD with its fitted model); --around samples each
 weight within x0.5..x2 of the given set (a local search after a global one) instead of the global ranges.
 """
@@ -36,13 +36,13 @@ def sample(rng: np.random.Generator, around: dict | None) -> dict:
             "mpc.q_lateral_error": 10 ** rng.uniform(-1.5, 1.5), "mpc.q_course_error": 10 ** rng.uniform(-1.5, 2)}
 
 
-def evaluate(args: tuple[int, int, str, dict | None]):
-    i, seeds, plant, around = args
+def evaluate(args: tuple[int, int, str, dict | None, list[Theta]]):
+    i, seeds, plant, around, thetas = args
     weights = sample(np.random.default_rng(5000 + i), around)
     if around and i == 0:
         weights = dict(around)  # the centre itself, scored alike
     config = apply_overrides(EpisodeConfig.preset(plant), weights)
-    results = [run_episode(t, config, seed=s) for t in THETAS for s in range(seeds)]
+    results = [run_episode(t, config, seed=s) for t in thetas for s in range(seeds)]
     return sum(r.completed for r in results), sum(r.J for r in results), weights
 
 
@@ -53,9 +53,12 @@ def main() -> None:
     parser.add_argument("--seeds", type=int, default=4)
     parser.add_argument("--plant", default="default")
     parser.add_argument("--around", type=json.loads, default=None)
+    parser.add_argument("--thetas", type=json.loads, default=None, help="JSON list of theta objects (default: 4)")
     args = parser.parse_args()
+    thetas = [Theta(**t) for t in args.thetas] if args.thetas else THETAS
     with Pool(2) as pool:
-        out = pool.map(evaluate, [(i, args.seeds, args.plant, args.around) for i in range(args.sets)], chunksize=4)
+        out = pool.map(evaluate, [(i, args.seeds, args.plant, args.around, thetas) for i in range(args.sets)],
+                       chunksize=4)
     out.sort(key=lambda o: (-o[0], o[1]))
     for completed, total_j, weights in out[:8]:
         print(completed, round(total_j, 3), json.dumps({k: round(v, 4) for k, v in weights.items()}))

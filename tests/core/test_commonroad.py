@@ -2,6 +2,8 @@
 matches the published parameter set's numbers, the controller's model sits at the car's drift, and the config
 refuses what cannot drift."""
 
+import json
+import subprocess
 import sys
 
 import numpy as np
@@ -17,6 +19,7 @@ from driftlab.core.drivability import drivable_reason
 from driftlab.core.episode import run_episode
 from driftlab.core.equilibrium import drift_equilibrium
 from driftlab.core.errors import ConfigError
+from driftlab.core.mpc import MpcConfig
 from driftlab.core.vehicle import pack_params
 
 
@@ -80,3 +83,26 @@ def test_an_std_episode_is_a_pure_function_of_its_arguments():
     first, again = (run_episode(Theta(), config, seed=4) for _ in range(2))
     assert first.J == again.J and np.array_equal(first.trajectory, again.trajectory)
     assert first.trajectory[0, 4] == pytest.approx(commonroad_drifts(2, 44.0, 0.5)[0].speed_mps, abs=0.5)
+
+
+def test_the_plant_key_brings_the_cars_controller_and_switching_back_restores_the_default():
+    config = EpisodeConfig.preset("commonroad_std")
+    assert config.mpc == MpcConfig.commonroad() and config.scenario.sideslip_rad == 0.5
+    back = apply_overrides(config, {"plant.model": "driftlab", "scenario.sideslip_rad": 0.4})
+    assert back == EpisodeConfig()
+    kept = apply_overrides(EpisodeConfig(), {"plant.model": "commonroad_std", "scenario.sideslip_rad": 0.5,
+                                             "mpc.q_sideslip": 500.0})
+    assert kept.mpc.q_sideslip == 500.0 and kept.mpc.q_steer == MpcConfig().q_steer  # mpc keys given: kept
+
+
+@pytest.mark.parametrize(("beta", "expected"), [("-0.5", None), ("-0.4", "steers into the turn")])
+def test_driftlab_equilibrium_prints_the_plants_drift_family(beta, expected):
+    out = subprocess.run([sys.executable, "-m", "driftlab.cli", "equilibrium", "--plant", "commonroad_std",
+                          "--radius", "44", "--beta", beta], capture_output=True, text=True, timeout=120)
+    assert out.returncode == 0, out.stderr
+    plant = json.loads(out.stdout)["plant"]
+    if expected is None:
+        assert plant["countersteer"] and abs(plant["V"] - 20.50) <= 0.05 and abs(plant["delta"] + 0.264) <= 0.005
+        assert "error" not in plant and plant["rear_slip"] < -0.4
+    else:
+        assert not plant["countersteer"] and expected in plant["error"] and plant["delta"] > 0

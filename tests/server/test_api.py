@@ -159,6 +159,9 @@ def test_pause_and_resume(server):
     ({"iterations": 5, "config": {"plant.friction_scale": 9.0}}, "plant.friction_scale"),
     ({"iterations": 5, "colour": "red"}, "colour"),
     ({"iterations": 5, "config": {"plant.friction_scale": 1.2}}, "not drivable"),
+    ({"iterations": 5, "config": {"plant.model": "commonroad_std"}}, "steers into the turn"),  # sideslip 0.4
+    ({"iterations": 5, "config": {"plant.model": "commonroad_std", "plant.commonroad_vehicle": 1,
+                                  "scenario.sideslip_rad": 0.5}}, "front-wheel drive"),
 ])
 def test_bad_requests_name_the_field_and_store_nothing(server, body, field):
     url, _ = server
@@ -167,6 +170,18 @@ def test_bad_requests_name_the_field_and_store_nothing(server, body, field):
     assert r.status_code == 422, r.text
     assert field in r.json()["detail"]
     assert len(httpx.get(f"{url}/api/jobs").json()) == len(before)
+
+
+def test_a_commonroad_job_is_one_config_key(server):
+    url, _ = server
+    r = httpx.post(f"{url}/api/jobs", json={"iterations": 1, "seed_points": 1, "name": "commonroad",
+                                            "config": {"plant.model": "commonroad_std", "scenario.sideslip_rad": 0.5}})
+    assert r.status_code == 201, r.text
+    config = r.json()["spec"]["config"]
+    assert config["plant"]["model"] == "commonroad_std" and config["vehicle"]["mass_kg"] == pytest.approx(1093.3, 0.01)
+    assert config["mpc"]["q_steer"] != 122.5  # the controller's weights for that car
+    done = _wait_status(url, r.json()["id"], {"finished"}, timeout_s=300)  # behind the module's other jobs
+    assert done["n_done"] == 1
 
 
 def test_unknown_ids_are_404(server):

@@ -19,7 +19,7 @@ from typing import NamedTuple
 import numpy as np
 from numba import njit
 
-from driftlab.core.commonroad.plant import std_plant_step
+from driftlab.core.commonroad.plant import mb_plant_step, std_plant_step
 from driftlab.core.controller import (
     DISTURBANCE_LIMIT,
     drift_reference,
@@ -43,6 +43,7 @@ from driftlab.core.planner import PLAN_PHASE, advance_phase, phase_direction
 from driftlab.core.plant import (
     DRIVE,
     HEADING,
+    PLANT_COMMONROAD_MB,
     PLANT_COMMONROAD_STD,
     SIDESLIP,
     SPEED,
@@ -117,7 +118,7 @@ class LoopSettings(NamedTuple):
     gripup_grace_s: float
     substep_s: float
     noisy: bool
-    plant_kind: int  # driftlab.core.plant.PLANT_DRIFTLAB or PLANT_COMMONROAD_STD
+    plant_kind: int  # driftlab.core.plant.PLANT_DRIFTLAB, PLANT_COMMONROAD_STD or PLANT_COMMONROAD_MB
 
 
 class LoopState(NamedTuple):
@@ -325,6 +326,9 @@ def finish_step(cfg, st, qa, plant_params, actuator_params, du, ok, used_osqp):
     if cfg.plant_kind == PLANT_COMMONROAD_STD:
         st.plant[:] = std_plant_step(st.plant, steer, drive_n, cfg.dt_s, cfg.substep_s, plant_params,
                                      actuator_params)
+    elif cfg.plant_kind == PLANT_COMMONROAD_MB:
+        st.plant[:] = mb_plant_step(st.plant, steer, drive_n, cfg.dt_s, cfg.substep_s, plant_params,
+                                    actuator_params)
     else:
         st.plant[:] = plant_step(st.plant, steer, drive_n, cfg.dt_s, cfg.substep_s, plant_params, actuator_params)
     ints[I_STEP] += 1

@@ -171,7 +171,8 @@ class EpisodeConfig:
                    mpc=controllers[controller]())
 
 
-PLANT_PRESETS = {"default": PlantConfig, "nominal": PlantConfig.nominal, "commonroad_std": PlantConfig.commonroad_std}
+PLANT_PRESETS = {"default": PlantConfig, "nominal": PlantConfig.nominal, "commonroad_std": PlantConfig.commonroad_std,
+                 "commonroad_mb": PlantConfig.commonroad_mb}
 
 
 def model_vehicle_for(plant: PlantConfig, scenario: ScenarioConfig) -> VehicleParams:

@@ -49,8 +49,8 @@ PLANT_LIMITS: dict[str, tuple[float, float]] = {
 A_STEER_LAG, A_STEER_RATE, A_DRIVE_LAG, A_DRIVE_RATE = range(4)
 
 # Which plant the episode loop steps (plant.model): DriftLab's own, or CommonRoad's single-track drift model (STD).
-PLANT_MODELS = ("driftlab", "commonroad_std")
-PLANT_DRIFTLAB, PLANT_COMMONROAD_STD = range(len(PLANT_MODELS))
+PLANT_MODELS = ("driftlab", "commonroad_std", "commonroad_mb")
+PLANT_DRIFTLAB, PLANT_COMMONROAD_STD, PLANT_COMMONROAD_MB = range(len(PLANT_MODELS))
 # Settings that shape DriftLab's own car and tyres; a CommonRoad plant has its own (PAC2002 tyres, load transfer,
 # combined slip) and keeps these at 1 / off.
 _DRIFTLAB_ONLY = {"yaw_inertia_scale": 1.0, "tyre_b_scale": 1.0, "tyre_c_scale": 1.0, "friction_circle": False,
@@ -171,6 +171,13 @@ class PlantConfig:
         return cls(model="commonroad_std", commonroad_vehicle=vehicle_id, friction_scale=1.0, substep_s=0.002,
                    **_DRIFTLAB_ONLY)
 
+    @classmethod
+    def commonroad_mb(cls, vehicle_id: int = 2) -> PlantConfig:
+        """CommonRoad's multi-body model with vehicle ``vehicle_id``, as :meth:`commonroad_std` (RK4 at 1 ms: its
+        suspension and axle compliance are stiffer than STD's wheel-speed mode)."""
+        return cls(model="commonroad_mb", commonroad_vehicle=vehicle_id, friction_scale=1.0, substep_s=0.001,
+                   **_DRIFTLAB_ONLY)
+
     @property
     def plant_kind(self) -> int:
         return PLANT_MODELS.index(self.model)
@@ -278,6 +285,6 @@ def make_plant(config: PlantConfig, model_vehicle: VehicleParams) -> Plant:
     """The plant ``config.model`` names (DriftLab's own, or a CommonRoad model)."""
     if config.model == "driftlab":
         return Plant(config, model_vehicle)
-    from driftlab.core.commonroad.plant import CommonRoadStdPlant
+    from driftlab.core.commonroad.plant import CommonRoadMbPlant, CommonRoadStdPlant
 
-    return CommonRoadStdPlant(config)
+    return CommonRoadMbPlant(config) if config.model == "commonroad_mb" else CommonRoadStdPlant(config)

@@ -106,3 +106,23 @@ def test_driftlab_equilibrium_prints_the_plants_drift_family(beta, expected):
         assert "error" not in plant and plant["rear_slip"] < -0.4
     else:
         assert not plant["countersteer"] and expected in plant["error"] and plant["delta"] > 0
+
+
+def test_the_compiled_mb_equals_the_package_on_random_states():
+    from vehiclemodels.init_mb import init_mb
+    from vehiclemodels.vehicle_dynamics_mb import vehicle_dynamics_mb
+
+    from driftlab.core.commonroad.mb import mb_derivatives, pack_mb
+
+    p, cp = package_parameters(2), pack_mb(2)
+    rng = np.random.default_rng(5)
+    spread = np.r_[np.zeros(6), 0.02, 0.1, 0.01, 0.1, 0.3, 0.01, 0.05, 0.02, 0.1, 0.3, 0.005, 0.05, 0.02, 0.1, 0.3,
+                   0.005, 0.05, 2.0, 2.0, 2.0, 2.0, 0.001, 0.001]
+    for i in range(300):
+        speed = rng.uniform(0.0, 0.09) if i % 10 == 0 else rng.uniform(3.0, 30.0)
+        x = np.array(init_mb([0.0, 0.0, rng.uniform(-0.5, 0.5), speed, 0.3, rng.uniform(-0.1, 0.1) * speed,
+                              rng.uniform(-0.8, 0.8)], p)) + rng.normal(0.0, 1.0, 29) * spread
+        u = [rng.uniform(-2.0, 2.0), rng.uniform(-8.0, 8.0)]
+        expected = np.array(vehicle_dynamics_mb(list(x), u, p))
+        # Equal to the last bit but for a rounding here and there (numba's and CPython's x ** 2).
+        np.testing.assert_allclose(mb_derivatives(x.copy(), np.array(u), cp), expected, rtol=1e-12, atol=1e-9)

@@ -21,6 +21,8 @@ import math
 import numpy as np
 from numba import njit
 
+from driftlab.core.commonroad.mb import N_MB, mb_acceleration_constraints, mb_derivatives, pack_mb
+from driftlab.core.commonroad.mb import M as MB_MASS
 from driftlab.core.commonroad.parameters import CR_CG_TO_FRONT, CR_MASS, CR_WHEEL_RADIUS, pack_commonroad
 from driftlab.core.commonroad.std import (
     N_STD,
@@ -44,6 +46,7 @@ from driftlab.core.plant import (
     DRIVE,
     HEADING,
     N_PLANT_STATES,
+    PLANT_COMMONROAD_MB,
     PLANT_COMMONROAD_STD,
     SIDESLIP,
     SPEED,
@@ -139,3 +142,89 @@ class CommonRoadStdPlant:
     def step(self, state: np.ndarray, steer_cmd_rad: float, drive_cmd_n: float, duration_s: float) -> np.ndarray:
         return std_plant_step(state, steer_cmd_rad, drive_cmd_n, duration_s, self.config.substep_s, self.params,
                               self.actuators)
+
+
+# --- CommonRoad's multi-body model (MB) ---------------------------------------------------------------------------
+# Layout: the loop's eight, MB's 29 states, the drive actuator's force.
+MB_FIRST = N_PLANT_STATES
+MB_DRIVE_ACTUATOR = N_PLANT_STATES + N_MB
+N_MB_PLANT_STATES = MB_DRIVE_ACTUATOR + 1
+
+
+@njit(cache=True, error_model="numpy")
+def _mb_integrated_derivatives(z, steer_cmd, drive_cmd, p, act):
+    """d/dt of [MB's 29 states, drive actuator force]."""
+    u = np.empty(2)
+    u[0] = _rate(z[2], steer_cmd, act[A_STEER_LAG], act[A_STEER_RATE])
+    u[1] = z[N_MB] / p[MB_MASS]
+    dz = np.empty(N_MB + 1)
+    dz[:N_MB] = mb_derivatives(z[:N_MB], u, p)
+    dz[N_MB] = _rate(z[N_MB], drive_cmd, act[A_DRIVE_LAG], act[A_DRIVE_RATE]) if act[A_DRIVE_LAG] > 0.0 else 0.0
+    return dz
+
+
+@njit(cache=True, error_model="numpy")
+def mb_plant_step(state, steer_cmd, drive_cmd, duration_s, substep_s, p, act):
+    """Advance the MB plant by ``duration_s`` with commands held; the loop's eight states follow from MB's."""
+    z = state[MB_FIRST:].copy()
+    if act[A_DRIVE_LAG] <= 0.0:
+        reach = act[A_DRIVE_RATE] * duration_s
+        z[N_MB] += min(max(drive_cmd - z[N_MB], -reach), reach)
+    n_sub = max(1, int(round(duration_s / substep_s)))
+    h = duration_s / n_sub
+    for _ in range(n_sub):
+        k1 = _mb_integrated_derivatives(z, steer_cmd, drive_cmd, p, act)
+        k2 = _mb_integrated_derivatives(z + 0.5 * h * k1, steer_cmd, drive_cmd, p, act)
+        k3 = _mb_integrated_derivatives(z + 0.5 * h * k2, steer_cmd, drive_cmd, p, act)
+        k4 = _mb_integrated_derivatives(z + h * k3, steer_cmd, drive_cmd, p, act)
+        z = z + (h / 6.0) * (k1 + 2.0 * k2 + 2.0 * k3 + k4)
+        for i in range(23, 27):  # the package clamps the wheel speeds of its state at 0
+            z[i] = max(0.0, z[i])
+    out = np.empty(N_MB_PLANT_STATES)
+    _mb_to_loop(z, p, out)
+    out[MB_FIRST:] = z
+    return out
+
+
+@njit(cache=True)
+def _mb_to_loop(z, p, out):
+    out[X_POS], out[Y_POS], out[HEADING] = z[0], z[1], z[4]
+    out[SPEED] = math.sqrt(z[3] ** 2 + z[10] ** 2)
+    out[SIDESLIP] = math.atan2(z[10], z[3])
+    out[YAW_RATE], out[STEER] = z[5], z[2]
+    out[DRIVE] = p[MB_MASS] * mb_acceleration_constraints(z[3], z[N_MB] / p[MB_MASS], p)
+
+
+class CommonRoadMbPlant:
+    """CommonRoad's MB as the loop's plant (see :class:`driftlab.core.plant.Plant` for the interface)."""
+
+    kind = PLANT_COMMONROAD_MB
+
+    def __init__(self, config: PlantConfig) -> None:
+        self.config = config
+        self.params = pack_mb(config.commonroad_vehicle, friction_scale=config.friction_scale,
+                              mass_scale=config.mass_scale, steer_rate_radps=config.steer_rate_radps)
+        self.actuators = config.actuator_params()
+
+    def start_state(self, loop_state: np.ndarray) -> np.ndarray:
+        """The package's own init_mb (suspension at its static deflection), the rear wheels at the configured slip
+        ratio, the front ones rolling."""
+        from vehiclemodels.init_mb import init_mb
+
+        from driftlab.core.commonroad.parameters import package_parameters
+
+        p = package_parameters(self.config.commonroad_vehicle)
+        s = loop_state
+        z = np.array(init_mb([s[X_POS], s[Y_POS], s[STEER], s[SPEED], s[HEADING], s[YAW_RATE], s[SIDESLIP]], p))
+        rear = max(z[3], 0.0) * (1.0 - self.config.initial_rear_slip) / p.R_w
+        z[25] = z[26] = rear
+        out = np.zeros(N_MB_PLANT_STATES)
+        zz = np.zeros(N_MB + 1)
+        zz[:N_MB], zz[N_MB] = z, s[DRIVE]
+        _mb_to_loop(zz, self.params, out)
+        out[MB_FIRST:] = zz
+        return out
+
+    def step(self, state: np.ndarray, steer_cmd_rad: float, drive_cmd_n: float, duration_s: float) -> np.ndarray:
+        return mb_plant_step(state, steer_cmd_rad, drive_cmd_n, duration_s, self.config.substep_s, self.params,
+                             self.actuators)

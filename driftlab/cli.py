@@ -99,8 +99,15 @@ def _commonroad_family(config: EpisodeConfig, radius_m: float, beta_rad: float, 
     from driftlab.core.commonroad.equilibrium import commonroad_drifts, describe_family
 
     plant = config.plant
-    family = commonroad_drifts(plant.commonroad_vehicle, radius_m, beta_rad, plant.friction_scale, plant.mass_scale,
-                               right=beta_rad > 0)
+    if plant.model == "commonroad_mb":
+        from driftlab.core.commonroad.mb_equilibrium import mb_main_drift
+
+        main = mb_main_drift(plant.commonroad_vehicle, radius_m, beta_rad, beta_rad > 0, plant.friction_scale,
+                             plant.mass_scale)
+        family = (main,) if main is not None else ()  # MB: the drift nearest STD's, not a family
+    else:
+        family = commonroad_drifts(plant.commonroad_vehicle, radius_m, beta_rad, plant.friction_scale,
+                                   plant.mass_scale, right=beta_rad > 0)
     branches = []
     for drift in family:
         d = drift.as_dict()

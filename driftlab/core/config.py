@@ -183,7 +183,7 @@ def model_vehicle_for(plant: PlantConfig, scenario: ScenarioConfig) -> VehiclePa
         return VehicleParams()
     from driftlab.core.commonroad.model_fit import fitted_model_vehicle
 
-    return fitted_model_vehicle(plant.commonroad_vehicle, scenario.left_radius_m, scenario.sideslip_rad)
+    return fitted_model_vehicle(plant.commonroad_vehicle, scenario.left_radius_m, scenario.sideslip_rad, plant.model)
 
 
 def _coerce(section: str, name: str, current: Any, raw: Any) -> Any:

@@ -76,9 +76,16 @@ def _commonroad_reason(plant: PlantConfig, left_radius_m: float, right_radius_m:
     from driftlab.core.commonroad.equilibrium import commonroad_drifts, describe_family
 
     for circle, radius in (("left", left_radius_m), ("right", right_radius_m)):
-        family = commonroad_drifts(plant.commonroad_vehicle, radius, sideslip_rad, plant.friction_scale,
-                                   plant.mass_scale, right=circle == "right")
-        why = describe_family(family)
+        if plant.model == "commonroad_mb":
+            from driftlab.core.commonroad.mb_equilibrium import mb_main_drift
+
+            drift = mb_main_drift(plant.commonroad_vehicle, radius, sideslip_rad, circle == "right",
+                                  plant.friction_scale, plant.mass_scale)
+            why = None if drift is not None and drift.countersteer else "no countersteer steady drift found (MB)"
+        else:
+            family = commonroad_drifts(plant.commonroad_vehicle, radius, sideslip_rad, plant.friction_scale,
+                                       plant.mass_scale, right=circle == "right")
+            why = describe_family(family)
         if why is not None:
             return (f"config is not drivable on the {circle} circle (scenario radius {radius:g} m, sideslip "
                     f"{abs(sideslip_rad):g} rad): {why}; try another scenario.sideslip_rad (CommonRoad vehicle "

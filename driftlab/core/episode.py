@@ -119,6 +119,8 @@ def run_episode(theta: Theta, config: EpisodeConfig, *, seed: int = 0) -> Episod
     n_steps = int(round(scenario.max_time_s / dt))
     variation = draw_variation(config.plant, seed, n_steps + 1)
     plant = make_plant(variation.plant, config.vehicle)
+    if hasattr(plant, "start_in_drift_of"):  # a multi-body car starts with its body rolled as in the drift
+        plant.start_in_drift_of(scenario.left_radius_m, scenario.sideslip_rad)
     start = model.left
     offset = variation.start_offset
     state = plant.start_state(initial_plant_state(

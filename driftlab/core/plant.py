@@ -89,6 +89,10 @@ class PlantConfig:
             the tyre and load settings above do not apply and must stay at 1 / off.
         commonroad_vehicle: CommonRoad parameter set (2 or 3).
         initial_rear_slip: a CommonRoad plant's rear wheel slip ratio at the start (negative: spinning) [-].
+        locked_differential: MB's rear wheels on one shaft (the package gives each half the drive torque, an open
+            differential: in a 1 g drift the inner rear wheel unloads, its normal force falls below zero within
+            0.3 s, and it spins up, 78 -> 185 rad/s in 0.35 s, so no power-on drift can be held; drift cars lock
+            or weld theirs). STD has one rear wheel: this does not apply.
 
     Per-episode variation, drawn from the episode's seed (:mod:`driftlab.core.variation`); a real car never
     drives the same episode twice. Spreads are half-widths of uniform draws, noise levels standard deviations
@@ -133,6 +137,7 @@ class PlantConfig:
     model: str = "driftlab"
     commonroad_vehicle: int = 2
     initial_rear_slip: float = -0.5
+    locked_differential: bool = True
 
     def __post_init__(self) -> None:
         check_ranges(self, "plant", PLANT_LIMITS)
@@ -153,7 +158,7 @@ class PlantConfig:
         if self.steer_lag_spread_s > self.steer_lag_s:
             raise ConfigError(f"plant.steer_lag_spread_s must be in [0, plant.steer_lag_s = {self.steer_lag_s}], "
                               f"got {self.steer_lag_spread_s!r}")
-        for name in ("friction_circle", "load_transfer"):
+        for name in ("friction_circle", "load_transfer", "locked_differential"):
             if not isinstance(getattr(self, name), bool):
                 raise ConfigError(f"plant.{name} must be true or false, got {getattr(self, name)!r}")
 

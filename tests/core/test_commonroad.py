@@ -126,3 +126,30 @@ def test_the_compiled_mb_equals_the_package_on_random_states():
         expected = np.array(vehicle_dynamics_mb(list(x), u, p))
         # Equal to the last bit but for a rounding here and there (numba's and CPython's x ** 2).
         np.testing.assert_allclose(mb_derivatives(x.copy(), np.array(u), cp), expected, rtol=1e-12, atol=1e-9)
+
+
+def test_the_multibody_cars_steady_drift_with_a_locked_differential():
+    from driftlab.core.commonroad.mb_equilibrium import mb_main_drift, mb_steady_state
+
+    left = mb_main_drift(2, 44.0, 0.5)
+    right = mb_main_drift(2, 44.0, 0.5, right=True)
+    assert left.countersteer and right.countersteer and left.steer_rad < 0 < right.steer_rad
+    # MB's own drift, not STD's: more countersteer and less drive with four wheels and a rolling body.
+    std = commonroad_drifts(2, 44.0, 0.5)[0]
+    assert abs(left.speed_mps - std.speed_mps) < 0.5 and left.steer_rad < std.steer_rad - 0.1
+    assert left.rear_slip < 0 and left.acceleration_mps2 < std.acceleration_mps2
+    # The drift is a steady state of the package's own equations, the rear wheels on one shaft.
+    from vehiclemodels.vehicle_dynamics_mb import vehicle_dynamics_mb
+
+    _, state, accel = mb_steady_state(2, 44.0, 0.5)
+    f = np.array(vehicle_dynamics_mb(list(state), [0.0, accel], package_parameters(2)))
+    steady = [3, 5, 7, 9, 10, 12, 14, 15, 17, 19, 20, 22, 23, 24, 27, 28]
+    assert np.max(np.abs(f[steady])) < 1e-6 and abs(f[25] + f[26]) < 1e-6
+    assert f[4] == pytest.approx(left.yaw_rate_radps) and np.hypot(f[0], f[1]) == pytest.approx(left.speed_mps)
+
+
+def test_an_mb_episode_runs_in_the_same_loop_and_is_pure():
+    config = EpisodeConfig.preset("commonroad_mb")
+    first, again = (run_episode(Theta(), config, seed=1) for _ in range(2))
+    assert first.J == again.J and np.array_equal(first.trajectory, again.trajectory)
+    assert first.trajectory[0, 4] == pytest.approx(20.39, abs=0.2)  # it starts in MB's own drift

@@ -33,14 +33,16 @@ def _speed_gap(friction: float, base: VehicleParams, radius_m: float, sideslip_r
 
 
 @lru_cache(maxsize=64)
-def fitted_model_vehicle(vehicle_id: int, radius_m: float, sideslip_rad: float) -> VehicleParams:
-    """The model of CommonRoad vehicle ``vehicle_id`` whose drift at (radius, sideslip) is the car's main drift.
+def fitted_model_vehicle(vehicle_id: int, radius_m: float, sideslip_rad: float,
+                         model: str = "commonroad_std") -> VehicleParams:
+    """The model of CommonRoad vehicle ``vehicle_id`` whose drift at (radius, sideslip) is the car's main drift
+    (the STD car's, or with ``model`` "commonroad_mb" the multi-body car's).
 
     Raises:
         ConfigError: the car has no countersteer drift there, or no friction of the model reaches its speed.
     """
-    left = _main_drift(vehicle_id, radius_m, sideslip_rad, right=False)
-    right = _main_drift(vehicle_id, radius_m, sideslip_rad, right=True)
+    left = _main_drift(vehicle_id, radius_m, sideslip_rad, False, model)
+    right = _main_drift(vehicle_id, radius_m, sideslip_rad, True, model)
     base = commonroad_model_vehicle(vehicle_id)
     # The drift speed grows with friction (V^2 ~ mu g R): bracket it, then solve (on the left-hand drift; the
     # right-hand one of vehicle 2 is 0.1 m/s slower, within what dV corrects).
@@ -63,12 +65,20 @@ def fitted_model_vehicle(vehicle_id: int, radius_m: float, sideslip_rad: float) 
                    drive_offset_right_n=float(eq.drive_force_n - mass * right.acceleration_mps2))
 
 
-def _main_drift(vehicle_id: int, radius_m: float, sideslip_rad: float, right: bool):
+def _main_drift(vehicle_id: int, radius_m: float, sideslip_rad: float, right: bool, model: str):
+    side = "right" if right else "left"
+    where = (f"CommonRoad vehicle {vehicle_id} ({model}) at radius {radius_m:g} m, sideslip {abs(sideslip_rad):g} "
+             f"rad ({side}-hand drift)")
+    if model == "commonroad_mb":
+        from driftlab.core.commonroad.mb_equilibrium import mb_main_drift
+
+        drift = mb_main_drift(vehicle_id, radius_m, sideslip_rad, right)
+        if drift is None or not drift.countersteer:
+            raise ConfigError(f"the controller's model cannot be fitted to {where}: no countersteer steady drift "
+                              "found", field="scenario.sideslip_rad")
+        return drift
     family = commonroad_drifts(vehicle_id, radius_m, sideslip_rad, right=right)
     why = describe_family(family)
     if why is not None:
-        side = "right" if right else "left"
-        raise ConfigError(f"the controller's model cannot be fitted to CommonRoad vehicle {vehicle_id} at radius "
-                          f"{radius_m:g} m, sideslip {abs(sideslip_rad):g} rad ({side}-hand drift): {why}",
-                          field="scenario.sideslip_rad")
+        raise ConfigError(f"the controller's model cannot be fitted to {where}: {why}", field="scenario.sideslip_rad")
     return family[0]

@@ -57,7 +57,9 @@ from driftlab.core.plant import (
     PlantConfig,
 )
 
+MB_SUSPENSION = [6, 8, 11, 13, 16, 18, 21, 27, 28]  # roll, pitch, heave, the axles' roll and heave, compliance
 OMEGA_F, OMEGA_R, DRIVE_ACTUATOR = N_PLANT_STATES, N_PLANT_STATES + 1, N_PLANT_STATES + 2
+A_LOCKED_DIFFERENTIAL = 4  # MB's actuator vector carries the differential after DriftLab's four actuator settings
 N_STD_PLANT_STATES = N_PLANT_STATES + 3
 _DRIVE_SLOT = N_STD  # the drive actuator's force, after STD's nine states in the integrated vector
 
@@ -159,6 +161,10 @@ def _mb_integrated_derivatives(z, steer_cmd, drive_cmd, p, act):
     u[1] = z[N_MB] / p[MB_MASS]
     dz = np.empty(N_MB + 1)
     dz[:N_MB] = mb_derivatives(z[:N_MB], u, p)
+    if act[A_LOCKED_DIFFERENTIAL] > 0.5:
+        # One rear axle shaft: both wheels turn together, driven by the sum of the torques (the package's mean).
+        locked = 0.5 * (dz[25] + dz[26])
+        dz[25] = dz[26] = locked
     dz[N_MB] = _rate(z[N_MB], drive_cmd, act[A_DRIVE_LAG], act[A_DRIVE_RATE]) if act[A_DRIVE_LAG] > 0.0 else 0.0
     return dz
 
@@ -204,7 +210,16 @@ class CommonRoadMbPlant:
         self.config = config
         self.params = pack_mb(config.commonroad_vehicle, friction_scale=config.friction_scale,
                               mass_scale=config.mass_scale, steer_rate_radps=config.steer_rate_radps)
-        self.actuators = config.actuator_params()
+        self.actuators = np.append(config.actuator_params(), 1.0 if config.locked_differential else 0.0)
+        self.steady: np.ndarray | None = None
+
+    def start_in_drift_of(self, radius_m: float, sideslip_rad: float) -> None:
+        """Start the suspension as it sits in the car's steady drift there (if one was found)."""
+        from driftlab.core.commonroad.mb_equilibrium import mb_steady_state
+
+        found = mb_steady_state(self.config.commonroad_vehicle, radius_m, sideslip_rad, False,
+                                self.config.friction_scale, self.config.mass_scale)
+        self.steady = None if found is None else found[1]
 
     def start_state(self, loop_state: np.ndarray) -> np.ndarray:
         """The package's own init_mb (suspension at its static deflection), the rear wheels at the configured slip
@@ -218,6 +233,8 @@ class CommonRoadMbPlant:
         z = np.array(init_mb([s[X_POS], s[Y_POS], s[STEER], s[SPEED], s[HEADING], s[YAW_RATE], s[SIDESLIP]], p))
         rear = max(z[3], 0.0) * (1.0 - self.config.initial_rear_slip) / p.R_w
         z[25] = z[26] = rear
+        if self.steady is not None:  # the body rolled and the axles deflected as in the drift, not at rest
+            z[MB_SUSPENSION] = self.steady[MB_SUSPENSION]
         out = np.zeros(N_MB_PLANT_STATES)
         zz = np.zeros(N_MB + 1)
         zz[:N_MB], zz[N_MB] = z, s[DRIVE]

@@ -1,0 +1,86 @@
+"""The MB plant's steady drift (locked rear differential): the multi-body state that holds a constant V, beta and
+r = V / R, found from the STD car's drift as a start.
+
+Unknowns: V, delta, the acceleration input, the front wheel speeds, the (common) rear wheel speed, and the
+suspension's roll, pitch, heave and axle states; equations: every derivative of MB zero but the pose's, the rear
+wheels' mean (one shaft). Vehicle 2 at R 44, beta -0.5: V 20.39 m/s, delta -0.411 rad, drive 3248 N, rear slip
+ratio -0.35, body roll -0.135 rad (STD: 20.50, -0.264, 3636 N).
+"""
+
+from __future__ import annotations
+
+import math
+from functools import lru_cache
+
+import numpy as np
+from scipy.optimize import root
+
+from driftlab.core.commonroad.equilibrium import PlantDrift, commonroad_drifts
+from driftlab.core.commonroad.mb import R_W, A, B, M, mb_derivatives, pack_mb
+from driftlab.core.commonroad.parameters import package_parameters
+
+_SUSPENSION = [6, 8, 11, 13, 16, 18, 21, 27, 28]  # roll, pitch, heave, front/rear axle roll and heave, compliance
+_STEADY = [3, 5, 10, 15, 20, 7, 9, 12, 14, 17, 19, 22, 23, 24]
+_GUESSES = ((0.0, 0.0, 1.5), (-2.0, 0.1, 1.8), (0.0, 0.1, 1.2), (-1.0, 0.05, 1.5), (1.0, -0.05, 1.3))
+
+
+def _state(u, radius_m, sideslip_rad, cp):
+    speed, steer = u[0], u[1]
+    x = np.zeros(29)
+    x[2], x[3], x[10] = steer, speed * math.cos(sideslip_rad), speed * math.sin(sideslip_rad)
+    x[5] = -math.copysign(speed / radius_m, sideslip_rad)
+    x[23], x[24], x[25], x[26] = u[3], u[4], u[5], u[5]
+    x[_SUSPENSION] = u[6:15]
+    x[15], x[20] = x[10] + cp[A] * x[5], x[10] - cp[B] * x[5]  # the axles move with the body
+    return x
+
+
+def _residual(u, radius_m, sideslip_rad, cp):
+    f = mb_derivatives(_state(u, radius_m, sideslip_rad, cp), np.array([0.0, u[2]]), cp)
+    out = np.empty(15)
+    out[:14] = f[_STEADY]
+    out[14] = 0.5 * (f[25] + f[26])
+    out[12:] *= 1e-2  # wheel accelerations to the scale of the others
+    return out
+
+
+def mb_main_drift(vehicle_id: int, radius_m: float, sideslip_rad: float, right: bool = False,
+                  friction_scale: float = 1.0, mass_scale: float = 1.0) -> PlantDrift | None:
+    """The MB car's drift nearest the STD car's (the fastest physical one found), or None."""
+    found = mb_steady_state(vehicle_id, radius_m, sideslip_rad, right, friction_scale, mass_scale)
+    return None if found is None else found[0]
+
+
+@lru_cache(maxsize=64)
+def mb_steady_state(vehicle_id: int, radius_m: float, sideslip_rad: float, right: bool = False,
+                    friction_scale: float = 1.0, mass_scale: float = 1.0
+                    ) -> tuple[PlantDrift, np.ndarray, float] | None:
+    """(the drift, MB's full 29-state vector in it, the acceleration input), or None."""
+    from vehiclemodels.init_mb import init_mb
+
+    cp = pack_mb(vehicle_id, friction_scale=friction_scale, mass_scale=mass_scale)
+    beta = abs(sideslip_rad) if right else -abs(sideslip_rad)
+    std = commonroad_drifts(vehicle_id, radius_m, sideslip_rad, friction_scale, mass_scale, right=right)
+    if not std:
+        return None
+    start = std[0]
+    rest = np.array(init_mb([0, 0, start.steer_rad, start.speed_mps, 0, start.yaw_rate_radps, beta],
+                            package_parameters(vehicle_id)))[_SUSPENSION]
+    found = []
+    for dv, dd, spin in _GUESSES:
+        speed = start.speed_mps + dv
+        rolling = speed * math.cos(beta) / cp[R_W]
+        guess = np.r_[speed, start.steer_rad - math.copysign(dd, beta), start.acceleration_mps2, rolling, rolling,
+                      rolling * spin, rest]
+        sol = root(_residual, guess, args=(radius_m, beta, cp), method="hybr", options={"xtol": 1e-13})
+        if (sol.success and np.max(np.abs(_residual(sol.x, radius_m, beta, cp))) < 1e-8 and sol.x[0] > 2.0
+                and min(sol.x[3], sol.x[4], sol.x[5]) >= 0.0):
+            found.append(sol.x)
+    if not found:
+        return None
+    x = max(found, key=lambda s: s[0])
+    speed, steer, accel = float(x[0]), float(x[1]), float(x[2])
+    rear_slip = 1.0 - cp[R_W] * x[5] / (speed * math.cos(beta))
+    drift = PlantDrift(speed, beta, -math.copysign(speed / radius_m, beta), steer, float(cp[M] * accel), accel,
+                       float(1.0 - cp[R_W] * x[3] / (speed * math.cos(beta))), float(rear_slip))
+    return drift, _state(x, radius_m, beta, cp), accel

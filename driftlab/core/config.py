@@ -158,8 +158,8 @@ class EpisodeConfig:
         "commonroad_std" (CommonRoad's STD, vehicle 2, with the controller's model of that car);
         controller: "default" (DriftLab's extended MPC) or "paper" (the paper's formulation)."""
         controllers = {"default": MpcConfig, "paper": MpcConfig.paper}
-        if plant != "default" and plant != "nominal":
-            controllers["default"] = MpcConfig.commonroad  # the default controller's weights for that car
+        if plant != "default" and plant != "nominal":  # the default controller's weights for that car
+            controllers["default"] = MpcConfig.commonroad_mb if plant == "commonroad_mb" else MpcConfig.commonroad
         if plant not in PLANT_PRESETS:
             raise ConfigError(f"plant must be one of {', '.join(PLANT_PRESETS)}, got {plant!r}")
         if controller not in controllers:
@@ -261,7 +261,9 @@ def _refit_model_vehicle(config: EpisodeConfig, changes: dict[str, dict[str, Any
     or the scenario changes (driftlab.core.commonroad.model_fit), unless ``vehicle.*`` keys are given."""
     plant_switched = "model" in changes.get("plant", {}) or "commonroad_vehicle" in changes.get("plant", {})
     if plant_switched and "mpc" not in changes:  # and the default controller's weights for that car
-        config = replace(config, mpc=MpcConfig() if config.plant.model == "driftlab" else MpcConfig.commonroad())
+        weights = {"driftlab": MpcConfig, "commonroad_std": MpcConfig.commonroad,
+                   "commonroad_mb": MpcConfig.commonroad_mb}
+        config = replace(config, mpc=weights[config.plant.model]())
     if "vehicle" in changes or not ({"plant", "scenario"} & set(changes)):
         return config
     if config.plant.model == "driftlab" and not plant_switched:

@@ -137,6 +137,16 @@ class MpcConfig:
                    r_drive_step_kn=0.0009, steer_rate_radps=11.5374, q_speed=0.9787, q_lateral_error=0.8447,
                    q_course_error=0.1509)
 
+    @classmethod
+    def commonroad_mb(cls) -> MpcConfig:
+        """The weights for CommonRoad's multi-body model (vehicle 2, locked differential, its fitted model): with
+        :meth:`commonroad`'s none of 12 episodes completes (the flick spins out). ``benchmarks/tune_weights.py
+        --plant commonroad_mb``: 300 sets x 2 theta x 3 seeds completed none; 200 around :meth:`commonroad`'s with
+        the best theta of a 150-iteration job and the untuned one x 4 seeds: 4 of 8 (the centre: 0)."""
+        return cls(q_sideslip=260.5048, q_yaw_rate=51.0635, q_steer=1.3107, q_drive_kn=0.9577, r_steer_step=16.4536,
+                   r_drive_step_kn=0.0012, steer_rate_radps=6.3898, q_speed=0.4947, q_lateral_error=0.9149,
+                   q_course_error=0.0962)
+
     def __post_init__(self) -> None:
         ranges = {
             "dt_s": (0.005, 0.5), "horizon": (1, 100), "steer_limit_rad": (0.05, 1.2),

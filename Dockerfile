@@ -1,4 +1,4 @@
-# DriftLab: docker build -t driftlab . && docker run -p 8000:8000 -v driftlab-data:/data driftlab
+# DriftLab: docker build -t driftlab . && docker run -p 8000:8000 -e DRIFTLAB_TOKEN=<secret> -v driftlab-data:/data driftlab
 FROM python:3.11-slim
 
 ENV PYTHONDONTWRITEBYTECODE=1 PYTHONUNBUFFERED=1 OMP_NUM_THREADS=1 \
@@ -22,5 +22,6 @@ VOLUME ["/data"]
 EXPOSE 8000
 HEALTHCHECK --interval=30s --timeout=5s --start-period=20s \
     CMD python -c "import urllib.request,sys; sys.exit(urllib.request.urlopen('http://127.0.0.1:8000/api/health').status != 200)"
-# The same command the README runs (with the host set so the published port reaches it).
+# The same command the README runs, on all interfaces so the published port reaches it: `serve` refuses that without
+# DRIFTLAB_TOKEN (docker run -e DRIFTLAB_TOKEN=...), so a published port never hands the API to anyone who reaches it.
 CMD ["driftlab", "serve", "--host", "0.0.0.0", "--port", "8000"]

@@ -320,6 +320,11 @@ def _cmd_serve(args: argparse.Namespace) -> int:
     from driftlab.server.app import create_app
     from driftlab.settings import Settings
 
+    settings = Settings()
+    if args.host not in ("127.0.0.1", "localhost", "::1") and not settings.token:
+        # Reachable from other machines: every client there could start, pause and delete jobs.
+        raise ConfigError(f"--host {args.host}: serving beyond this machine needs DRIFTLAB_TOKEN (mutations then "
+                          "need 'Authorization: Bearer <token>', the view /viser/?token=<token>); or bind 127.0.0.1")
     # Bind before touching any job: a second server on a taken port must leave the first one's jobs alone.
     family = socket.AF_INET6 if ":" in args.host else socket.AF_INET
     sock = socket.socket(family, socket.SOCK_STREAM)
@@ -331,13 +336,13 @@ def _cmd_serve(args: argparse.Namespace) -> int:
         raise ConfigError(f"--port {args.port} on {args.host}: {exc.strerror or exc}") from None
     sock.listen(2048)
     sock.set_inheritable(True)
-    settings = Settings()
     if args.dask:
         settings = settings.model_copy(update={"dask_address": args.dask})
     workers = args.workers or (None if settings.dask_address else 2)
     app = create_app(_db_url(args.db), workers=workers, settings=settings)
     shown_host = "localhost" if args.host == "0.0.0.0" else args.host
-    print(f"DriftLab: the 3D view on http://{shown_host}:{args.port}/viser/, the API docs on "
+    login = "?token=<DRIFTLAB_TOKEN>" if settings.token else ""
+    print(f"DriftLab: the 3D view on http://{shown_host}:{args.port}/viser/{login}, the API docs on "
           f"http://{shown_host}:{args.port}/docs", flush=True)
     server = uvicorn.Server(uvicorn.Config(app, log_level="info"))
     server.run(sockets=[sock])

@@ -19,6 +19,9 @@ class Settings(BaseSettings):
         token: bearer token every mutating API request must carry, if set (DRIFTLAB_TOKEN).
         dask_address: a Dask scheduler (tcp://HOST:8786) to run episodes on (DRIFTLAB_DASK_ADDRESS); unset: a
             local process pool.
+        allowed_hosts: host names this server answers to besides 127.0.0.1, localhost and ::1, comma-separated
+            (DRIFTLAB_ALLOWED_HOSTS, e.g. "lab-pc.example.org,10.0.0.5"; "*" for any, behind a proxy that checks).
+        max_body_bytes: the largest request body accepted (DRIFTLAB_MAX_BODY_BYTES, default 1 MB).
     """
 
     model_config = SettingsConfigDict(env_prefix="DRIFTLAB_", extra="ignore")
@@ -26,6 +29,11 @@ class Settings(BaseSettings):
     database_url: str | None = None
     token: str | None = None
     dask_address: str | None = None
+    allowed_hosts: str = ""
+    max_body_bytes: int = 1_000_000
+
+    def allowed_host_names(self) -> frozenset[str]:
+        return frozenset(h.strip() for h in self.allowed_hosts.split(",") if h.strip())
 
 
 def default_database_file() -> Path:

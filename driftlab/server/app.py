@@ -11,6 +11,7 @@ from fastapi.responses import JSONResponse
 
 from driftlab.core.errors import ConfigError
 from driftlab.db import storage
+from driftlab.server.edge import EdgeGuard
 from driftlab.server.routes import evaluations, jobs, pages, studies
 from driftlab.server.view import RecordingCache, add_view_routes
 from driftlab.settings import Settings
@@ -59,6 +60,9 @@ def create_app(db_url: str, *, workers: int | None = 2, start_worker: bool = Tru
     app = FastAPI(title="DriftLab", version="0.1.0", lifespan=lifespan,
                   description="Learning-based inertia drift: tuning jobs, evaluations, trajectories.")
     app.state.settings = settings
+    # Outermost: hosts, origins, the token and the body size are checked before anything else runs.
+    app.add_middleware(EdgeGuard, token=settings.token, allowed_hosts=settings.allowed_host_names(),
+                       max_body_bytes=settings.max_body_bytes)
     app.state.factory = factory
     app.state.runner = runner
     app.state.recordings = RecordingCache(factory)

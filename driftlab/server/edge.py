@@ -1,0 +1,123 @@
+"""The service's edge, checked before any route runs and before any request body is read (a pure ASGI
+middleware, so nothing is buffered first):
+
+- the Host header names this machine (127.0.0.1, localhost, ::1) or a host of ``DRIFTLAB_ALLOWED_HOSTS``: a page
+  on another site cannot reach the API through DNS rebinding (400 otherwise);
+- a mutating API request (POST, PUT, PATCH, DELETE under /api) carries the token when one is set (401 before its
+  body is read); without a token, one sent by a browser from another origin is refused (403): body-less POSTs
+  are "simple" cross-site requests that no CORS preflight stops;
+- a request body larger than ``DRIFTLAB_MAX_BODY_BYTES`` is refused (413), by its Content-Length or, for a
+  chunked body, as soon as the bytes read pass the limit;
+- the /viser websocket (the 3D view, whose what-if panel runs episodes) opens only from this origin, and with the
+  token (the ``driftlab_token`` cookie that ``/viser/?token=...`` sets) when one is set.
+"""
+
+from __future__ import annotations
+
+import json
+import secrets
+from http.cookies import SimpleCookie
+from urllib.parse import parse_qs, urlsplit
+
+LOCAL_HOSTS = frozenset({"127.0.0.1", "localhost", "::1"})
+MUTATING = frozenset({"POST", "PUT", "PATCH", "DELETE"})
+TOKEN_COOKIE = "driftlab_token"
+
+
+def host_name(host_header: str) -> str:
+    """'localhost:8000' -> 'localhost'; '[::1]:8000' -> '::1'."""
+    host = host_header.strip().lower()
+    if host.startswith("["):
+        return host[1:host.find("]")] if "]" in host else host
+    return host.rsplit(":", 1)[0] if host.count(":") == 1 else host
+
+
+class EdgeGuard:
+    def __init__(self, app, *, token: str | None, allowed_hosts: frozenset[str], max_body_bytes: int) -> None:
+        self.app = app
+        self.token = token or None
+        self.allowed_hosts = LOCAL_HOSTS | {h.lower() for h in allowed_hosts}
+        self.max_body_bytes = max_body_bytes
+
+    async def __call__(self, scope, receive, send):
+        if scope["type"] not in ("http", "websocket"):
+            return await self.app(scope, receive, send)
+        headers = {k.decode("latin-1").lower(): v.decode("latin-1") for k, v in scope.get("headers", ())}
+        host = headers.get("host", "")
+        if "*" not in self.allowed_hosts and host_name(host) not in self.allowed_hosts:
+            return await self._refuse(scope, send, 400, f"host: {host!r} is not this server's (127.0.0.1, localhost, "
+                                      "or DRIFTLAB_ALLOWED_HOSTS)")
+        origin = headers.get("origin")
+        foreign = origin is not None and not self._same_origin(origin, host)
+        if scope["type"] == "websocket":
+            if foreign:
+                return await self._refuse(scope, send, 403, f"origin: {origin!r} may not open the view's websocket")
+            if self.token and not self._websocket_token_ok(scope, headers):
+                return await self._refuse(scope, send, 401, "token: open the view as /viser/?token=<DRIFTLAB_TOKEN>")
+            return await self.app(scope, receive, send)
+        if scope["method"] in MUTATING and scope["path"].startswith("/api"):
+            if self.token:
+                if not secrets.compare_digest(headers.get("authorization", ""), f"Bearer {self.token}"):
+                    return await self._refuse(scope, send, 401,
+                                              "this endpoint needs 'Authorization: Bearer <DRIFTLAB_TOKEN>'")
+            elif foreign:
+                return await self._refuse(scope, send, 403, f"origin: a request from {origin!r} may not change "
+                                          "anything here (set DRIFTLAB_TOKEN to allow authenticated clients)")
+        length = headers.get("content-length")
+        if length is not None and length.isdigit() and int(length) > self.max_body_bytes:
+            return await self._refuse(scope, send, 413, self._too_large())
+        return await self._limited(scope, receive, send)
+
+    def _same_origin(self, origin: str, host: str) -> bool:
+        parts = urlsplit(origin)
+        return parts.netloc.lower() == host.strip().lower() or (
+            parts.hostname or "").lower() in (self.allowed_hosts - LOCAL_HOSTS)
+
+    def _websocket_token_ok(self, scope, headers) -> bool:
+        given = parse_qs(scope.get("query_string", b"").decode("latin-1")).get("token", [""])[0]
+        cookie = SimpleCookie(headers.get("cookie", ""))
+        if TOKEN_COOKIE in cookie:
+            given = given or cookie[TOKEN_COOKIE].value
+        return bool(given) and secrets.compare_digest(given, self.token)
+
+    def _too_large(self) -> str:
+        return f"body: larger than {self.max_body_bytes} bytes (DRIFTLAB_MAX_BODY_BYTES)"
+
+    async def _limited(self, scope, receive, send):
+        """The app, with a body that may not pass the limit while it is read (chunked bodies have no length)."""
+        state = {"read": 0, "started": False, "refused": False}
+
+        async def limited_receive():
+            message = await receive()
+            if message["type"] == "http.request":
+                state["read"] += len(message.get("body", b""))
+                if state["read"] > self.max_body_bytes:
+                    if not state["started"]:
+                        await self._send_json(send, 413, self._too_large())
+                        state["started"] = state["refused"] = True
+                    return {"type": "http.disconnect"}  # the route stops reading; its answer is dropped
+            return message
+
+        async def guarded_send(message):
+            if state["refused"]:
+                return
+            if message["type"] == "http.response.start":
+                state["started"] = True
+            await send(message)
+
+        await self.app(scope, limited_receive, guarded_send)
+
+    async def _refuse(self, scope, send, status: int, detail: str):
+        if scope["type"] == "websocket":
+            # Before the handshake is accepted: the server answers the upgrade with 403.
+            await send({"type": "websocket.close", "code": 1008, "reason": detail[:120]})
+            return
+        await self._send_json(send, status, detail)
+
+    @staticmethod
+    async def _send_json(send, status: int, detail: str):
+        body = json.dumps({"detail": detail}).encode()
+        await send({"type": "http.response.start", "status": status,
+                    "headers": [(b"content-type", b"application/json"), (b"content-length", str(len(body)).encode()),
+                                (b"connection", b"close")]})
+        await send({"type": "http.response.body", "body": body})

@@ -1,0 +1,116 @@
+"""The service's edge against a real server: body limits before work, the token before the body, trusted hosts,
+same-origin mutations and the view's websocket."""
+
+import os
+import subprocess
+import sys
+
+import httpx
+import psutil
+import pytest
+import viser
+from websockets.exceptions import InvalidStatus
+from websockets.sync.client import connect
+
+from tests.server_process import free_port, start_server
+
+TOKEN = "edge-test-token"
+SUBPROTOCOL = f"viser-v{viser.__version__}"
+
+
+@pytest.fixture(scope="module")
+def open_server(tmp_path_factory):
+    proc, url = start_server(tmp_path_factory.mktemp("edge") / "open.db", free_port())
+    yield proc, url
+    proc.terminate()
+    proc.wait(timeout=30)
+
+
+@pytest.fixture(scope="module")
+def token_server(tmp_path_factory):
+    proc, url = start_server(tmp_path_factory.mktemp("edge") / "token.db", free_port(),
+                             env_extra={"DRIFTLAB_TOKEN": TOKEN})
+    yield proc, url
+    proc.terminate()
+    proc.wait(timeout=30)
+
+
+def _chunks(total_mb=300):
+    block = b"x" * (1 << 20)
+    for _ in range(total_mb):
+        yield block
+
+
+def _post_huge(url, headers, sized):
+    """A 300 MB POST (with a Content-Length, or chunked); the server may close while the client still writes."""
+    if sized:
+        headers = {**headers, "content-length": str(300 << 20)}
+    try:
+        return httpx.post(f"{url}/api/jobs", content=_chunks(), headers=headers, timeout=60).status_code
+    except (httpx.WriteError, httpx.RemoteProtocolError, httpx.ReadError):
+        return None  # refused before the client finished sending
+
+
+@pytest.mark.parametrize("sized", [True, False])
+@pytest.mark.parametrize("which", ["open", "token"])
+def test_a_300_mb_body_is_refused_before_it_is_read(open_server, token_server, which, sized):
+    proc, url = open_server if which == "open" else token_server
+    rss_before = psutil.Process(proc.pid).memory_info().rss
+    status = _post_huge(url, {"content-type": "application/json"}, sized)
+    assert status in (413, 401, None)
+    if which == "token":  # no token: refused with 401 before a byte of the body is read
+        assert status in (401, None)
+    growth_mb = (psutil.Process(proc.pid).memory_info().rss - rss_before) / 2**20
+    assert growth_mb < 50, growth_mb
+    # The server is fine afterwards, and a small body still gets through.
+    assert httpx.get(f"{url}/api/health").status_code == 200
+
+
+def test_a_sized_body_over_the_limit_is_a_413_naming_the_limit(open_server):
+    _, url = open_server
+    r = httpx.post(f"{url}/api/jobs", content=b"{" + b" " * 1_100_000 + b"}",
+                   headers={"content-type": "application/json"})
+    assert r.status_code == 413 and "DRIFTLAB_MAX_BODY_BYTES" in r.json()["detail"]
+
+
+def test_a_foreign_host_is_400_and_a_foreign_origin_may_not_mutate(open_server):
+    _, url = open_server
+    assert httpx.get(f"{url}/api/jobs", headers={"host": "evil.example"}).status_code == 400
+    r = httpx.post(f"{url}/api/jobs/1/pause", headers={"origin": "http://evil.example"})
+    assert r.status_code == 403 and "origin" in r.json()["detail"]
+    same = httpx.post(f"{url}/api/jobs/1/pause", headers={"origin": url})
+    assert same.status_code == 404  # past the edge: no such job
+    assert httpx.get(f"{url}/api/jobs", headers={"origin": "http://evil.example"}).status_code == 200  # reads
+
+
+def _ws(url, **kwargs):
+    return connect(url.replace("http", "ws") + "/viser", subprotocols=[SUBPROTOCOL], open_timeout=10, **kwargs)
+
+
+def test_the_view_websocket_needs_this_origin(open_server):
+    _, url = open_server
+    with pytest.raises(InvalidStatus) as refused:
+        _ws(url, origin="http://evil.example")
+    assert refused.value.response.status_code == 403
+    with _ws(url, origin=url) as socket:
+        assert socket.recv(timeout=10)  # viser speaks first
+
+
+def test_the_view_websocket_needs_the_token_when_one_is_set(token_server):
+    _, url = token_server
+    with pytest.raises(InvalidStatus):
+        _ws(url, origin=url)
+    page = httpx.get(f"{url}/viser/", params={"token": TOKEN})
+    cookie = page.cookies.get("driftlab_token")
+    assert page.status_code == 200 and cookie == TOKEN
+    with _ws(url, origin=url, additional_headers={"cookie": f"driftlab_token={cookie}"}) as socket:
+        assert socket.recv(timeout=10)
+
+
+def test_serving_beyond_this_machine_needs_a_token(tmp_path):
+    env = {k: v for k, v in os.environ.items() if k != "DRIFTLAB_TOKEN"}
+    out = subprocess.run([sys.executable, "-m", "driftlab.cli", "serve", "--host", "0.0.0.0", "--port",
+                          str(free_port()), "--db", str(tmp_path / "x.db")], env=env, capture_output=True, text=True,
+                         timeout=60)
+    assert out.returncode == 2 and "DRIFTLAB_TOKEN" in out.stderr
+    assert not (tmp_path / "x.db").exists()  # refused before anything was opened

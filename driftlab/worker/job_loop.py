@@ -77,25 +77,31 @@ class _PendingEvaluation:
         return score, samples, ordered[score.representative]
 
 
+STORED, OVER_BUDGET, LOST = "stored", "over_budget", "lost"
+
+
 def _store(factory: sessionmaker[Session], lease: _Lease, evaluation: _PendingEvaluation,
-           scored: tuple[RobustScore, list[SampleResult], EpisodeOutcome]) -> bool:
-    """Commit the evaluation if this runner still holds the job (False if the job was taken over or deleted:
-    its new runner asks again, and no index is stored twice). Reads the job's status and budget in the same
-    transaction, so a pause or a new budget takes effect at the next evaluation, not the next heartbeat."""
+           scored: tuple[RobustScore, list[SampleResult], EpisodeOutcome]) -> str:
+    """Commit the evaluation if this runner still holds the job (LOST if the job was taken over or deleted: its
+    new runner asks again, and no index is stored twice) and the budget has room (OVER_BUDGET: a PATCH lowered it
+    while the evaluation ran; nothing is stored past ``iterations``). Reads the job's status and budget in the same
+    write transaction, so a pause or a new budget takes effect at the next evaluation, not the next heartbeat."""
     score, samples, shown = scored
     metrics = {**shown.metrics, "n_samples": len(samples), "n_completed": score.n_completed,
                "J_samples_mean": score.J}
     with storage.transaction(factory) as session:
         job = session.get(Job, lease.job_id)
         if job is None or job.runner_id != lease.runner:
-            return False
+            return LOST
         lease.observe(job)
+        if storage.count_evaluations(session, job_id=lease.job_id) >= lease.iterations:
+            return OVER_BUDGET
         storage.add_evaluation(session, job_id=lease.job_id, theta=evaluation.theta, J=score.J, status=score.status,
                                metrics=metrics, trigger_points=shown.trigger_points,
                                wall_ms=sum(o.wall_ms for o in evaluation.outcomes.values()),
                                columns=shown.columns, trajectory=shown.trajectory,
                                seeds=[s.as_dict() for s in samples], trajectory_seed=shown.seed)
-    return True
+    return STORED
 
 
 def claim_job(factory: sessionmaker[Session], job_id: int, runner: str,
@@ -197,8 +203,12 @@ def run_job(factory: sessionmaker[Session], job_id: int, executor: EpisodeExecut
                         episodes[executor.submit(evaluation.theta, config_doc, seed)] = evaluation
                     continue
                 evaluations.remove(evaluation)
-                if not _store(factory, lease, evaluation, scored):
+                outcome_of_store = _store(factory, lease, evaluation, scored)
+                if outcome_of_store == LOST:
                     lease.held = False  # taken over: stop at once, the new runner owns the job
+                    continue
+                if outcome_of_store == OVER_BUDGET:
+                    n_done = max(n_done, lease.iterations)  # the budget is spent: what is in flight is dropped
                     continue
                 completed = score.status == "completed"
                 optimizer.tell(evaluation.theta, score.J if completed else None)

@@ -67,3 +67,30 @@ def test_a_job_seed_fixes_the_design_and_parallel_completion_may_change_the_orde
     for i in range(3):
         stored = {tuple(sorted(t.items())) for t in _thetas(tmp_path, f"run{i}", False, 4, i)}
         assert design <= stored and len(stored) == 14
+
+
+def test_nothing_is_stored_past_a_budget_lowered_while_evaluations_run(tmp_path):
+    from driftlab.db import lifecycle
+
+    factory = storage.open_database(f"sqlite:///{tmp_path / 'budget.db'}")
+    spec = TuningSpec(iterations=200, seed_points=200, seed=1, robust_samples=1, confirm_samples=0)
+    with storage.transaction(factory) as session:
+        job_id = storage.create_job(session, name="budget", spec=spec.to_dict(), seed=spec.seed).id
+    claim_job(factory, job_id, "runner")
+    done = []
+    runner = threading.Thread(target=lambda: done.append(
+        run_job(factory, job_id, ShuffledExecutor(3), runner="runner", workers=8)))
+    runner.start()
+    lowered = None
+    while lowered is None:  # lower the budget to what is stored right now, as a client reading n_done would
+        with storage.transaction(factory) as session:
+            count = storage.count_evaluations(session, job_id=job_id)
+            if count >= 5:
+                lifecycle.extend(session, job_id=job_id, iterations=count)
+                lowered = count
+        time.sleep(0.001)
+    runner.join(timeout=60)
+    with storage.snapshot(factory) as session:
+        stored = storage.count_evaluations(session, job_id=job_id)
+        assert stored == lowered == storage.get_job(session, job_id=job_id).spec["iterations"]
+    assert done == ["finished"]

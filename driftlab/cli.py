@@ -484,6 +484,9 @@ def _user_error(exc: Exception, args: argparse.Namespace) -> str | None:
     lifecycle = sys.modules.get("driftlab.db.lifecycle")
     if lifecycle is not None and isinstance(exc, lifecycle.TransitionError):
         return str(exc)
+    schema = sys.modules.get("driftlab.db.schema")
+    if schema is not None and isinstance(exc, schema.NewerDatabaseError):
+        return f"database {getattr(args, 'db', None) or '(default)'}: {exc}"
     sqlalchemy_exc = sys.modules.get("sqlalchemy.exc")
     if sqlalchemy_exc is not None and isinstance(exc, sqlalchemy_exc.SQLAlchemyError):
         reason = str(getattr(exc, "orig", None) or exc).splitlines()[0]

@@ -22,6 +22,9 @@ class Settings(BaseSettings):
         allowed_hosts: host names this server answers to besides 127.0.0.1, localhost and ::1, comma-separated
             (DRIFTLAB_ALLOWED_HOSTS, e.g. "lab-pc.example.org,10.0.0.5"; "*" for any, behind a proxy that checks).
         max_body_bytes: the largest request body accepted (DRIFTLAB_MAX_BODY_BYTES, default 1 MB).
+        max_episodes_per_job, max_episodes_per_study, max_queued_jobs: what one request may queue (see
+            driftlab.server.quotas); the defaults allow the paper's runs many times over (a 500-run of the job
+            default is 4000 episodes).
     """
 
     model_config = SettingsConfigDict(env_prefix="DRIFTLAB_", extra="ignore")
@@ -31,6 +34,9 @@ class Settings(BaseSettings):
     dask_address: str | None = None
     allowed_hosts: str = ""
     max_body_bytes: int = 1_000_000
+    max_episodes_per_job: int = 100_000
+    max_episodes_per_study: int = 1_000_000
+    max_queued_jobs: int = 100
 
     def allowed_host_names(self) -> frozenset[str]:
         return frozenset(h.strip() for h in self.allowed_hosts.split(",") if h.strip())

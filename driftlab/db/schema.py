@@ -41,10 +41,27 @@ def _revision_of_meta(connection) -> str:
     return {"2": "0002"}.get(str(version), BASELINE)
 
 
+class NewerDatabaseError(Exception):
+    """The database was written by a newer DriftLab (a schema revision this one does not know)."""
+
+
 def upgrade(engine: Engine) -> None:
-    """Bring the database to the head revision (a no-op when it is there)."""
-    if current_revision(engine) == head_revision():
+    """Bring the database to the head revision (a no-op when it is there).
+
+    Raises:
+        NewerDatabaseError: the database's revision is unknown here: a newer release made it.
+    """
+    current = current_revision(engine)
+    if current == head_revision():
         return
+    if current is not None:
+        try:
+            known = ScriptDirectory.from_config(_config(None)).get_revision(current) is not None
+        except Exception:  # alembic raises its own errors for revisions it cannot locate
+            known = False
+        if not known:
+            raise NewerDatabaseError(f"the database is at schema revision {current!r}, newer than this DriftLab "
+                                     f"knows ({head_revision()}): upgrade DriftLab, or use another --db")
     with engine.connect() as connection:
         # SQLite rebuilds a table to alter it; with foreign keys enforced, dropping the old jobs table would
         # fail. The pragma only takes effect outside a transaction, hence on the driver's connection first.

@@ -8,6 +8,7 @@ from contextlib import asynccontextmanager
 from fastapi import FastAPI, Request
 from fastapi.exceptions import RequestValidationError
 from fastapi.responses import JSONResponse
+from sqlalchemy.exc import OperationalError
 
 from driftlab.core.errors import ConfigError
 from driftlab.db import storage
@@ -90,5 +91,16 @@ def create_app(db_url: str, *, workers: int | None = 2, start_worker: bool = Tru
     @app.exception_handler(storage.NotFound)
     async def _not_found(_request: Request, exc: storage.NotFound):
         return JSONResponse({"detail": str(exc)}, status_code=404)
+
+    @app.exception_handler(OperationalError)
+    async def _storage_unavailable(_request: Request, exc: OperationalError):
+        # A read-only file, a full disk, a lock held past the timeout: nothing was changed; try again or fix it.
+        reason = str(exc.orig or exc).splitlines()[0]
+        return JSONResponse({"detail": f"storage: {reason}"}, status_code=503)
+
+    @app.exception_handler(Exception)
+    async def _internal(_request: Request, exc: Exception):
+        return JSONResponse({"detail": f"internal error ({type(exc).__name__}); the server log has the trace"},
+                            status_code=500)
 
     return app

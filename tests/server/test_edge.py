@@ -12,7 +12,7 @@ import viser
 from websockets.exceptions import InvalidStatus
 from websockets.sync.client import connect
 
-from tests.server_process import free_port, start_server
+from tests.server_process import free_port, start_server, wait_status
 
 TOKEN = "edge-test-token"
 SUBPROTOCOL = f"viser-v{viser.__version__}"
@@ -114,3 +114,54 @@ def test_serving_beyond_this_machine_needs_a_token(tmp_path):
                          timeout=60)
     assert out.returncode == 2 and "DRIFTLAB_TOKEN" in out.stderr
     assert not (tmp_path / "x.db").exists()  # refused before anything was opened
+
+
+def test_work_per_request_is_bounded_and_a_refusal_stores_nothing(open_server):
+    _, url = open_server
+    before = len(httpx.get(f"{url}/api/jobs").json())
+    r = httpx.post(f"{url}/api/jobs", json={"iterations": 5000, "robust_samples": 60})
+    assert r.status_code == 422 and "DRIFTLAB_MAX_EPISODES_PER_JOB" in r.json()["detail"]
+    spec = {"iterations": 5000, "robust_samples": 4, "confirm_samples": 4}
+    r = httpx.post(f"{url}/api/studies", json={"kind": "seeds", "seeds": list(range(32)), "spec": spec})
+    assert r.status_code == 422 and r.json()["detail"].startswith("seeds:")
+    assert "DRIFTLAB_MAX_EPISODES_PER_STUDY" in r.json()["detail"]
+    assert len(httpx.get(f"{url}/api/jobs").json()) == before and httpx.get(f"{url}/api/studies").json() == []
+
+
+def test_the_queue_is_bounded(tmp_path):
+    proc, url = start_server(tmp_path / "queue.db", free_port(), env_extra={"DRIFTLAB_MAX_QUEUED_JOBS": "2"})
+    try:
+        first = httpx.post(f"{url}/api/jobs", json={"iterations": 5000, "seed_points": 5}).json()["id"]
+        wait_status(url, first, {"running"})  # it runs; the next two wait
+        ids = [first] + [httpx.post(f"{url}/api/jobs", json={"iterations": 5000, "seed_points": 5}).json()["id"]
+                         for _ in range(2)]
+        r = httpx.post(f"{url}/api/jobs", json={"iterations": 10})
+        assert r.status_code == 422 and "DRIFTLAB_MAX_QUEUED_JOBS" in r.json()["detail"]
+        for job_id in ids:
+            httpx.post(f"{url}/api/jobs/{job_id}/pause")
+    finally:
+        proc.terminate()
+        proc.wait(timeout=30)
+
+
+def test_a_read_only_database_is_a_json_503_and_a_newer_one_a_one_line_exit_2(tmp_path):
+    db = tmp_path / "ro.db"
+    proc, url = start_server(db, free_port())  # creates the file at the head revision
+    proc.terminate()
+    proc.wait(timeout=30)
+    # Opened read-only (SQLite's mode=ro: even root cannot write through it), as a file on a read-only mount is.
+    proc, url = start_server(f"sqlite:///file:{db}?mode=ro&uri=true", free_port())
+    try:
+        assert httpx.get(f"{url}/api/jobs").json() == []
+        r = httpx.post(f"{url}/api/jobs", json={"iterations": 5})
+        assert r.status_code == 503 and r.json()["detail"].startswith("storage:") and "readonly" in r.text
+    finally:
+        proc.terminate()
+        proc.wait(timeout=30)
+    import sqlite3
+
+    with sqlite3.connect(db) as connection:
+        connection.execute("UPDATE alembic_version SET version_num = '9999'")
+    out = subprocess.run([sys.executable, "-m", "driftlab.cli", "tune", "--iterations", "1", "--db", str(db)],
+                         capture_output=True, text=True, timeout=60)
+    assert out.returncode == 2 and len(out.stderr.strip().splitlines()) == 1 and "newer" in out.stderr

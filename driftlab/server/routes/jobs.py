@@ -11,6 +11,7 @@ from sqlalchemy.orm import Session, sessionmaker
 from driftlab.core.drivability import check_drivable
 from driftlab.core.tuning import TuningSpec
 from driftlab.db import lifecycle, storage
+from driftlab.server import quotas
 from driftlab.server.routes.deps import factory, require_token, wake_runner
 from driftlab.server.schemas import After, JobCreate, JobId, JobPatch, Limit, check_document_types
 from driftlab.server.serialize import evaluation_dict, evaluations_csv, job_dict
@@ -32,9 +33,12 @@ def create_job(body: JobCreate, db: Factory, request: Request) -> dict[str, Any]
         doc["bounds"] = {k: list(v) for k, v in doc["bounds"].items()}
     spec = TuningSpec.from_dict(doc)  # ConfigError -> 422 naming the field
     check_drivable(spec.config)  # NotDrivableError (a ConfigError) -> 422 with the reason
+    settings = request.app.state.settings
+    quotas.check_job(settings, spec.to_dict())
     with storage.transaction(db) as session:
         if body.name and storage.find_job(session, name=body.name) is not None:
             raise HTTPException(409, f"name: a job named {body.name!r} exists")
+        quotas.check_queue(settings, session, 1)
         name = body.name or storage.unique_job_name(session, "job")
         out = job_dict(session, storage.create_job(session, name=name, spec=spec.to_dict(), seed=spec.seed))
     wake_runner(request)
@@ -80,6 +84,8 @@ def extend(job_id: JobId, body: JobPatch, db: Factory, request: Request) -> dict
     """A new budget (>= the evaluations stored); a finished job with more iterations continues."""
     try:
         with storage.transaction(db) as session:
+            quotas.check_job(request.app.state.settings,
+                             {**storage.get_job(session, job_id=job_id).spec, "iterations": body.iterations})
             out = job_dict(session, lifecycle.extend(session, job_id=job_id, iterations=body.iterations))
     except lifecycle.TransitionError as exc:
         raise HTTPException(422, f"iterations: {exc}") from None

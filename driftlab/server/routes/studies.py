@@ -9,6 +9,7 @@ from sqlalchemy.orm import Session, sessionmaker
 
 from driftlab import studies as study_views
 from driftlab.db import lifecycle, storage, studies
+from driftlab.server import quotas
 from driftlab.server.routes.deps import factory, require_token, wake_runner
 from driftlab.server.schemas import StudyCreate, StudyId, check_document_types
 
@@ -26,6 +27,8 @@ def create_study(body: StudyCreate, db: Factory, request: Request) -> dict[str, 
         if body.name and studies.find_study(session, name=body.name) is not None:
             raise HTTPException(409, f"name: a study named {body.name!r} exists")
         study = study_views.start_study(session, doc=doc, name=body.name)
+        session.flush()
+        quotas.check_study(request.app.state.settings, session, study)  # raised here: nothing is stored
         out = study_views.study_summary(session, study)
     wake_runner(request)
     return out

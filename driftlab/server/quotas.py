@@ -1,0 +1,48 @@
+"""How much work one request may queue (DRIFTLAB_MAX_EPISODES_PER_JOB, DRIFTLAB_MAX_EPISODES_PER_STUDY,
+DRIFTLAB_MAX_QUEUED_JOBS): a job's episodes are at most iterations x (robust_samples + confirm_samples); a seeds
+study's, its jobs'; a robustness study's, cells x robust_samples. Each refusal is a 422 naming the field and the
+limit, and stores nothing (it is raised inside the request's transaction)."""
+
+from __future__ import annotations
+
+from fastapi import HTTPException
+from sqlalchemy import func, select
+from sqlalchemy.orm import Session
+
+from driftlab.db.models import Job, Study
+from driftlab.settings import Settings
+
+
+def job_episodes(spec: dict) -> int:
+    return int(spec["iterations"]) * (int(spec.get("robust_samples", 1)) + int(spec.get("confirm_samples", 0)))
+
+
+def check_job(settings: Settings, spec: dict) -> None:
+    episodes = job_episodes(spec)
+    if episodes > settings.max_episodes_per_job:
+        raise HTTPException(422, f"iterations: {spec['iterations']} iterations x up to "
+                                 f"{episodes // int(spec['iterations'])} episodes = {episodes} episodes exceed the "
+                                 f"limit of {settings.max_episodes_per_job} a job (DRIFTLAB_MAX_EPISODES_PER_JOB)")
+
+
+def check_queue(settings: Settings, session: Session, adding: int) -> None:
+    queued = session.scalar(select(func.count()).select_from(Job).where(Job.status == "queued")) or 0
+    if queued + adding > settings.max_queued_jobs:
+        raise HTTPException(422, f"jobs: {queued} jobs are queued and this adds {adding}; the limit is "
+                                 f"{settings.max_queued_jobs} (DRIFTLAB_MAX_QUEUED_JOBS): wait, or delete some")
+
+
+def check_study(settings: Settings, session: Session, study: Study) -> None:
+    if study.kind == "seeds":
+        jobs = list(session.scalars(select(Job).where(Job.study_id == study.id)))
+        for job in jobs:
+            check_job(settings, job.spec)
+        episodes = sum(job_episodes(job.spec) for job in jobs)
+        check_queue(settings, session, 0)  # its jobs are queued already: the count includes them
+        field = "seeds"
+    else:
+        episodes = len(study.cells) * int(study.spec.get("robust_samples", 1))
+        field = "grid"
+    if episodes > settings.max_episodes_per_study:
+        raise HTTPException(422, f"{field}: this study runs up to {episodes} episodes, over the limit of "
+                                 f"{settings.max_episodes_per_study} a study (DRIFTLAB_MAX_EPISODES_PER_STUDY)")

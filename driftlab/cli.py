@@ -231,12 +231,24 @@ def _open_tuning_job(factory, args: argparse.Namespace, runner: str) -> tuple[in
     return job_id, name
 
 
+def _stop_on_sigterm() -> None:
+    """SIGTERM (docker stop, timeout, systemd) stops like Ctrl-C: the job is paused, its lease released, the worker
+    processes shut down, instead of the lease going stale for 15 s and semaphores leaking."""
+    import signal
+
+    def interrupt(_signum, _frame):
+        raise KeyboardInterrupt
+
+    signal.signal(signal.SIGTERM, interrupt)
+
+
 def _cmd_tune(args: argparse.Namespace) -> int:
     from driftlab.core.compiled import episode_kernels_cached
     from driftlab.db import lifecycle, storage
     from driftlab.worker.executor import open_executor
     from driftlab.worker.job_loop import Progress, run_job
 
+    _stop_on_sigterm()
     factory = storage.open_database(_db_url(args.db))
     runner = lifecycle.new_runner_id("tune")
     job_id, name = _open_tuning_job(factory, args, runner)

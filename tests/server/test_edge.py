@@ -165,3 +165,33 @@ def test_a_read_only_database_is_a_json_503_and_a_newer_one_a_one_line_exit_2(tm
     out = subprocess.run([sys.executable, "-m", "driftlab.cli", "tune", "--iterations", "1", "--db", str(db)],
                          capture_output=True, text=True, timeout=60)
     assert out.returncode == 2 and len(out.stderr.strip().splitlines()) == 1 and "newer" in out.stderr
+
+
+def test_sigterm_stops_tune_like_ctrl_c(tmp_path):
+    import signal
+    import sqlite3
+    import time
+
+    db = tmp_path / "term.db"
+    proc = subprocess.Popen([sys.executable, "-m", "driftlab.cli", "tune", "--iterations", "2000", "--seed-points",
+                             "5", "--name", "term", "--db", str(db), "--workers", "2"],
+                            stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+    deadline = time.time() + 120
+    while time.time() < deadline:  # until evaluations are being stored
+        if db.exists():
+            with sqlite3.connect(db) as connection:
+                try:
+                    if connection.execute("SELECT count(*) FROM evaluations").fetchone()[0] >= 3:
+                        break
+                except sqlite3.OperationalError:
+                    pass
+        time.sleep(0.2)
+    workers = [c.pid for c in psutil.Process(proc.pid).children(recursive=True)]
+    proc.send_signal(signal.SIGTERM)
+    _, err = proc.communicate(timeout=60)
+    assert proc.returncode == 130, err
+    with sqlite3.connect(db) as connection:
+        status, runner = connection.execute("SELECT status, runner_id FROM jobs WHERE name = 'term'").fetchone()
+    assert status == "paused" and runner is None  # the lease released at once, not left to go stale
+    time.sleep(1.0)
+    assert workers and not [p for p in workers if psutil.pid_exists(p) and psutil.Process(p).status() != "zombie"]

@@ -45,6 +45,7 @@ from driftlab.core.plant import (
     HEADING,
     PLANT_COMMONROAD_MB,
     PLANT_COMMONROAD_STD,
+    PLANT_EXTERNAL,
     SIDESLIP,
     SPEED,
     STEER,
@@ -78,12 +79,12 @@ STATUSES = ("completed", "spun_out", "left_track", "stalled", "gripped_up", "sol
 RUNNING = -1
 
 # What run_until_constrained returns.
-DONE, NEEDS_QP = 0, 1
+DONE, NEEDS_QP, NEEDS_PLANT = 0, 1, 2
 
 # Integer loop state: step, rows written, controller's direction and last direction, hold steps left,
 # whether a previous measurement exists, status, trigger events, the grip-up clock's state.
 (I_STEP, I_ROWS, I_DIRECTION, I_LAST_DIRECTION, I_HOLD_LEFT, I_HAS_LAST, I_STATUS, I_EVENTS, I_GRIPUP,
- I_UPDATES) = range(10)
+ I_UPDATES, I_PLANT_DUE) = range(11)
 # Float loop state: last trigger time, grip-up start, the seen errors of the step waiting for OSQP.
 F_LAST_TRIGGER_S, F_GRIPUP_SINCE_S, F_SEEN_E, F_SEEN_DPSI = range(4)
 MAX_EVENTS = 16
@@ -118,7 +119,7 @@ class LoopSettings(NamedTuple):
     gripup_grace_s: float
     substep_s: float
     noisy: bool
-    plant_kind: int  # driftlab.core.plant.PLANT_DRIFTLAB, PLANT_COMMONROAD_STD or PLANT_COMMONROAD_MB
+    plant_kind: int  # driftlab.core.plant.PLANT_DRIFTLAB, PLANT_COMMONROAD_STD, PLANT_COMMONROAD_MB, PLANT_EXTERNAL
 
 
 class LoopState(NamedTuple):
@@ -147,7 +148,7 @@ class LoopState(NamedTuple):
 
 def new_loop_state(plant_state: np.ndarray, plan: np.ndarray, start_inputs: np.ndarray, n_steps: int,
                    n_increments: int) -> LoopState:
-    ints = np.zeros(10, dtype=np.int64)
+    ints = np.zeros(11, dtype=np.int64)
     ints[I_DIRECTION] = ints[I_LAST_DIRECTION] = LEFT
     ints[I_STATUS] = RUNNING
     return LoopState(ints=ints, floats=np.zeros(4), plant=plant_state.copy(), plan=plan, estimate=np.zeros(3),
@@ -302,6 +303,8 @@ def run_until_constrained(cfg, st, qa_left, qa_right, model_params, plant_params
         finish_step(cfg, st, qa, plant_params, actuator_params, du, True, False)
         if ints[I_STATUS] != RUNNING:
             return DONE
+        if ints[I_PLANT_DUE] == 1:
+            return NEEDS_PLANT
     ints[I_STATUS] = STALLED  # out of time before finishing the 8
     return DONE
 
@@ -329,6 +332,8 @@ def finish_step(cfg, st, qa, plant_params, actuator_params, du, ok, used_osqp):
     elif cfg.plant_kind == PLANT_COMMONROAD_MB:
         st.plant[:] = mb_plant_step(st.plant, steer, drive_n, cfg.dt_s, cfg.substep_s, plant_params,
                                     actuator_params)
+    elif cfg.plant_kind == PLANT_EXTERNAL:
+        ints[I_PLANT_DUE] = 1  # a plant without a compiled step: Python steps it with st.last_applied
     else:
         st.plant[:] = plant_step(st.plant, steer, drive_n, cfg.dt_s, cfg.substep_s, plant_params, actuator_params)
     ints[I_STEP] += 1

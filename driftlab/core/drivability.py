@@ -45,7 +45,9 @@ def _reason(vehicle: VehicleParams, plant: PlantConfig, left_radius_m: float, ri
     # A right-hand drift mirrors a left-hand one (same V, delta, Fxr): one solve per radius is enough.
     if plant.model != "driftlab":
         reason = _model_reason(vehicle, left_radius_m, right_radius_m, sideslip_rad)
-        return reason or _commonroad_reason(plant, left_radius_m, right_radius_m, sideslip_rad)
+        if reason is not None or plant.model not in ("commonroad_std", "commonroad_mb"):
+            return reason  # a registered plant's own drift is not known here
+        return _commonroad_reason(plant, left_radius_m, right_radius_m, sideslip_rad)
     for label, params in (("the controller's model", pack_params(vehicle)),
                           ("the plant", plant.packed_params(vehicle))):
         for circle, radius in (("left", left_radius_m), ("right", right_radius_m)):

@@ -18,8 +18,10 @@ from driftlab.core.closed_loop import (
     DONE,
     I_DIRECTION,
     I_EVENTS,
+    I_PLANT_DUE,
     I_ROWS,
     I_STATUS,
+    NEEDS_QP,
     STATUSES,
     LoopSettings,
     finish_step,
@@ -35,6 +37,7 @@ from driftlab.core.plant import (
     DRIVE,
     HEADING,
     N_PLANT_STATES,
+    PLANT_EXTERNAL,
     SIDESLIP,
     SPEED,
     STEER,
@@ -126,18 +129,26 @@ def run_episode(theta: Theta, config: EpisodeConfig, *, seed: int = 0) -> Episod
     state = plant.start_state(initial_plant_state(
         config, track, start.speed_mps + theta.dV + offset[0], start.sideslip_rad + offset[1],
         start.yaw_rate_radps + offset[2], start.steer_rad, start.drive_force_n))
-    settings = _loop_settings(config, theta, track, n_steps, variation.noisy)
+    settings = _loop_settings(config, theta, track, n_steps, variation.noisy, plant.kind)
     loop = new_loop_state(state, initial_plan_state(), start.inputs, n_steps, len(model.left_qp.step_limit))
     # OSQP runs here, between stretches of the compiled loop; its warm start lives and dies with the episode.
     sessions = {LEFT: model.left_qp.session(), RIGHT: model.right_qp.session()}
     qa_left, qa_right = model.left_qp.arrays, model.right_qp.arrays
-    args = (plant.params, plant.actuators)
-    while run_until_constrained(settings, loop, qa_left, qa_right, model.params, *args, variation.noise) != DONE:
-        direction = int(loop.ints[I_DIRECTION])
-        du, ok = sessions[direction].solve_constrained(loop.qp_q, loop.qp_lower, loop.qp_upper)
-        finish_step(settings, loop, qa_left if direction == LEFT else qa_right, *args, du, ok, True)
-        if loop.ints[I_STATUS] >= 0:
-            break
+    # A plant stepped in Python has no compiled parameters: the kernel gets placeholders of the same types.
+    args = (plant.params, plant.actuators) if plant.kind != PLANT_EXTERNAL else (np.zeros(1), np.zeros(4))
+    # One loop for every plant: the kernel returns here for a constrained QP, and, for a plant without a compiled
+    # step (plant.kind PLANT_EXTERNAL), after each control step for the plant's own Python step.
+    while (code := run_until_constrained(settings, loop, qa_left, qa_right, model.params, *args,
+                                         variation.noise)) != DONE:
+        if code == NEEDS_QP:
+            direction = int(loop.ints[I_DIRECTION])
+            du, ok = sessions[direction].solve_constrained(loop.qp_q, loop.qp_lower, loop.qp_upper)
+            finish_step(settings, loop, qa_left if direction == LEFT else qa_right, *args, du, ok, True)
+            if loop.ints[I_STATUS] >= 0:
+                break
+        if loop.ints[I_PLANT_DUE]:
+            loop.plant[:] = plant.step(loop.plant, float(loop.last_applied[0]), float(loop.last_applied[1]), dt)
+            loop.ints[I_PLANT_DUE] = 0
     status = STATUSES[int(loop.ints[I_STATUS])]
     trajectory = loop.rows[:int(loop.ints[I_ROWS])].copy()
     triggers = [{"t_s": float(t), "x_m": float(x), "y_m": float(y), "phase": int(phase)}
@@ -153,7 +164,7 @@ def run_episode(theta: Theta, config: EpisodeConfig, *, seed: int = 0) -> Episod
 
 
 def _loop_settings(config: EpisodeConfig, theta: Theta, track: FigureEight, n_steps: int,
-                   noisy: bool) -> LoopSettings:
+                   noisy: bool, plant_kind: int) -> LoopSettings:
     mpc, scenario, failure = config.mpc, config.scenario, config.failure
     left, right = track.left, track.right
     return LoopSettings(
@@ -171,4 +182,4 @@ def _loop_settings(config: EpisodeConfig, theta: Theta, track: FigureEight, n_st
         max_lateral_error_m=float(failure.max_lateral_error_m), min_speed_mps=float(failure.min_speed_mps),
         gripup_sideslip_rad=float(failure.gripup_sideslip_rad), gripup_time_s=float(failure.gripup_time_s),
         gripup_grace_s=float(failure.gripup_grace_s), substep_s=float(config.plant.substep_s), noisy=bool(noisy),
-        plant_kind=int(config.plant.plant_kind))
+        plant_kind=int(plant_kind))

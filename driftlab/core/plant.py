@@ -18,6 +18,8 @@ error against a 0.5 ms reference (4e-8 on [V, beta, r] over 5 s for the default 
 
 from __future__ import annotations
 
+import importlib
+from collections.abc import Callable
 from dataclasses import dataclass, replace
 
 import numpy as np
@@ -51,6 +53,40 @@ A_STEER_LAG, A_STEER_RATE, A_DRIVE_LAG, A_DRIVE_RATE = range(4)
 # Which plant the episode loop steps (plant.model): DriftLab's own, or CommonRoad's single-track drift model (STD).
 PLANT_MODELS = ("driftlab", "commonroad_std", "commonroad_mb")
 PLANT_DRIFTLAB, PLANT_COMMONROAD_STD, PLANT_COMMONROAD_MB = range(len(PLANT_MODELS))
+PLANT_EXTERNAL = len(PLANT_MODELS)  # a registered plant (register_plant) that steps in Python
+
+# Plants that step in Python, by plant.model name: a user's own car. The episode loop, planner, controller, failure
+# rules and J are the same code as for the compiled plants (the kernel hands each control step's commands back).
+# Registered in Python (register_plant), or by an installed package under the entry-point group "driftlab.plants"
+# (name = "package.module:factory"), never from a request: a REST client can only name what is installed.
+_REGISTERED: dict[str, Callable[[PlantConfig], object]] = {}
+_BUILTIN_EXTERNAL = {"commonroad_std_reference": "driftlab.core.commonroad.reference:ReferenceStdPlant"}
+
+
+def register_plant(name: str, factory: Callable[[PlantConfig], object]) -> None:
+    """``factory(config)`` returns an object with ``kind = PLANT_EXTERNAL``, ``start_state(loop_state)`` (the
+    full state from the loop's eight, X_POS ... DRIVE; own states appended) and ``step(state, steer_cmd_rad,
+    drive_cmd_n, duration_s)`` (a new state, the loop's eight first)."""
+    if name in PLANT_MODELS:
+        raise ConfigError(f"plant.model {name!r} is built in")
+    _REGISTERED[name] = factory
+
+
+def _external_factory(name: str) -> Callable[[PlantConfig], object] | None:
+    if name in _REGISTERED:
+        return _REGISTERED[name]
+    target = _BUILTIN_EXTERNAL.get(name)
+    if target is None:
+        from importlib.metadata import entry_points
+
+        found = [e for e in entry_points(group="driftlab.plants") if e.name == name]
+        target = found[0].value if found else None
+    if target is None:
+        return None
+    module_name, _, attribute = target.partition(":")
+    factory = getattr(importlib.import_module(module_name), attribute)
+    _REGISTERED[name] = factory
+    return factory
 # Settings that shape DriftLab's own car and tyres; a CommonRoad plant has its own (PAC2002 tyres, load transfer,
 # combined slip) and keeps these at 1 / off.
 _DRIFTLAB_ONLY = {"yaw_inertia_scale": 1.0, "tyre_b_scale": 1.0, "tyre_c_scale": 1.0, "friction_circle": False,
@@ -141,10 +177,10 @@ class PlantConfig:
 
     def __post_init__(self) -> None:
         check_ranges(self, "plant", PLANT_LIMITS)
-        if self.model not in PLANT_MODELS:
-            raise ConfigError(f"plant.model must be one of {', '.join(PLANT_MODELS)}, got {self.model!r}",
-                              field="plant.model")
-        if self.model != "driftlab":
+        if self.model not in PLANT_MODELS and _external_factory(self.model) is None:
+            raise ConfigError(f"plant.model must be one of {', '.join(PLANT_MODELS)} or a registered plant, got "
+                              f"{self.model!r}", field="plant.model")
+        if self.model.startswith("commonroad"):
             from driftlab.core.commonroad.parameters import check_vehicle
 
             check_vehicle(self.commonroad_vehicle)
@@ -185,7 +221,7 @@ class PlantConfig:
 
     @property
     def plant_kind(self) -> int:
-        return PLANT_MODELS.index(self.model)
+        return PLANT_MODELS.index(self.model) if self.model in PLANT_MODELS else PLANT_EXTERNAL
 
     @property
     def varies(self) -> bool:
@@ -290,6 +326,8 @@ def make_plant(config: PlantConfig, model_vehicle: VehicleParams) -> Plant:
     """The plant ``config.model`` names (DriftLab's own, or a CommonRoad model)."""
     if config.model == "driftlab":
         return Plant(config, model_vehicle)
+    if config.model not in PLANT_MODELS:
+        return _external_factory(config.model)(config)
     from driftlab.core.commonroad.plant import CommonRoadMbPlant, CommonRoadStdPlant
 
     return CommonRoadMbPlant(config) if config.model == "commonroad_mb" else CommonRoadStdPlant(config)

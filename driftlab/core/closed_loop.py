@@ -19,7 +19,7 @@ from typing import NamedTuple
 import numpy as np
 from numba import njit
 
-from driftlab.core.commonroad.plant import mb_plant_step, std_plant_step
+from driftlab.core.commonroad.plant import std_plant_step
 from driftlab.core.controller import (
     DISTURBANCE_LIMIT,
     drift_reference,
@@ -43,7 +43,6 @@ from driftlab.core.planner import PLAN_PHASE, advance_phase, phase_direction
 from driftlab.core.plant import (
     DRIVE,
     HEADING,
-    PLANT_COMMONROAD_MB,
     PLANT_COMMONROAD_STD,
     PLANT_EXTERNAL,
     SIDESLIP,
@@ -119,7 +118,7 @@ class LoopSettings(NamedTuple):
     gripup_grace_s: float
     substep_s: float
     noisy: bool
-    plant_kind: int  # driftlab.core.plant.PLANT_DRIFTLAB, PLANT_COMMONROAD_STD, PLANT_COMMONROAD_MB, PLANT_EXTERNAL
+    plant_kind: int  # PLANT_DRIFTLAB or PLANT_COMMONROAD_STD (stepped in the kernel) or PLANT_EXTERNAL
 
 
 class LoopState(NamedTuple):
@@ -326,14 +325,13 @@ def finish_step(cfg, st, qa, plant_params, actuator_params, du, ok, used_osqp):
     if not ok:
         ints[I_STATUS] = SOLVER_FAILED
         return
-    if cfg.plant_kind == PLANT_COMMONROAD_STD:
+    if cfg.plant_kind == PLANT_COMMONROAD_STD:  # stepped here: a return to Python per step costs it 1.5x
         st.plant[:] = std_plant_step(st.plant, steer, drive_n, cfg.dt_s, cfg.substep_s, plant_params,
                                      actuator_params)
-    elif cfg.plant_kind == PLANT_COMMONROAD_MB:
-        st.plant[:] = mb_plant_step(st.plant, steer, drive_n, cfg.dt_s, cfg.substep_s, plant_params,
-                                    actuator_params)
     elif cfg.plant_kind == PLANT_EXTERNAL:
-        ints[I_PLANT_DUE] = 1  # a plant without a compiled step: Python steps it with st.last_applied
+        # Another plant (CommonRoad's MB, a registered one): the caller steps it with st.last_applied. Kept out of
+        # this kernel, so that its first compile does not grow with every plant (MB's derivatives alone ~10 s).
+        ints[I_PLANT_DUE] = 1
     else:
         st.plant[:] = plant_step(st.plant, steer, drive_n, cfg.dt_s, cfg.substep_s, plant_params, actuator_params)
     ints[I_STEP] += 1

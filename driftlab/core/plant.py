@@ -220,10 +220,6 @@ class PlantConfig:
                    **_DRIFTLAB_ONLY)
 
     @property
-    def plant_kind(self) -> int:
-        return PLANT_MODELS.index(self.model) if self.model in PLANT_MODELS else PLANT_EXTERNAL
-
-    @property
     def varies(self) -> bool:
         """Whether episodes of this plant differ by seed."""
         return any(getattr(self, name) > 0.0 for name in VARIATION_LIMITS)
@@ -299,7 +295,8 @@ class Plant:
     """A plant instance, what the episode loop steps: configuration resolved against the controller's vehicle.
 
     Attributes:
-        kind: which compiled step the loop calls (PLANT_DRIFTLAB, PLANT_COMMONROAD_STD).
+        kind: PLANT_DRIFTLAB or PLANT_COMMONROAD_STD (the loop's kernel steps it with ``params`` and
+            ``actuators``) or PLANT_EXTERNAL (the loop calls ``step`` each control step).
         params: the packed parameters of that step.
         actuators: actuator parameters (layout A_STEER_LAG ... A_DRIVE_RATE).
     """

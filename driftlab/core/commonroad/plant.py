@@ -46,8 +46,8 @@ from driftlab.core.plant import (
     DRIVE,
     HEADING,
     N_PLANT_STATES,
-    PLANT_COMMONROAD_MB,
     PLANT_COMMONROAD_STD,
+    PLANT_EXTERNAL,
     SIDESLIP,
     SPEED,
     STEER,
@@ -130,7 +130,7 @@ def std_start_state(loop_state: np.ndarray, cp: np.ndarray, rear_slip: float) ->
 class CommonRoadStdPlant:
     """CommonRoad's STD as the loop's plant (see :class:`driftlab.core.plant.Plant` for the interface)."""
 
-    kind = PLANT_COMMONROAD_STD
+    kind = PLANT_COMMONROAD_STD  # stepped inside the loop's kernel
 
     def __init__(self, config: PlantConfig) -> None:
         self.config = config
@@ -204,7 +204,7 @@ def _mb_to_loop(z, p, out):
 class CommonRoadMbPlant:
     """CommonRoad's MB as the loop's plant (see :class:`driftlab.core.plant.Plant` for the interface)."""
 
-    kind = PLANT_COMMONROAD_MB
+    kind = PLANT_EXTERNAL
 
     def __init__(self, config: PlantConfig) -> None:
         self.config = config

@@ -92,6 +92,27 @@ def _config(args: argparse.Namespace) -> EpisodeConfig:
     return apply_overrides(preset, _key_values(args.set or [], "--set"))
 
 
+def _countersteer_window(plant, radius_m: float, right: bool) -> list[float] | None:
+    """[lowest, highest] |sideslip| on a 0.01 rad grid from 0.2 to 0.8 at which the car's main drift at this radius
+    countersteers (None: nowhere); what the drivability check decides for one sideslip, over the range."""
+    from driftlab.core.commonroad.equilibrium import commonroad_drifts
+    from driftlab.core.commonroad.mb_equilibrium import mb_main_drift
+
+    inside = []
+    for i in range(20, 81):
+        beta = i / 100
+        if plant.model == "commonroad_mb":
+            main = mb_main_drift(plant.commonroad_vehicle, radius_m, beta, right, plant.friction_scale,
+                                 plant.mass_scale)
+        else:
+            family = commonroad_drifts(plant.commonroad_vehicle, radius_m, beta, plant.friction_scale,
+                                       plant.mass_scale, right=right)
+            main = family[0] if family else None
+        if main is not None and main.countersteer:
+            inside.append(beta)
+    return [inside[0], inside[-1]] if inside else None
+
+
 def _commonroad_family(config: EpisodeConfig, radius_m: float, beta_rad: float, model_eq) -> dict[str, Any]:
     """A CommonRoad plant's drift family at (radius, beta): its main (fastest) drift with the mismatch to the
     model, every other steady drift, and why the scenario's drift cannot be held where the main one does not
@@ -113,7 +134,8 @@ def _commonroad_family(config: EpisodeConfig, radius_m: float, beta_rad: float, 
         d = drift.as_dict()
         d["drive_n"] = drift.acceleration_mps2 * config.vehicle.mass_kg
         branches.append(d)
-    out: dict[str, Any] = {"branches": branches, "countersteer": bool(family and family[0].countersteer)}
+    out: dict[str, Any] = {"branches": branches, "countersteer": bool(family and family[0].countersteer),
+                           "countersteer_window_rad": _countersteer_window(plant, radius_m, beta_rad > 0)}
     why = describe_family(family)
     if why is not None:
         out["error"] = f"not drivable at radius {radius_m:g} m, beta {beta_rad:g} rad: {why}"

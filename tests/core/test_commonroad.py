@@ -104,6 +104,8 @@ def test_driftlab_equilibrium_prints_the_plants_drift_family(beta, expected):
     if expected is None:
         assert plant["countersteer"] and abs(plant["V"] - 20.50) <= 0.05 and abs(plant["delta"] + 0.264) <= 0.005
         assert "error" not in plant and plant["rear_slip"] < -0.4
+        low, high = plant["countersteer_window_rad"]  # where the scenario's drift can be held at this radius
+        assert 0.4 < low <= 0.45 and high >= 0.6
     else:
         assert not plant["countersteer"] and expected in plant["error"] and plant["delta"] > 0
 

@@ -132,6 +132,7 @@ class BayesianOptimizer:
         self.x: list[np.ndarray] = []  # unit-cube inputs, told
         self.y: list[float | None] = []  # None: failed evaluation
         self.pending: list[np.ndarray] = []
+        self.failure_scores: list[float] = []  # per told evaluation: a failure's score, inf otherwise
         self._hyper_at = -1
         self._regression_hp: Hyperparameters | None = None
         self._clf_at = -1
@@ -148,8 +149,11 @@ class BayesianOptimizer:
         self.pending.append(unit)
         return self._to_theta(unit)
 
-    def tell(self, theta: Mapping[str, float], value: float | None) -> None:
-        """Record an evaluation: its value, or None for a failed one. Cheap: no fitting here."""
+    def tell(self, theta: Mapping[str, float], value: float | None, failure_score: float | None = None) -> None:
+        """Record an evaluation: its value, or None for a failed one (with ``failure_score``, lower for one that got
+        further: where to look while nothing has succeeded). Cheap: no fitting here."""
+        self.failure_scores.append(failure_score if value is None and failure_score is not None
+                                   and math.isfinite(failure_score) else math.inf)
         unit = self._to_unit(theta)
         if value is not None and not math.isfinite(value):
             value = None
@@ -192,6 +196,11 @@ class BayesianOptimizer:
         streak = self._failure_streak()
         if ok.any() and streak >= _FAILURE_STREAK:
             return self._retreat(x_ok[int(np.argmin(y_ok))], x_all[~ok], streak)
+        if not ok.any() and streak >= _FAILURE_STREAK and min(self.failure_scores, default=math.inf) < math.inf:
+            # Nothing has succeeded: search near the failure that got furthest (on CommonRoad's STD a job whose
+            # first theta failed one confirmation seed found no completion in 150 space-filling evaluations).
+            nearest = x_all[int(np.argmin(self.failure_scores))]
+            return self._retreat(nearest, np.delete(x_all, int(np.argmin(self.failure_scores)), axis=0), streak)
         if ok.sum() < 2:
             # Nothing to model yet: keep filling space, away from what was tried.
             return self._farthest_candidate(x_all)

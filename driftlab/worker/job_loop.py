@@ -38,12 +38,13 @@ class Progress:
         return (self.iterations - self.n_done) * self.seconds_per_evaluation
 
 
-def restore_optimizer(spec: TuningSpec, history: list[tuple[dict[str, float], float | None]]) -> BayesianOptimizer:
-    """An optimizer in the state it had after telling ``history`` (theta, J or None if failed)."""
+def restore_optimizer(spec: TuningSpec, history: list[tuple[dict[str, float], float | None, float]]
+                      ) -> BayesianOptimizer:
+    """An optimizer in the state it had after telling ``history`` (theta, J or None if failed, the stored J)."""
     optimizer = BayesianOptimizer(spec.bounds, seed_points=spec.seed_points, active_set=spec.active_set,
                                   seed=spec.seed, initial_points=spec.initial_points)
-    for theta, value in history:
-        optimizer.tell(theta, value)
+    for theta, value, stored_j in history:
+        optimizer.tell(theta, value, stored_j)
     return optimizer
 
 
@@ -154,7 +155,7 @@ def run_job(factory: sessionmaker[Session], job_id: int, executor: EpisodeExecut
         job = storage.get_job(session, job_id=job_id)
         spec = TuningSpec.from_dict(job.spec)
         stored = storage.evaluations(session, job_id=job_id)
-        history = [(e.theta, e.J if e.completed else None) for e in stored]
+        history = [(e.theta, e.J if e.completed else None, e.J) for e in stored]
         best = min((e.J for e in stored if e.completed), default=None)
     optimizer = restore_optimizer(spec, history)
     config_doc = spec.to_dict()["config"]
@@ -211,7 +212,7 @@ def run_job(factory: sessionmaker[Session], job_id: int, executor: EpisodeExecut
                     n_done = max(n_done, lease.iterations)  # the budget is spent: what is in flight is dropped
                     continue
                 completed = score.status == "completed"
-                optimizer.tell(evaluation.theta, score.J if completed else None)
+                optimizer.tell(evaluation.theta, score.J if completed else None, score.J)
                 n_done += 1
                 if completed:
                     best = score.J if best is None else min(best, score.J)

@@ -175,3 +175,23 @@ def test_pending_points_enter_by_a_block_update_equal_to_a_full_refactorization(
     np.testing.assert_allclose(updated.chol @ updated.chol.T, joint, atol=1e-10)
     mean, std = updated.predict(x[50:])
     np.testing.assert_allclose(mean, y[50:], atol=0.1)  # observed with noise 1e-3: the mean passes near them
+
+
+def test_with_no_success_yet_it_searches_near_the_failure_that_got_furthest():
+    # A small feasible island at (0.8, 0.2); failures score their distance to it (as a failed episode's penalty
+    # falls with the fraction of the course driven). Space filling alone rarely lands in it.
+    bounds = {"a": (0.0, 1.0), "b": (0.0, 1.0)}
+    island = np.array([0.8, 0.2])
+
+    def run(use_scores: bool) -> int:
+        opt = BayesianOptimizer(bounds, seed_points=4, seed=3, initial_points=[{"a": 0.75, "b": 0.3}])
+        for i in range(30):
+            theta = opt.ask()
+            d = float(np.hypot(theta["a"] - island[0], theta["b"] - island[1]))
+            if d < 0.04:
+                return i
+            opt.tell(theta, None, 3.5 + d if use_scores else None)
+        return 30
+
+    assert run(use_scores=True) < 30  # finds the island from its closest failure
+    assert run(use_scores=True) < run(use_scores=False)

@@ -6,9 +6,11 @@ from __future__ import annotations
 from contextlib import asynccontextmanager
 
 from fastapi import FastAPI, Request
+from fastapi.exception_handlers import http_exception_handler
 from fastapi.exceptions import RequestValidationError
 from fastapi.responses import JSONResponse
 from sqlalchemy.exc import OperationalError
+from starlette.exceptions import HTTPException as StarletteHTTPException
 
 from driftlab.core.errors import ConfigError
 from driftlab.db import storage
@@ -91,6 +93,15 @@ def create_app(db_url: str, *, workers: int | None = 2, start_worker: bool = Tru
     @app.exception_handler(storage.NotFound)
     async def _not_found(_request: Request, exc: storage.NotFound):
         return JSONResponse({"detail": str(exc)}, status_code=404)
+
+    @app.exception_handler(StarletteHTTPException)
+    async def _http_error(request: Request, exc: StarletteHTTPException):
+        if exc.status_code == 400 and exc.detail == "There was an error parsing the body":
+            # FastAPI's answer to a body it cannot decode (not UTF-8): a malformed request body like any other.
+            message = "body: not a UTF-8 JSON document"
+            return JSONResponse({"detail": message, "errors": [{"field": "body", "message": message}]},
+                                status_code=422)
+        return await http_exception_handler(request, exc)
 
     @app.exception_handler(OperationalError)
     async def _storage_unavailable(_request: Request, exc: OperationalError):

@@ -208,6 +208,9 @@ def test_invalid_json_is_a_422_naming_the_body(server):
     _, url, _ = server
     r = httpx.post(f"{url}/api/jobs", content=b'{"iterations": 3,', headers={"content-type": "application/json"})
     assert r.status_code == 422 and r.json()["detail"].startswith("body:")
+    not_utf8 = httpx.post(f"{url}/api/jobs", content=b'{"iterations": 5, "name": "\xff\xfe"}',
+                          headers={"content-type": "application/json"})
+    assert not_utf8.status_code == 422 and not_utf8.json()["errors"][0]["field"] == "body"
 
 
 def test_delete_extend_and_paging(server):

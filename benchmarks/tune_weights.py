@@ -1,5 +1,5 @@
 """Random search over the default controller's weights on a plant (how MpcConfig's defaults and
-MpcConfig.commonroad() were found): each weight set runs 4 theta, each under SEEDS seeded episode variations
+driftlab.core.commonroad.weights were found): each weight set runs 4 theta, each under SEEDS seeded episode variations
 (friction, mass, lag, start, sensor noise: the plant's spreads); sets are ranked by completions, then by the sum
 of J.
 

@@ -17,6 +17,7 @@ from driftlab.core.errors import ConfigError, NoEquilibriumError
 from driftlab.core.robust import MAX_ROBUST_SAMPLES
 from driftlab.core.tuning import DEFAULT_CONFIRM_SAMPLES, DEFAULT_ROBUST_SAMPLES
 from driftlab.core.vehicle import pack_params
+from driftlab.shutdown import stop_on_sigterm
 
 DB_HELP = ("SQLite file or SQLAlchemy URL (default: DRIFTLAB_DATABASE_URL, else the shared "
            "~/.local/share/driftlab/driftlab.db)")
@@ -92,61 +93,6 @@ def _config(args: argparse.Namespace) -> EpisodeConfig:
     return apply_overrides(preset, _key_values(args.set or [], "--set"))
 
 
-def _countersteer_window(plant, radius_m: float, right: bool) -> list[float] | None:
-    """[lowest, highest] |sideslip| on a 0.01 rad grid from 0.2 to 0.8 at which the car's main drift at this radius
-    countersteers (None: nowhere); what the drivability check decides for one sideslip, over the range."""
-    from driftlab.core.commonroad.equilibrium import commonroad_drifts
-    from driftlab.core.commonroad.mb_equilibrium import mb_main_drift
-
-    inside = []
-    for i in range(20, 81):
-        beta = i / 100
-        if plant.model == "commonroad_mb":
-            main = mb_main_drift(plant.commonroad_vehicle, radius_m, beta, right, plant.friction_scale,
-                                 plant.mass_scale)
-        else:
-            family = commonroad_drifts(plant.commonroad_vehicle, radius_m, beta, plant.friction_scale,
-                                       plant.mass_scale, right=right)
-            main = family[0] if family else None
-        if main is not None and main.countersteer:
-            inside.append(beta)
-    return [inside[0], inside[-1]] if inside else None
-
-
-def _commonroad_family(config: EpisodeConfig, radius_m: float, beta_rad: float, model_eq) -> dict[str, Any]:
-    """A CommonRoad plant's drift family at (radius, beta): its main (fastest) drift with the mismatch to the
-    model, every other steady drift, and why the scenario's drift cannot be held where the main one does not
-    countersteer."""
-    from driftlab.core.commonroad.equilibrium import commonroad_drifts, describe_family
-
-    plant = config.plant
-    if plant.model == "commonroad_mb":
-        from driftlab.core.commonroad.mb_equilibrium import mb_main_drift
-
-        main = mb_main_drift(plant.commonroad_vehicle, radius_m, beta_rad, beta_rad > 0, plant.friction_scale,
-                             plant.mass_scale)
-        family = (main,) if main is not None else ()  # MB: the drift nearest STD's, not a family
-    else:
-        family = commonroad_drifts(plant.commonroad_vehicle, radius_m, beta_rad, plant.friction_scale,
-                                   plant.mass_scale, right=beta_rad > 0)
-    branches = []
-    for drift in family:
-        d = drift.as_dict()
-        d["drive_n"] = drift.acceleration_mps2 * config.vehicle.mass_kg
-        branches.append(d)
-    out: dict[str, Any] = {"branches": branches, "countersteer": bool(family and family[0].countersteer),
-                           "countersteer_window_rad": _countersteer_window(plant, radius_m, beta_rad > 0)}
-    why = describe_family(family)
-    if why is not None:
-        out["error"] = f"not drivable at radius {radius_m:g} m, beta {beta_rad:g} rad: {why}"
-    if branches:
-        main = branches[0]
-        out.update({k: main[k] for k in ("V", "beta", "r", "delta", "Fxr", "drive_n", "rear_slip", "front_slip")})
-        out["mismatch"] = {"dV": main["V"] - model_eq.speed_mps, "ddelta": main["delta"] - model_eq.steer_rad,
-                           "dFxr": main["drive_n"] - model_eq.drive_force_n}
-    return out
-
-
 def _cmd_equilibrium(args: argparse.Namespace) -> int:
     config = _config(args)
     try:
@@ -156,7 +102,13 @@ def _cmd_equilibrium(args: argparse.Namespace) -> int:
         return 2
     out: dict[str, Any] = eq.as_dict()
     if args.plant and config.plant.model != "driftlab":
-        out["plant"] = _commonroad_family(config, args.radius, args.beta, eq)
+        from driftlab.core.commonroad.family import family_summary
+
+        plant = family_summary(config.plant, args.radius, args.beta)
+        if "V" in plant:
+            plant["mismatch"] = {"dV": plant["V"] - eq.speed_mps, "ddelta": plant["delta"] - eq.steer_rad,
+                                 "dFxr": plant["drive_n"] - eq.drive_force_n}
+        out["plant"] = plant
     elif args.plant:
         try:
             plant_eq = drift_equilibrium(args.radius, args.beta, config.plant.packed_params(config.vehicle))
@@ -253,24 +205,13 @@ def _open_tuning_job(factory, args: argparse.Namespace, runner: str) -> tuple[in
     return job_id, name
 
 
-def _stop_on_sigterm() -> None:
-    """SIGTERM (docker stop, timeout, systemd) stops like Ctrl-C: the job is paused, its lease released, the worker
-    processes shut down, instead of the lease going stale for 15 s and semaphores leaking."""
-    import signal
-
-    def interrupt(_signum, _frame):
-        raise KeyboardInterrupt
-
-    signal.signal(signal.SIGTERM, interrupt)
-
-
 def _cmd_tune(args: argparse.Namespace) -> int:
     from driftlab.core.compiled import episode_kernels_cached
     from driftlab.db import lifecycle, storage
     from driftlab.worker.executor import open_executor
     from driftlab.worker.job_loop import Progress, run_job
 
-    _stop_on_sigterm()
+    stop_on_sigterm()
     factory = storage.open_database(_db_url(args.db))
     runner = lifecycle.new_runner_id("tune")
     job_id, name = _open_tuning_job(factory, args, runner)

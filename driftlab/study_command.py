@@ -152,9 +152,9 @@ def cmd_study(args: argparse.Namespace, tuning_spec, db_url: str, dask_address: 
             summary = study_views.study_summary(session, studies.get_study_by_name(session, name=args.name))
         print(json.dumps(brief_summary(summary, args.every)))
         return 0
-    from driftlab.cli import _stop_on_sigterm
+    from driftlab.shutdown import stop_on_sigterm
 
-    _stop_on_sigterm()
+    stop_on_sigterm()
     runner = lifecycle.new_runner_id("study")
     study_id = _open_study(factory, args, tuning_spec, runner)
     with storage.transaction(factory) as session:

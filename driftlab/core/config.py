@@ -159,7 +159,9 @@ class EpisodeConfig:
         controller: "default" (DriftLab's extended MPC) or "paper" (the paper's formulation)."""
         controllers = {"default": MpcConfig, "paper": MpcConfig.paper}
         if plant != "default" and plant != "nominal":  # the default controller's weights for that car
-            controllers["default"] = MpcConfig.commonroad_mb if plant == "commonroad_mb" else MpcConfig.commonroad
+            from driftlab.core.commonroad.weights import WEIGHTS
+
+            controllers["default"] = WEIGHTS[plant]
         if plant not in PLANT_PRESETS:
             raise ConfigError(f"plant must be one of {', '.join(PLANT_PRESETS)}, got {plant!r}")
         if controller not in controllers:
@@ -256,14 +258,15 @@ def _switch_plant_model(sections: dict[str, Any], changes: dict[str, dict[str, A
 
 def _refit_model_vehicle(config: EpisodeConfig, changes: dict[str, dict[str, Any]]) -> EpisodeConfig:
     """The controller follows the plant's car: switching back to DriftLab's plant restores Table I and the default
-    weights, switching to a CommonRoad car takes MpcConfig.commonroad() (unless ``mpc.*`` keys are given), and a
+    weights, switching to a CommonRoad car takes its weights (driftlab.core.commonroad.weights; unless ``mpc.*``
+    keys are given), and a
     CommonRoad plant's model is fitted to the car's drift at the scenario's radius and sideslip whenever the plant
     or the scenario changes (driftlab.core.commonroad.model_fit), unless ``vehicle.*`` keys are given."""
     plant_switched = "model" in changes.get("plant", {}) or "commonroad_vehicle" in changes.get("plant", {})
     if plant_switched and "mpc" not in changes:  # and the default controller's weights for that car
-        weights = {"driftlab": MpcConfig, "commonroad_std": MpcConfig.commonroad,
-                   "commonroad_mb": MpcConfig.commonroad_mb}
-        config = replace(config, mpc=weights[config.plant.model]())
+        from driftlab.core.commonroad.weights import WEIGHTS
+
+        config = replace(config, mpc=WEIGHTS.get(config.plant.model, MpcConfig)())
     if "vehicle" in changes or not ({"plant", "scenario"} & set(changes)):
         return config
     if config.plant.model == "driftlab" and not plant_switched:

@@ -75,21 +75,14 @@ def _model_reason(vehicle: VehicleParams, left_radius_m: float, right_radius_m: 
 
 def _commonroad_reason(plant: PlantConfig, left_radius_m: float, right_radius_m: float,
                        sideslip_rad: float) -> str | None:
-    from driftlab.core.commonroad.equilibrium import commonroad_drifts, describe_family
+    from driftlab.core.commonroad.family import describe_family, drift_family
 
     for circle, radius in (("left", left_radius_m), ("right", right_radius_m)):
-        if plant.model == "commonroad_mb":
-            from driftlab.core.commonroad.mb_equilibrium import mb_main_drift
-
-            drift = mb_main_drift(plant.commonroad_vehicle, radius, sideslip_rad, circle == "right",
-                                  plant.friction_scale, plant.mass_scale)
-            why = None if drift is not None and drift.countersteer else "no countersteer steady drift found (MB)"
-        else:
-            family = commonroad_drifts(plant.commonroad_vehicle, radius, sideslip_rad, plant.friction_scale,
-                                       plant.mass_scale, right=circle == "right")
-            why = describe_family(family)
+        family = drift_family(plant.model, plant.commonroad_vehicle, radius, sideslip_rad, circle == "right",
+                              plant.friction_scale, plant.mass_scale)
+        why = describe_family(family)
         if why is not None:
             return (f"config is not drivable on the {circle} circle (scenario radius {radius:g} m, sideslip "
-                    f"{abs(sideslip_rad):g} rad): {why}; try another scenario.sideslip_rad (CommonRoad vehicle "
-                    f"{plant.commonroad_vehicle} countersteers from about 0.45 rad at 44 m)")
+                    f"{abs(sideslip_rad):g} rad): {why}; try another scenario.sideslip_rad (`driftlab equilibrium "
+                    f"--plant {plant.model}` prints where the car countersteers)")
     return None

@@ -124,29 +124,6 @@ class MpcConfig:
                    q_course_error=0.0, disturbance_gain=0.0, feedback_in_model=False, terminal_cost=False,
                    qp_solver="osqp")
 
-    @classmethod
-    def commonroad(cls) -> MpcConfig:
-        """The default controller with weights chosen for CommonRoad's STD (vehicle 2, its fitted model): the
-        default weights complete none of 12 episodes there (the flick into the opposite drift spins out or grips
-        up). Found by ``benchmarks/tune_weights.py --plant commonroad_std`` in three rounds: 300 sets x 4 theta x 4
-        seeds (best 7 of 16); 200 around the best x 4 theta x 8 seeds (14 of 32); 200 around that one x 3 theta
-        near the untuned one (``--thetas '[{}, {"k": 0.03}, {"k": 0.015, "dV": -0.1}]'``) x 8 seeds: 23 of 24,
-        against 13 of 24 for its centre. Less weight on the steering's deviation, more on the yaw rate and the
-        drive force than the default plant's weights."""
-        return cls(q_sideslip=412.9075, q_yaw_rate=39.8934, q_steer=0.8418, q_drive_kn=1.2849, r_steer_step=8.3507,
-                   r_drive_step_kn=0.0009, steer_rate_radps=11.5374, q_speed=0.9787, q_lateral_error=0.8447,
-                   q_course_error=0.1509)
-
-    @classmethod
-    def commonroad_mb(cls) -> MpcConfig:
-        """The weights for CommonRoad's multi-body model (vehicle 2, locked differential, its fitted model): with
-        :meth:`commonroad`'s none of 12 episodes completes (the flick spins out). ``benchmarks/tune_weights.py
-        --plant commonroad_mb``: 300 sets x 2 theta x 3 seeds completed none; 200 around :meth:`commonroad`'s with
-        the best theta of a 150-iteration job and the untuned one x 4 seeds: 4 of 8 (the centre: 0)."""
-        return cls(q_sideslip=260.5048, q_yaw_rate=51.0635, q_steer=1.3107, q_drive_kn=0.9577, r_steer_step=16.4536,
-                   r_drive_step_kn=0.0012, steer_rate_radps=6.3898, q_speed=0.4947, q_lateral_error=0.9149,
-                   q_course_error=0.0962)
-
     def __post_init__(self) -> None:
         ranges = {
             "dt_s": (0.005, 0.5), "horizon": (1, 100), "steer_limit_rad": (0.05, 1.2),

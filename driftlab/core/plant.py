@@ -50,32 +50,35 @@ PLANT_LIMITS: dict[str, tuple[float, float]] = {
 # Actuator parameter layout: [steer lag s, steer rate rad/s, drive lag s, drive rate N/s].
 A_STEER_LAG, A_STEER_RATE, A_DRIVE_LAG, A_DRIVE_RATE = range(4)
 
-# Which plant the episode loop steps (plant.model): DriftLab's own, or CommonRoad's single-track drift model (STD).
+# Which plant an episode steps (plant.model): DriftLab's own, CommonRoad's models, or a plant registered by name.
 PLANT_MODELS = ("driftlab", "commonroad_std", "commonroad_mb")
-PLANT_DRIFTLAB, PLANT_COMMONROAD_STD, PLANT_COMMONROAD_MB = range(len(PLANT_MODELS))
-PLANT_EXTERNAL = len(PLANT_MODELS)  # a registered plant (register_plant) that steps in Python
+# Where the episode loop steps a plant (a plant's ``kind``): inside its compiled kernel (DriftLab's own, CommonRoad's
+# STD), or, for any other (MB, a user's own car), by calling the plant's ``step`` once a control step. The episode
+# loop, planner, controller, failure rules and J are the same code either way.
+PLANT_DRIFTLAB, PLANT_COMMONROAD_STD, PLANT_EXTERNAL = range(3)
 
-# Plants that step in Python, by plant.model name: a user's own car. The episode loop, planner, controller, failure
-# rules and J are the same code as for the compiled plants (the kernel hands each control step's commands back).
-# Registered in Python (register_plant), or by an installed package under the entry-point group "driftlab.plants"
-# (name = "package.module:factory"), never from a request: a REST client can only name what is installed.
-_REGISTERED: dict[str, Callable[[PlantConfig], object]] = {}
-_BUILTIN_EXTERNAL = {"commonroad_std_reference": "driftlab.core.commonroad.reference:ReferenceStdPlant"}
+# Plants by plant.model, built from "module:factory" on first use (so this module imports none of them). More are
+# registered in Python (register_plant) or by an installed package under the entry-point group "driftlab.plants",
+# never from a request: a REST client can only name what is installed.
+_FACTORIES: dict[str, Callable[[PlantConfig], object]] = {}
+_BUILT_IN = {"commonroad_std": "driftlab.core.commonroad.plant:CommonRoadStdPlant",
+             "commonroad_mb": "driftlab.core.commonroad.plant:CommonRoadMbPlant",
+             "commonroad_std_reference": "driftlab.core.commonroad.reference:ReferenceStdPlant"}
 
 
 def register_plant(name: str, factory: Callable[[PlantConfig], object]) -> None:
     """``factory(config)`` returns an object with ``kind = PLANT_EXTERNAL``, ``start_state(loop_state)`` (the
     full state from the loop's eight, X_POS ... DRIVE; own states appended) and ``step(state, steer_cmd_rad,
     drive_cmd_n, duration_s)`` (a new state, the loop's eight first)."""
-    if name in PLANT_MODELS:
+    if name == "driftlab" or name in _BUILT_IN:
         raise ConfigError(f"plant.model {name!r} is built in")
-    _REGISTERED[name] = factory
+    _FACTORIES[name] = factory
 
 
-def _external_factory(name: str) -> Callable[[PlantConfig], object] | None:
-    if name in _REGISTERED:
-        return _REGISTERED[name]
-    target = _BUILTIN_EXTERNAL.get(name)
+def _plant_factory(name: str) -> Callable[[PlantConfig], object] | None:
+    if name in _FACTORIES:
+        return _FACTORIES[name]
+    target = _BUILT_IN.get(name)
     if target is None:
         from importlib.metadata import entry_points
 
@@ -85,8 +88,10 @@ def _external_factory(name: str) -> Callable[[PlantConfig], object] | None:
         return None
     module_name, _, attribute = target.partition(":")
     factory = getattr(importlib.import_module(module_name), attribute)
-    _REGISTERED[name] = factory
+    _FACTORIES[name] = factory
     return factory
+
+
 # Settings that shape DriftLab's own car and tyres; a CommonRoad plant has its own (PAC2002 tyres, load transfer,
 # combined slip) and keeps these at 1 / off.
 _DRIFTLAB_ONLY = {"yaw_inertia_scale": 1.0, "tyre_b_scale": 1.0, "tyre_c_scale": 1.0, "friction_circle": False,
@@ -177,7 +182,7 @@ class PlantConfig:
 
     def __post_init__(self) -> None:
         check_ranges(self, "plant", PLANT_LIMITS)
-        if self.model not in PLANT_MODELS and _external_factory(self.model) is None:
+        if self.model != "driftlab" and _plant_factory(self.model) is None:
             raise ConfigError(f"plant.model must be one of {', '.join(PLANT_MODELS)} or a registered plant, got "
                               f"{self.model!r}", field="plant.model")
         if self.model.startswith("commonroad"):
@@ -320,11 +325,7 @@ class Plant:
 
 
 def make_plant(config: PlantConfig, model_vehicle: VehicleParams) -> Plant:
-    """The plant ``config.model`` names (DriftLab's own, or a CommonRoad model)."""
+    """The plant ``config.model`` names (DriftLab's own, a CommonRoad model, a registered one)."""
     if config.model == "driftlab":
         return Plant(config, model_vehicle)
-    if config.model not in PLANT_MODELS:
-        return _external_factory(config.model)(config)
-    from driftlab.core.commonroad.plant import CommonRoadMbPlant, CommonRoadStdPlant
-
-    return CommonRoadMbPlant(config) if config.model == "commonroad_mb" else CommonRoadStdPlant(config)
+    return _plant_factory(config.model)(config)

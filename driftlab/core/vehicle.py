@@ -33,10 +33,9 @@ P_GRAVITY = 7
 P_CG_HEIGHT = 8
 P_FRICTION_CIRCLE = 9
 P_LOAD_TRANSFER = 10
-P_FRONT_FRICTION = 11
-P_STEER_OFFSET = 12
-P_DRIVE_OFFSET = 13
-N_PARAMS = 14
+P_STEER_OFFSET = 11
+P_DRIVE_OFFSET = 12
+N_PARAMS = 13
 
 # Fixed-point passes for the load-transfer loop (loads depend on Fyf, which depends on loads). The loop
 # gain is roughly h/L * mu * |sin(delta)| ~ 0.05, so each pass shrinks the error about twentyfold.
@@ -57,14 +56,12 @@ class VehicleParams:
         tyre_c: simplified Pacejka shape factor C [-].
         cg_height_m: CG height above ground [m]; used only where load transfer is switched on.
         gravity_mps2: gravitational acceleration g [m/s^2].
-        front_friction_scale: the front tyre's friction relative to ``friction`` [-] (1: one mu for both axles,
-            as in the paper). A model fitted to another car's steady drifts uses it to place its drift
-            equilibrium where that car's is (driftlab.core.commonroad.model_fit).
         steer_offset_rad: the model's tyres see the steering command plus this, toward the countersteer of a
             left-hand drift (mirrored for a right-hand one) [rad]; 0 in the paper.
         drive_offset_n: the model's rear tyre sees the drive command plus this [N]; 0 in the paper.
             The two offsets let a model whose tyres differ from a car's (PAC2002 with combined slip and wheel
-            speeds, say) have its drift equilibrium at that car's measured steady drift: the MPC then
+            speeds, say) have its drift equilibrium at that car's measured steady drift
+            (driftlab.core.commonroad.model_fit): the MPC then
             linearizes and regulates about the drift the car actually holds. A plant never has them.
         steer_offset_right_rad, drive_offset_right_n: the same for the right-hand drift, in its mirror image
             (a car whose tyres are not symmetric, as PAC2002's shifts make them, drifts differently each way;
@@ -80,7 +77,6 @@ class VehicleParams:
     tyre_c: float = 1.4478
     cg_height_m: float = 0.45
     gravity_mps2: float = 9.81
-    front_friction_scale: float = 1.0
     steer_offset_rad: float = 0.0
     drive_offset_n: float = 0.0
     steer_offset_right_rad: float = 0.0
@@ -97,7 +93,6 @@ class VehicleParams:
             "tyre_c": (0.5, 2.5),
             "cg_height_m": (0.0, 2.0),
             "gravity_mps2": (1.0, 30.0),
-            "front_friction_scale": (0.3, 3.0),
             "steer_offset_rad": (-0.5, 0.5),
             "drive_offset_n": (-10000.0, 10000.0),
             "steer_offset_right_rad": (-0.5, 0.5),
@@ -146,7 +141,6 @@ def pack_params(
     p[P_CG_HEIGHT] = vehicle.cg_height_m
     p[P_FRICTION_CIRCLE] = 1.0 if friction_circle else 0.0
     p[P_LOAD_TRANSFER] = 1.0 if load_transfer else 0.0
-    p[P_FRONT_FRICTION] = vehicle.front_friction_scale
     steer_offset = vehicle.steer_offset_right_rad if right else vehicle.steer_offset_rad
     p[P_STEER_OFFSET] = -steer_offset if mirrored else steer_offset
     p[P_DRIVE_OFFSET] = vehicle.drive_offset_right_n if right else vehicle.drive_offset_n
@@ -202,7 +196,7 @@ def tyre_forces(speed_mps, sideslip_rad, yaw_rate_radps, steer_rad, drive_force_
             cap = 0.999 * rear_peak
             fxr = min(max(drive_force_n, -cap), cap)
             rear_peak = math.sqrt(rear_peak * rear_peak - fxr * fxr)
-        fyf = pacejka_lateral_force(alpha_f, mu * p[P_FRONT_FRICTION] * fzf, p[P_TYRE_B], p[P_TYRE_C])
+        fyf = pacejka_lateral_force(alpha_f, mu * fzf, p[P_TYRE_B], p[P_TYRE_C])
         fyr = pacejka_lateral_force(alpha_r, rear_peak, p[P_TYRE_B], p[P_TYRE_C])
         if p[P_LOAD_TRANSFER] > 0.5:
             transfer = (fxr - fyf * math.sin(steer_rad)) * p[P_CG_HEIGHT] / wheelbase

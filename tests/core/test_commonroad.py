@@ -14,6 +14,7 @@ from driftlab.core.commonroad.equilibrium import commonroad_drifts, describe_fam
 from driftlab.core.commonroad.model_fit import fitted_model_vehicle
 from driftlab.core.commonroad.parameters import _vehiclemodels, pack_commonroad, package_parameters
 from driftlab.core.commonroad.std import std_derivatives
+from driftlab.core.commonroad.weights import std_weights
 from driftlab.core.config import EpisodeConfig, Theta, apply_overrides
 from driftlab.core.drivability import drivable_reason
 from driftlab.core.episode import run_episode
@@ -87,7 +88,7 @@ def test_an_std_episode_is_a_pure_function_of_its_arguments():
 
 def test_the_plant_key_brings_the_cars_controller_and_switching_back_restores_the_default():
     config = EpisodeConfig.preset("commonroad_std")
-    assert config.mpc == MpcConfig.commonroad() and config.scenario.sideslip_rad == 0.5
+    assert config.mpc == std_weights() and config.scenario.sideslip_rad == 0.5
     back = apply_overrides(config, {"plant.model": "driftlab", "scenario.sideslip_rad": 0.4})
     assert back == EpisodeConfig()
     kept = apply_overrides(EpisodeConfig(), {"plant.model": "commonroad_std", "scenario.sideslip_rad": 0.5,

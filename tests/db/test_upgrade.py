@@ -39,8 +39,8 @@ RELEASE_MPC = {"dt_s": 0.05, "horizon": 20, "q_speed": 4.2, "q_sideslip": 1800.0
                "q_course_error": 6.6, "terminal_cost": False}
 RELEASE_J = -0.7103497996442939
 # RELEASE_J was computed on another machine: with the same lock, numpy's CPU-dispatched SIMD math differs in the
-# last bits between CPUs (seen: ...6494677 against ...6442939, 5e-12), so a stored release is matched to this
-# tolerance; on one machine and lock an episode is bit-identical (checked below with `again`).
+# last bits between CPUs (reported from another VM: ...6494677 against ...6442939, 5e-12), so a stored release is
+# matched to this tolerance; on one machine and lock an episode is bit-identical (checked below with `again`).
 ACROSS_CPUS_J = 1e-9
 
 

@@ -1,11 +1,12 @@
 """The STD plant's own steady drifts: its drift family at a radius and sideslip.
 
 Unknowns V, delta, omega_f, omega_r and the acceleration input u (beta and r = V / R given); equations: every
-derivative of STD zero but the pose's. Unlike the 3-state model, the family is not unique: besides the drift near
-the model's speed there are low-speed, high-wheelspin branches (e.g. vehicle 2, R 44, beta -0.52: V 13.8-14.2,
-delta -0.73..-0.84, rear slip -1.3..-1.4), so the solve starts from a grid of guesses and returns every distinct
-physical solution. The *main* drift is the fastest one (lowest wheelspin): the one a car at drift speed settles
-in; an episode can hold the scenario's drift only if the main drift countersteers.
+derivative of STD zero but the pose's. Unlike the 3-state model's, the family need not be unique (at small
+sideslip vehicle 2 has several into-the-turn drifts), so the solve starts from a grid of guesses and returns every
+distinct physical solution. The *main* drift is the fastest one (lowest wheelspin): the one a car at drift speed
+settles in; an episode can hold the scenario's drift only if the main drift countersteers. (Low-speed,
+high-wheelspin countersteer branches reported elsewhere for vehicle 2 at R 44 were not found: 140 starts here and
+1500 least-squares starts in slip coordinates, with and without the power cap, found only the main drift.)
 """
 
 from __future__ import annotations
@@ -31,7 +32,6 @@ from driftlab.core.commonroad.std import (
     rear_tyre_state,
     std_derivatives,
 )
-from driftlab.core.equilibrium import Equilibrium
 
 _GUESS_SPEEDS_MPS = (8.0, 10.0, 12.0, 14.0, 17.0, 20.0, 23.0)
 _GUESS_STEERS_RAD = (-0.9, -0.6, -0.3, 0.0, 0.2)
@@ -40,7 +40,7 @@ _GUESS_REAR_SLIPS = (-0.3, -0.8, -1.4, -2.0)
 
 @dataclass(frozen=True)
 class PlantDrift:
-    """One steady drift of the STD plant (left-hand: beta < 0, r > 0; right-hand: beta > 0, r < 0); it
+    """One steady drift of a CommonRoad plant (left-hand: beta < 0, r > 0; right-hand: beta > 0, r < 0); it
     countersteers when delta has the sign of beta. PAC2002's shifts make the car slightly asymmetric: vehicle 2
     at R 44, |beta| 0.5 drifts left at V 20.50, delta -0.264 and right at V 20.40, delta +0.225."""
 
@@ -48,8 +48,9 @@ class PlantDrift:
     sideslip_rad: float
     yaw_rate_radps: float
     steer_rad: float
-    rear_force_n: float  # the rear tyre's longitudinal force
-    acceleration_mps2: float  # the input u (m u is the drive force the loop commands)
+    rear_force_n: float  # the rear tyres' longitudinal force
+    acceleration_mps2: float  # the input u
+    drive_n: float  # m u: the drive force the loop commands to hold it
     front_slip: float
     rear_slip: float
 
@@ -57,14 +58,10 @@ class PlantDrift:
     def countersteer(self) -> bool:
         return self.steer_rad * self.sideslip_rad > 0.0
 
-    def equilibrium(self, mass_kg: float) -> Equilibrium:
-        """As the loop's equilibrium: the drive force it commands is m u."""
-        return Equilibrium(self.speed_mps, self.sideslip_rad, self.yaw_rate_radps, self.steer_rad,
-                           mass_kg * self.acceleration_mps2)
-
     def as_dict(self) -> dict[str, float | bool]:
         return {"V": self.speed_mps, "beta": self.sideslip_rad, "r": self.yaw_rate_radps, "delta": self.steer_rad,
-                "Fxr": self.rear_force_n, "acceleration_mps2": self.acceleration_mps2, "front_slip": self.front_slip,
+                "Fxr": self.rear_force_n, "acceleration_mps2": self.acceleration_mps2, "drive_n": self.drive_n,
+                "front_slip": self.front_slip,
                 "rear_slip": self.rear_slip, "countersteer": self.countersteer}
 
 
@@ -84,7 +81,7 @@ def _residual(unknowns, radius_m, sideslip_rad, cp):
     return np.array([f[S_SPEED], f[S_YAW_RATE], f[S_SIDESLIP], f[S_OMEGA_F] * 1e-2, f[S_OMEGA_R] * 1e-2])
 
 
-def _physical(x, cp, radius_m, sideslip_rad) -> bool:
+def _physical(x, cp) -> bool:
     speed, steer, omega_f, omega_r, accel = x
     return (speed > 2.0 and omega_f >= 0.0 and omega_r >= 0.0 and abs(steer) < cp[CR_STEER_MAX]
             and acceleration_constraints(speed, accel, cp) == accel)
@@ -102,7 +99,7 @@ def plant_drifts(radius_m: float, sideslip_rad: float, cp: np.ndarray) -> list[P
         sol = root(_residual, guess, args=(radius_m, sideslip_rad, cp), method="hybr", options={"xtol": 1e-12})
         if not sol.success or np.max(np.abs(_residual(sol.x, radius_m, sideslip_rad, cp))) > 1e-7:
             continue
-        if not _physical(sol.x, cp, radius_m, sideslip_rad):
+        if not _physical(sol.x, cp):
             continue
         if all(np.max(np.abs(sol.x[:2] - f[:2])) > 1e-5 for f in found):
             found.append(sol.x)
@@ -118,6 +115,7 @@ def _drift(x, radius_m, sideslip_rad, cp) -> PlantDrift:
                + (speed * math.sin(sideslip_rad) + cp[CR_CG_TO_FRONT] * state[S_YAW_RATE]) * math.sin(steer))
     front_slip = 1.0 - cp[CR_WHEEL_RADIUS] * omega_f / max(u_wf, 0.1)
     return PlantDrift(speed, sideslip_rad, float(state[S_YAW_RATE]), steer, float(rear_force), accel,
+                      float(cp[CR_MASS] * accel),
                       float(front_slip), float(rear_slip))
 
 
@@ -146,6 +144,3 @@ def describe_family(drifts: tuple[PlantDrift, ...]) -> str | None:
                    f"m/s, delta {low.steer_rad:+.3f} rad, rear slip ratio {low.rear_slip:.2f})")
     return reason
 
-
-def mass_of(vehicle_id: int) -> float:
-    return float(pack_commonroad(vehicle_id)[CR_MASS])

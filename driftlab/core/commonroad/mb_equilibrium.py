@@ -82,5 +82,6 @@ def mb_steady_state(vehicle_id: int, radius_m: float, sideslip_rad: float, right
     speed, steer, accel = float(x[0]), float(x[1]), float(x[2])
     rear_slip = 1.0 - cp[R_W] * x[5] / (speed * math.cos(beta))
     drift = PlantDrift(speed, beta, -math.copysign(speed / radius_m, beta), steer, float(cp[M] * accel), accel,
+                       float(cp[M] * accel),
                        float(1.0 - cp[R_W] * x[3] / (speed * math.cos(beta))), float(rear_slip))
     return drift, _state(x, radius_m, beta, cp), accel

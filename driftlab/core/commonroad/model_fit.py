@@ -17,7 +17,7 @@ from functools import lru_cache
 
 from scipy.optimize import brentq
 
-from driftlab.core.commonroad.equilibrium import commonroad_drifts, describe_family
+from driftlab.core.commonroad.family import describe_family, drift_family
 from driftlab.core.commonroad.parameters import commonroad_model_vehicle
 from driftlab.core.equilibrium import drift_equilibrium
 from driftlab.core.errors import ConfigError, NoEquilibriumError
@@ -66,19 +66,11 @@ def fitted_model_vehicle(vehicle_id: int, radius_m: float, sideslip_rad: float,
 
 
 def _main_drift(vehicle_id: int, radius_m: float, sideslip_rad: float, right: bool, model: str):
-    side = "right" if right else "left"
-    where = (f"CommonRoad vehicle {vehicle_id} ({model}) at radius {radius_m:g} m, sideslip {abs(sideslip_rad):g} "
-             f"rad ({side}-hand drift)")
-    if model == "commonroad_mb":
-        from driftlab.core.commonroad.mb_equilibrium import mb_main_drift
-
-        drift = mb_main_drift(vehicle_id, radius_m, sideslip_rad, right)
-        if drift is None or not drift.countersteer:
-            raise ConfigError(f"the controller's model cannot be fitted to {where}: no countersteer steady drift "
-                              "found", field="scenario.sideslip_rad")
-        return drift
-    family = commonroad_drifts(vehicle_id, radius_m, sideslip_rad, right=right)
+    family = drift_family(model, vehicle_id, radius_m, sideslip_rad, right)
     why = describe_family(family)
     if why is not None:
-        raise ConfigError(f"the controller's model cannot be fitted to {where}: {why}", field="scenario.sideslip_rad")
+        side = "right" if right else "left"
+        raise ConfigError(f"the controller's model cannot be fitted to CommonRoad vehicle {vehicle_id} ({model}) at "
+                          f"radius {radius_m:g} m, sideslip {abs(sideslip_rad):g} rad ({side}-hand drift): {why}",
+                          field="scenario.sideslip_rad")
     return family[0]

@@ -1,0 +1,29 @@
+"""The default controller's weights for CommonRoad's cars (the default plant's, MpcConfig's defaults, complete none
+of their episodes: the flick into the opposite drift spins out or grips up). Found by
+``benchmarks/tune_weights.py --plant commonroad_std`` / ``--plant commonroad_mb`` (each function says how)."""
+
+from __future__ import annotations
+
+from driftlab.core.mpc import MpcConfig
+
+
+def std_weights() -> MpcConfig:
+    """STD, vehicle 2, its fitted model: three rounds of random search, 300 sets x 4 theta x 4 seeds (best 7 of 16);
+    200 around the best x 4 theta x 8 seeds (14 of 32); 200 around that one x 3 theta near the untuned one
+    (``--thetas '[{}, {"k": 0.03}, {"k": 0.015, "dV": -0.1}]'``) x 8 seeds: 23 of 24, against 13 of 24 for its
+    centre. Less weight on the steering's deviation, more on the yaw rate and the drive force."""
+    return MpcConfig(q_sideslip=412.9075, q_yaw_rate=39.8934, q_steer=0.8418, q_drive_kn=1.2849, r_steer_step=8.3507,
+                     r_drive_step_kn=0.0009, steer_rate_radps=11.5374, q_speed=0.9787, q_lateral_error=0.8447,
+                     q_course_error=0.1509)
+
+
+def mb_weights() -> MpcConfig:
+    """MB, vehicle 2, locked differential, its fitted model: with :func:`std_weights` none of 6 episodes (3 seeds x
+    2 theta) completes; 300 sets x 2 theta x 3 seeds completed none; 200 around :func:`std_weights` with the best
+    theta of a 150-iteration job and the untuned one x 4 seeds: 4 of 8 (the centre: 0)."""
+    return MpcConfig(q_sideslip=260.5048, q_yaw_rate=51.0635, q_steer=1.3107, q_drive_kn=0.9577, r_steer_step=16.4536,
+                     r_drive_step_kn=0.0012, steer_rate_radps=6.3898, q_speed=0.4947, q_lateral_error=0.9149,
+                     q_course_error=0.0962)
+
+
+WEIGHTS = {"commonroad_std": std_weights, "commonroad_mb": mb_weights}

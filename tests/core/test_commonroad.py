@@ -10,7 +10,7 @@ import numpy as np
 import pytest
 from vehiclemodels.vehicle_dynamics_std import vehicle_dynamics_std
 
-from driftlab.core.commonroad.equilibrium import commonroad_drifts, describe_family
+from driftlab.core.commonroad.equilibrium import commonroad_drifts, describe_family, frozen_front_wheel_drifts
 from driftlab.core.commonroad.model_fit import fitted_model_vehicle
 from driftlab.core.commonroad.parameters import _vehiclemodels, pack_commonroad, package_parameters
 from driftlab.core.commonroad.std import std_derivatives
@@ -46,6 +46,24 @@ def test_the_plants_drift_family_at_44_m():
     into_turn = commonroad_drifts(2, 44.0, 0.4)
     why = describe_family(into_turn)
     assert not into_turn[0].countersteer and "steers into the turn (V 19.61 m/s, delta +0.067 rad)" in why
+
+
+def test_the_low_speed_countersteer_states_hold_only_by_a_frozen_front_wheel():
+    frozen = [d for d in frozen_front_wheel_drifts(2, 44.0, 0.4) if d.countersteer]
+    fastest = frozen[0]
+    assert 9.5 < fastest.speed_mps < 12.0 and -1.7 < fastest.rear_slip < -1.3 and fastest.front_wheel_radps < 0.0
+    # The package's own STD: steady there, but only because it zeroes a backward-turning wheel's acceleration;
+    # the same state with that wheel at rest is not steady.
+    x = [0.0, 0.0, fastest.steer_rad, fastest.speed_mps, 0.0, fastest.yaw_rate_radps, fastest.sideslip_rad,
+         fastest.front_wheel_radps, 0.0]
+    x[8] = fastest.speed_mps * np.cos(fastest.sideslip_rad) * (1.0 - fastest.rear_slip) / package_parameters(2).R_w
+    u = [0.0, fastest.acceleration_mps2]
+    steady = np.array(vehicle_dynamics_std(list(x), u, package_parameters(2)))[2:]
+    assert np.max(np.abs(steady[[1, 3, 4, 5, 6]])) < 1e-5 and steady[5] == 0.0
+    x[7] = 0.0
+    assert np.max(np.abs(np.array(vehicle_dynamics_std(list(x), u, package_parameters(2)))[2:][[1, 3, 4, 5]])) > 1e-2
+    why = describe_family(commonroad_drifts(2, 44.0, 0.4), frozen_front_wheel_drifts(2, 44.0, 0.4))
+    assert "low-speed, high-wheelspin" in why and "front wheel turning backwards" in why
 
 
 def test_the_controllers_model_drifts_where_the_car_does_on_both_circles():

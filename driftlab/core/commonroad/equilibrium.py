@@ -4,9 +4,13 @@ Unknowns V, delta, omega_f, omega_r and the acceleration input u (beta and r = V
 derivative of STD zero but the pose's. Unlike the 3-state model's, the family need not be unique (at small
 sideslip vehicle 2 has several into-the-turn drifts), so the solve starts from a grid of guesses and returns every
 distinct physical solution. The *main* drift is the fastest one (lowest wheelspin): the one a car at drift speed
-settles in; an episode can hold the scenario's drift only if the main drift countersteers. (Low-speed,
-high-wheelspin countersteer branches reported elsewhere for vehicle 2 at R 44 were not found: 140 starts here and
-1500 least-squares starts in slip coordinates, with and without the power cap, found only the main drift.)
+settles in; an episode can hold the scenario's drift only if the main drift countersteers.
+
+Low-speed, high-wheelspin countersteer "drifts" also solve the equations (vehicle 2, R 44, beta -0.4: V ~10-11 m/s,
+rear slip ratio ~-1.5), but only with the front wheel turning backwards: the package sets a wheel's acceleration to
+zero once its speed is negative (``d_omega = ... if omega >= 0 else 0``), which drops the front wheel's equation and
+leaves a one-parameter family held by a frozen wheel. They are reported apart (``frozen_front_wheel_drifts``), never
+taken as the main drift: no car holds a wheel spinning backwards without a torque.
 """
 
 from __future__ import annotations
@@ -53,6 +57,7 @@ class PlantDrift:
     drive_n: float  # m u: the drive force the loop commands to hold it
     front_slip: float
     rear_slip: float
+    front_wheel_radps: float = 0.0  # negative: held only by the package's frozen wheel (see the module docstring)
 
     @property
     def countersteer(self) -> bool:
@@ -62,7 +67,8 @@ class PlantDrift:
         return {"V": self.speed_mps, "beta": self.sideslip_rad, "r": self.yaw_rate_radps, "delta": self.steer_rad,
                 "Fxr": self.rear_force_n, "acceleration_mps2": self.acceleration_mps2, "drive_n": self.drive_n,
                 "front_slip": self.front_slip,
-                "rear_slip": self.rear_slip, "countersteer": self.countersteer}
+                "rear_slip": self.rear_slip, "front_wheel_radps": self.front_wheel_radps,
+                "countersteer": self.countersteer}
 
 
 def _state(speed, sideslip, radius, steer, omega_f, omega_r):
@@ -81,15 +87,15 @@ def _residual(unknowns, radius_m, sideslip_rad, cp):
     return np.array([f[S_SPEED], f[S_YAW_RATE], f[S_SIDESLIP], f[S_OMEGA_F] * 1e-2, f[S_OMEGA_R] * 1e-2])
 
 
-def _physical(x, cp) -> bool:
+def _physical(x, cp, frozen_front: bool) -> bool:
     speed, steer, omega_f, omega_r, accel = x
-    return (speed > 2.0 and omega_f >= 0.0 and omega_r >= 0.0 and abs(steer) < cp[CR_STEER_MAX]
+    return (speed > 2.0 and (omega_f < 0.0) == frozen_front and omega_r >= 0.0 and abs(steer) < cp[CR_STEER_MAX]
             and acceleration_constraints(speed, accel, cp) == accel)
 
 
-def plant_drifts(radius_m: float, sideslip_rad: float, cp: np.ndarray) -> list[PlantDrift]:
+def plant_drifts(radius_m: float, sideslip_rad: float, cp: np.ndarray, frozen_front: bool = False) -> list[PlantDrift]:
     """Every distinct steady drift at ``radius_m`` and ``sideslip_rad`` (beta < 0: left-hand, > 0: right-hand),
-    fastest first."""
+    fastest first; with ``frozen_front``, the ones held by a backward-turning front wheel instead."""
     found: list[np.ndarray] = []
     wheel = cp[CR_WHEEL_RADIUS]
     side = -1.0 if sideslip_rad < 0 else 1.0
@@ -99,7 +105,7 @@ def plant_drifts(radius_m: float, sideslip_rad: float, cp: np.ndarray) -> list[P
         sol = root(_residual, guess, args=(radius_m, sideslip_rad, cp), method="hybr", options={"xtol": 1e-12})
         if not sol.success or np.max(np.abs(_residual(sol.x, radius_m, sideslip_rad, cp))) > 1e-7:
             continue
-        if not _physical(sol.x, cp):
+        if not _physical(sol.x, cp, frozen_front):
             continue
         if all(np.max(np.abs(sol.x[:2] - f[:2])) > 1e-5 for f in found):
             found.append(sol.x)
@@ -116,7 +122,7 @@ def _drift(x, radius_m, sideslip_rad, cp) -> PlantDrift:
     front_slip = 1.0 - cp[CR_WHEEL_RADIUS] * omega_f / max(u_wf, 0.1)
     return PlantDrift(speed, sideslip_rad, float(state[S_YAW_RATE]), steer, float(rear_force), accel,
                       float(cp[CR_MASS] * accel),
-                      float(front_slip), float(rear_slip))
+                      float(front_slip), float(rear_slip), omega_f)
 
 
 @lru_cache(maxsize=256)
@@ -128,19 +134,35 @@ def commonroad_drifts(vehicle_id: int, radius_m: float, sideslip_rad: float, fri
     return tuple(plant_drifts(radius_m, abs(sideslip_rad) if right else -abs(sideslip_rad), cp))
 
 
-def describe_family(drifts: tuple[PlantDrift, ...]) -> str | None:
-    """None when the main (fastest) drift countersteers; else why the scenario's drift cannot be held."""
-    if not drifts:
-        return "the plant has no steady drift at all there"
-    main = drifts[0]
-    if main.countersteer:
+@lru_cache(maxsize=64)
+def frozen_front_wheel_drifts(vehicle_id: int, radius_m: float, sideslip_rad: float, friction_scale: float = 1.0,
+                              mass_scale: float = 1.0, right: bool = False) -> tuple[PlantDrift, ...]:
+    """The steady states that the package's frozen backward-turning front wheel holds (module docstring), fastest
+    first: what a solver that does not check the wheel's sign reports as low-speed, high-wheelspin drifts."""
+    cp = pack_commonroad(vehicle_id, friction_scale=friction_scale, mass_scale=mass_scale)
+    return tuple(plant_drifts(radius_m, abs(sideslip_rad) if right else -abs(sideslip_rad), cp, frozen_front=True))
+
+
+def describe_family(drifts: tuple[PlantDrift, ...], frozen: tuple[PlantDrift, ...] = ()) -> str | None:
+    """None when the main (fastest) drift countersteers; else why the scenario's drift cannot be held (naming the
+    ``frozen`` front-wheel countersteer states when given, so that nobody mistakes them for a drift to hold)."""
+    low = next((d for d in drifts[1:] if d.countersteer), None)
+    frozen_low = next((d for d in frozen if d.countersteer), None)
+    if drifts and drifts[0].countersteer:
         return None
-    others = [d for d in drifts if d.countersteer]
-    reason = (f"the plant's drift near drift speed steers into the turn (V {main.speed_mps:.2f} m/s, delta "
-              f"{main.steer_rad:+.3f} rad): no countersteer drift to hold")
-    if others:
-        low = others[0]
+    if not drifts:
+        reason = "the plant has no steady drift at all there"
+    else:
+        main = drifts[0]
+        reason = (f"the plant's drift near drift speed steers into the turn (V {main.speed_mps:.2f} m/s, delta "
+                  f"{main.steer_rad:+.3f} rad): no countersteer drift to hold")
+    if low is not None:
         reason += (f"; the only countersteer drift there is a low-speed, high-wheelspin one (V {low.speed_mps:.2f} "
                    f"m/s, delta {low.steer_rad:+.3f} rad, rear slip ratio {low.rear_slip:.2f})")
+    elif frozen_low is not None:
+        reason += (f"; the only countersteer drifts there are low-speed, high-wheelspin ones (e.g. V "
+                   f"{frozen_low.speed_mps:.2f} m/s, delta {frozen_low.steer_rad:+.3f} rad, rear slip ratio "
+                   f"{frozen_low.rear_slip:.2f}), and they hold only with the front wheel turning backwards "
+                   f"({frozen_low.front_wheel_radps:.1f} rad/s), which the package freezes: not a drift a car can hold")
     return reason
 

@@ -9,7 +9,12 @@ from __future__ import annotations
 
 from typing import Any
 
-from driftlab.core.commonroad.equilibrium import PlantDrift, commonroad_drifts, describe_family
+from driftlab.core.commonroad.equilibrium import (
+    PlantDrift,
+    commonroad_drifts,
+    describe_family,
+    frozen_front_wheel_drifts,
+)
 from driftlab.core.commonroad.mb_equilibrium import mb_main_drift
 
 __all__ = ["PlantDrift", "countersteer_window", "describe_family", "drift_family", "family_summary"]
@@ -42,10 +47,14 @@ def family_summary(plant: Any, radius_m: float, beta_rad: float) -> dict[str, An
     args = (plant.model, plant.commonroad_vehicle, radius_m)
     scales = (plant.friction_scale, plant.mass_scale)
     family = drift_family(*args, beta_rad, beta_rad > 0, *scales)
+    # STD's frozen-front-wheel states, shown apart so that nobody takes them for drifts (equilibrium's docstring).
+    frozen = (frozen_front_wheel_drifts(*args[1:], beta_rad, *scales, right=beta_rad > 0)
+              if plant.model == "commonroad_std" else ())
     out: dict[str, Any] = {"branches": [d.as_dict() for d in family],
+                           "frozen_front_wheel_branches": [d.as_dict() for d in frozen],
                            "countersteer": bool(family and family[0].countersteer),
                            "countersteer_window_rad": countersteer_window(*args, beta_rad > 0, *scales)}
-    why = describe_family(family)
+    why = describe_family(family, frozen)
     if why is not None:
         out["error"] = f"not drivable at radius {radius_m:g} m, beta {beta_rad:g} rad: {why}"
     if family:

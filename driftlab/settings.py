@@ -10,6 +10,7 @@ from __future__ import annotations
 import os
 from pathlib import Path
 
+from pydantic import Field
 from pydantic_settings import BaseSettings, SettingsConfigDict
 
 
@@ -25,6 +26,8 @@ class Settings(BaseSettings):
         max_episodes_per_job, max_episodes_per_study, max_queued_jobs: what one request may queue (see
             driftlab.server.quotas); the defaults allow the paper's runs many times over (a 500-run of the job
             default is 4000 episodes).
+        what_if_per_minute: what-if episodes one browser tab may start a minute (DRIFTLAB_WHAT_IF_PER_MINUTE,
+            default 60, bursts of 5): one open tab cannot keep the what-if worker busy for everyone.
     """
 
     model_config = SettingsConfigDict(env_prefix="DRIFTLAB_", extra="ignore")
@@ -37,6 +40,7 @@ class Settings(BaseSettings):
     max_episodes_per_job: int = 100_000
     max_episodes_per_study: int = 1_000_000
     max_queued_jobs: int = 100
+    what_if_per_minute: float = Field(default=60.0, gt=0.0, le=6000.0)
 
     def allowed_host_names(self) -> frozenset[str]:
         return frozenset(h.strip() for h in self.allowed_hosts.split(",") if h.strip())

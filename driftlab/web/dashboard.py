@@ -8,6 +8,7 @@ The dashboard draws what it is given: stored trajectories, or episodes a worker 
 from __future__ import annotations
 
 import threading
+import time
 from collections import OrderedDict
 from collections.abc import Callable
 from concurrent.futures import Future
@@ -20,6 +21,7 @@ from driftlab.core.config import apply_overrides, config_from_dict, config_to_di
 from driftlab.core.drivability import check_drivable
 from driftlab.core.errors import ConfigError
 from driftlab.db import storage
+from driftlab.settings import Settings
 from driftlab.web.frames import EpisodeFrames
 from driftlab.web.session import ClientSession
 from driftlab.web.sources import (
@@ -37,14 +39,41 @@ EpisodeRunner = Callable[[dict[str, float], dict[str, Any], int], Future]
 COMPARE_EVERY_POLLS = 4  # studies and comparisons every 2 s at the default 0.5 s poll
 
 
-class WhatIfRunner:
-    """Runs one episode per tab at a time; while one runs, only the newest request of that tab is kept."""
+class EpisodeBudget:
+    """A token bucket: ``per_minute`` episodes a minute on average, ``burst`` at once (a slider dragged for a few
+    seconds), so that one open tab cannot keep the what-if worker busy for everyone."""
 
-    def __init__(self, run_episode: EpisodeRunner | None) -> None:
+    def __init__(self, per_minute: float, burst: int, clock: Callable[[], float] = time.monotonic) -> None:
+        self.rate_per_s = per_minute / 60.0
+        self.burst = float(burst)
+        self.clock = clock
+        self._tokens = float(burst)
+        self._at = clock()
+
+    def wait_s(self) -> float:
+        """0 and one episode spent, or how long until the next one may start."""
+        now = self.clock()
+        self._tokens = min(self.burst, self._tokens + (now - self._at) * self.rate_per_s)
+        self._at = now
+        if self._tokens >= 1.0:
+            self._tokens -= 1.0
+            return 0.0
+        return (1.0 - self._tokens) / self.rate_per_s
+
+
+class WhatIfRunner:
+    """Runs one episode per tab at a time, at most ``per_minute`` a minute per tab (the websocket connection);
+    while one runs or the tab waits for its budget, only the newest request of that tab is kept."""
+
+    def __init__(self, run_episode: EpisodeRunner | None, per_minute: float = 60.0, burst: int = 5,
+                 clock: Callable[[], float] = time.monotonic) -> None:
         self.run_episode = run_episode
+        self.per_minute, self.burst, self.clock = per_minute, burst, clock
         self._lock = threading.Lock()
         self._busy: set[int] = set()
         self._waiting: dict[int, tuple[ClientSession, dict, dict, dict, int]] = {}
+        self._budgets: dict[int, EpisodeBudget] = {}
+        self.started = 0  # episodes sent to the worker: what the rate limit bounds
 
     def request(self, session: ClientSession, theta: dict[str, float], config_doc: dict[str, Any],
                 plant_overrides: dict[str, float], seed: int) -> None:
@@ -57,9 +86,30 @@ class WhatIfRunner:
                 self._waiting[key] = (session, theta, config_doc, plant_overrides, seed)
                 return
             self._busy.add(key)
-        self._submit(session, theta, config_doc, plant_overrides, seed)
+        self._start_or_wait(session, (session, theta, config_doc, plant_overrides, seed))
+
+    def _start_or_wait(self, session: ClientSession, request: tuple) -> None:
+        key = session.client.client_id
+        with self._lock:
+            budget = self._budgets.setdefault(key, EpisodeBudget(self.per_minute, self.burst, self.clock))
+            wait_s = budget.wait_s()
+            if wait_s > 0.0:
+                self._waiting[key] = request
+        if wait_s > 0.0:
+            timer = threading.Timer(wait_s, self._next, args=(session,))
+            timer.daemon = True
+            timer.start()
+            return
+        self._submit(*request)
+
+    def forget(self, client_id: int) -> None:
+        """A closed tab: its budget and waiting request go with it."""
+        with self._lock:
+            self._budgets.pop(client_id, None)
+            self._waiting.pop(client_id, None)
 
     def _submit(self, session: ClientSession, theta: dict, config_doc: dict, overrides: dict, seed: int) -> None:
+        self.started += 1
         try:
             config = apply_overrides(config_from_dict(config_doc), overrides)
             check_drivable(config)
@@ -86,15 +136,17 @@ class WhatIfRunner:
             if waiting is None:
                 self._busy.discard(key)
                 return
-        self._submit(*waiting)
+        self._start_or_wait(session, waiting)
 
 
 class Dashboard:
     def __init__(self, factory: sessionmaker[Session], *, run_episode: EpisodeRunner | None = None,
-                 host: str = "127.0.0.1", port: int = 0, poll_s: float = 0.5) -> None:
+                 host: str = "127.0.0.1", port: int = 0, poll_s: float = 0.5,
+                 what_if_per_minute: float | None = None) -> None:
         self.factory = factory
         self.poll_s = poll_s
-        self.what_if = WhatIfRunner(run_episode)
+        per_minute = Settings().what_if_per_minute if what_if_per_minute is None else what_if_per_minute
+        self.what_if = WhatIfRunner(run_episode, per_minute=per_minute)
         self.sessions: dict[int, ClientSession] = {}
         self._histories: dict[int, JobHistory] = {}
         self._jobs: list[tuple[int, str, str]] = []
@@ -165,6 +217,7 @@ class Dashboard:
     def _on_disconnect(self, client: viser.ClientHandle) -> None:
         with self._lock:
             session = self.sessions.pop(client.client_id, None)
+        self.what_if.forget(client.client_id)
         if session is not None:
             session.close()
 

@@ -26,6 +26,9 @@ class Settings(BaseSettings):
         max_episodes_per_job, max_episodes_per_study, max_queued_jobs: what one request may queue (see
             driftlab.server.quotas); the defaults allow the paper's runs many times over (a 500-run of the job
             default is 4000 episodes).
+        max_trajectories_per_job: trajectories (each up to ~100 kB) a job keeps beyond its bests
+            (DRIFTLAB_MAX_TRAJECTORIES_PER_JOB, default 5000, ~0.5 GB); later evaluations are stored without one,
+            and an episode re-runs bit for bit from its theta, config and seed.
         what_if_per_minute: what-if episodes one browser tab may start a minute (DRIFTLAB_WHAT_IF_PER_MINUTE,
             default 60, bursts of 5): one open tab cannot keep the what-if worker busy for everyone.
     """
@@ -40,6 +43,7 @@ class Settings(BaseSettings):
     max_episodes_per_job: int = 100_000
     max_episodes_per_study: int = 1_000_000
     max_queued_jobs: int = 100
+    max_trajectories_per_job: int = Field(default=5000, ge=1)
     what_if_per_minute: float = Field(default=60.0, gt=0.0, le=6000.0)
 
     def allowed_host_names(self) -> frozenset[str]:

@@ -130,18 +130,38 @@ def unique_job_name(session: Session, base: str) -> str:
 def add_evaluation(session: Session, *, job_id: int, theta: dict[str, float], J: float, status: str,
                    metrics: dict[str, Any], trigger_points: list[dict[str, float]], wall_ms: float,
                    columns: list[str], trajectory: np.ndarray, seeds: list[dict[str, Any]] | None = None,
-                   trajectory_seed: int | None = None) -> Evaluation:
-    """Appends the next evaluation of a job (its index is the count so far, so numbering survives resumes)."""
+                   trajectory_seed: int | None = None, max_trajectories: int | None = None) -> Evaluation:
+    """Appends the next evaluation of a job (its index is the count so far, so numbering survives resumes).
+
+    Its trajectory (up to ~100 kB) is kept while the job holds fewer than ``max_trajectories`` of them, and always
+    when the evaluation is the job's new best: a long job's storage stays bounded and its best stays watchable."""
     index = count_evaluations(session, job_id=job_id)
     evaluation = Evaluation(job_id=job_id, index=index, theta=theta, J=J, status=status, metrics=metrics,
                             trigger_points=trigger_points, wall_ms=wall_ms, seeds=seeds,
                             trajectory_seed=trajectory_seed)
-    data = np.ascontiguousarray(trajectory, dtype=np.float64)
-    evaluation.trajectory = Trajectory(columns=list(columns), rows=int(data.shape[0]),
-                                       data=zlib.compress(data.tobytes(), 6))
+    if (max_trajectories is None or count_trajectories(session, job_id=job_id) < max_trajectories
+            or _beats_best(session, job_id=job_id, J=J, completed=status == "completed")):
+        data = np.ascontiguousarray(trajectory, dtype=np.float64)
+        evaluation.trajectory = Trajectory(columns=list(columns), rows=int(data.shape[0]),
+                                           data=zlib.compress(data.tobytes(), 6))
     session.add(evaluation)
     session.flush()
     return evaluation
+
+
+def count_trajectories(session: Session, *, job_id: int) -> int:
+    return session.scalar(select(func.count()).select_from(Trajectory).join(Evaluation)
+                          .where(Evaluation.job_id == job_id)) or 0
+
+
+def _beats_best(session: Session, *, job_id: int, J: float, completed: bool) -> bool:
+    """Would an evaluation with this J and status become the job's best (best_evaluation's order)?"""
+    best = best_evaluation(session, job_id=job_id)
+    if best is None:
+        return True
+    if completed != best.completed:
+        return completed
+    return J < best.J
 
 
 def evaluations(session: Session, *, job_id: int, after: int = -1, limit: int | None = None) -> list[Evaluation]:
@@ -199,6 +219,9 @@ def best_summary(best: Evaluation | None) -> dict[str, Any] | None:
 def trajectory_array(session: Session, *, evaluation_id: int) -> tuple[list[str], np.ndarray]:
     traj = session.get(Trajectory, evaluation_id)
     if traj is None:
-        raise NotFound(f"no trajectory for evaluation {evaluation_id}")
+        get_evaluation(session, evaluation_id=evaluation_id)  # no such evaluation: say that instead
+        raise NotFound(f"the trajectory of evaluation {evaluation_id} was not kept (its job held "
+                       f"DRIFTLAB_MAX_TRAJECTORIES_PER_JOB of them; the best's always are): re-run it with "
+                       f"`driftlab episode` from its theta, config and trajectory_seed (an episode is deterministic)")
     data = np.frombuffer(zlib.decompress(traj.data), dtype=np.float64).reshape(traj.rows, len(traj.columns))
     return traj.columns, data

@@ -16,6 +16,7 @@ import numpy as np
 import viser
 import viser.uplot
 
+from driftlab.db.storage import NotFound
 from driftlab.web.frames import EpisodeFrames
 from driftlab.web.player import EpisodePlayer
 from driftlab.web.plots import padded_range, series
@@ -106,7 +107,17 @@ class Playback:
             self.player.unload()
             self.show_hud()
             return
-        self.load(self.frames_of(history.ids[-1]))
+        self._load_stored(history.ids[-1])
+
+    def _load_stored(self, evaluation_id: int) -> None:
+        """A stored episode; one whose trajectory a long job did not keep leaves the view as it is and says why."""
+        try:
+            frames = self.frames_of(evaluation_id)
+        except NotFound:
+            self.hud.content = (f"Evaluation id {evaluation_id}: its trajectory was not kept (past the job's "
+                                f"trajectory limit; every best's is).")
+            return
+        self.load(frames)
 
     def play_best(self) -> None:
         best = self.best()
@@ -125,7 +136,7 @@ class Playback:
             return
         self.mode = "rewatch"
         self.playing = True
-        self.load(self.frames_of(history.ids[index]))
+        self._load_stored(history.ids[index])
 
     def play_what_if(self, frames: EpisodeFrames, ghost: EpisodeFrames | None) -> None:
         """A what-if episode beside the ghost it was asked against (the best evaluation's episode on the same seed

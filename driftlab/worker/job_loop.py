@@ -20,6 +20,7 @@ from driftlab.core.tuning import TuningSpec
 from driftlab.db import lifecycle, storage
 from driftlab.db.lifecycle import JobStatus
 from driftlab.db.models import Job
+from driftlab.settings import Settings
 from driftlab.worker.executor import EpisodeExecutor, EpisodeOutcome
 
 
@@ -101,7 +102,8 @@ def _store(factory: sessionmaker[Session], lease: _Lease, evaluation: _PendingEv
                                metrics=metrics, trigger_points=shown.trigger_points,
                                wall_ms=sum(o.wall_ms for o in evaluation.outcomes.values()),
                                columns=shown.columns, trajectory=shown.trajectory,
-                               seeds=[s.as_dict() for s in samples], trajectory_seed=shown.seed)
+                               seeds=[s.as_dict() for s in samples], trajectory_seed=shown.seed,
+                               max_trajectories=lease.max_trajectories)
     return STORED
 
 
@@ -118,6 +120,7 @@ class _Lease:
     def __init__(self, factory: sessionmaker[Session], job_id: int, runner: str, iterations: int) -> None:
         self.factory, self.job_id, self.runner = factory, job_id, runner
         self.iterations = iterations
+        self.max_trajectories = Settings().max_trajectories_per_job
         self.held = True
         self._last = time.monotonic()
 

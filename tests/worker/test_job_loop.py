@@ -94,3 +94,27 @@ def test_nothing_is_stored_past_a_budget_lowered_while_evaluations_run(tmp_path)
         stored = storage.count_evaluations(session, job_id=job_id)
         assert stored == lowered == storage.get_job(session, job_id=job_id).spec["iterations"]
     assert done == ["finished"]
+
+
+def test_a_long_job_keeps_a_bounded_number_of_trajectories_and_every_best(tmp_path, monkeypatch):
+    monkeypatch.setenv("DRIFTLAB_MAX_TRAJECTORIES_PER_JOB", "5")
+    factory = storage.open_database(f"sqlite:///{tmp_path / 'bounded.db'}")
+    spec = TuningSpec(iterations=30, seed_points=4, seed=3, robust_samples=1, confirm_samples=0, deterministic=True)
+    with storage.transaction(factory) as session:
+        job_id = storage.create_job(session, name="bounded", spec=spec.to_dict(), seed=spec.seed).id
+    claim_job(factory, job_id, "runner")
+    assert run_job(factory, job_id, ShuffledExecutor(0), runner="runner") == "finished"
+    with storage.snapshot(factory) as session:
+        stored = storage.evaluations(session, job_id=job_id)
+        kept = [e.index for e in stored if e.trajectory is not None]
+        record, bests = float("inf"), []
+        for e in stored:
+            if e.J < record:
+                record, bests = e.J, bests + [e.index]
+        assert len(stored) == 30 and kept[:5] == [0, 1, 2, 3, 4]
+        assert set(kept[5:]) == {i for i in bests if i >= 5} and len(kept) < 30  # after the first five: the bests
+        best = storage.best_evaluation(session, job_id=job_id)
+        assert storage.trajectory_array(session, evaluation_id=best.id)[1].shape == (2, 1)
+        dropped = next(e for e in stored if e.trajectory is None)
+        with pytest.raises(storage.NotFound, match="was not kept"):
+            storage.trajectory_array(session, evaluation_id=dropped.id)

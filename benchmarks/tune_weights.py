@@ -9,7 +9,8 @@ knife edge (0.003 rad of sideslip noise gripped it up in half the episodes).
 Run: OMP_NUM_THREADS=1 python benchmarks/tune_weights.py [--sets 300] [--seeds 4] [--plant default]
          [--around '{"mpc.q_sideslip": 619, ...}'] [--thetas '[{"k": 0.03}, {}]']   (two processes)
 --plant is a --plant preset (commonroad_std: CommonRoad's STD with its fitted model); --around samples each
-weight within x0.5..x2 of the given set (a local search after a global one) instead of the global ranges.
+weight within x1/spread..x spread
+(--spread, default 2) of the given set (a local search after a global one) instead of the global ranges.
 """
 
 import argparse
@@ -26,9 +27,9 @@ THETAS = [Theta(0.02, 0.02, 0.0, 0.05), Theta(0.01, 0.03, 0.0, 0.02), Theta(0.03
           Theta(0.025, 0.025, -0.1, 0.08)]
 
 
-def sample(rng: np.random.Generator, around: dict | None) -> dict:
+def sample(rng: np.random.Generator, around: dict | None, spread: float = 2.0) -> dict:
     if around:
-        return {k: v * 2 ** rng.uniform(-1, 1) for k, v in around.items()}
+        return {k: v * spread ** rng.uniform(-1, 1) for k, v in around.items()}
     return {"mpc.q_sideslip": 10 ** rng.uniform(1.5, 3.5), "mpc.q_yaw_rate": 10 ** rng.uniform(0, 2.5),
             "mpc.q_steer": 10 ** rng.uniform(-1, 2), "mpc.q_drive_kn": 10 ** rng.uniform(-2, 0.5),
             "mpc.r_steer_step": 10 ** rng.uniform(0, 3), "mpc.r_drive_step_kn": 10 ** rng.uniform(-3, 0),
@@ -37,8 +38,8 @@ def sample(rng: np.random.Generator, around: dict | None) -> dict:
 
 
 def evaluate(args: tuple[int, int, str, dict | None, list[Theta]]):
-    i, seeds, plant, around, thetas = args
-    weights = sample(np.random.default_rng(5000 + i), around)
+    i, seeds, plant, around, thetas, spread = args
+    weights = sample(np.random.default_rng(5000 + i), around, spread)
     if around and i == 0:
         weights = dict(around)  # the centre itself, scored alike
     config = apply_overrides(EpisodeConfig.preset(plant), weights)
@@ -53,11 +54,13 @@ def main() -> None:
     parser.add_argument("--seeds", type=int, default=4)
     parser.add_argument("--plant", default="default")
     parser.add_argument("--around", type=json.loads, default=None)
+    parser.add_argument("--spread", type=float, default=2.0, help="--around samples within x1/spread..x spread")
     parser.add_argument("--thetas", type=json.loads, default=None, help="JSON list of theta objects (default: 4)")
     args = parser.parse_args()
     thetas = [Theta(**t) for t in args.thetas] if args.thetas else THETAS
     with Pool(2) as pool:
-        out = pool.map(evaluate, [(i, args.seeds, args.plant, args.around, thetas) for i in range(args.sets)],
+        out = pool.map(evaluate, [(i, args.seeds, args.plant, args.around, thetas, args.spread)
+                                  for i in range(args.sets)],
                        chunksize=4)
     out.sort(key=lambda o: (-o[0], o[1]))
     for completed, total_j, weights in out[:8]:

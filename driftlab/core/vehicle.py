@@ -35,7 +35,8 @@ P_FRICTION_CIRCLE = 9
 P_LOAD_TRANSFER = 10
 P_STEER_OFFSET = 11
 P_DRIVE_OFFSET = 12
-N_PARAMS = 13
+P_FRONT_GRIP = 13
+N_PARAMS = 14
 
 # Fixed-point passes for the load-transfer loop (loads depend on Fyf, which depends on loads). The loop
 # gain is roughly h/L * mu * |sin(delta)| ~ 0.05, so each pass shrinks the error about twentyfold.
@@ -66,6 +67,9 @@ class VehicleParams:
         steer_offset_right_rad, drive_offset_right_n: the same for the right-hand drift, in its mirror image
             (a car whose tyres are not symmetric, as PAC2002's shifts make them, drifts differently each way;
             a symmetric one has them equal to the left-hand ones).
+        front_grip_scale: the front tyre's peak force is friction x this x its load (1 in the paper): where
+            on its curve the front tyre sits in the drift, hence how strongly the yaw rate answers the steering
+            (fitted to a car's measured response, driftlab.core.commonroad.steering_gain).
     """
 
     mass_kg: float = 1844.7
@@ -81,6 +85,7 @@ class VehicleParams:
     drive_offset_n: float = 0.0
     steer_offset_right_rad: float = 0.0
     drive_offset_right_n: float = 0.0
+    front_grip_scale: float = 1.0
 
     def __post_init__(self) -> None:
         limits = {
@@ -97,6 +102,7 @@ class VehicleParams:
             "drive_offset_n": (-10000.0, 10000.0),
             "steer_offset_right_rad": (-0.5, 0.5),
             "drive_offset_right_n": (-10000.0, 10000.0),
+            "front_grip_scale": (0.2, 5.0),
         }
         check_ranges(self, "vehicle", limits)
 
@@ -144,6 +150,7 @@ def pack_params(
     steer_offset = vehicle.steer_offset_right_rad if right else vehicle.steer_offset_rad
     p[P_STEER_OFFSET] = -steer_offset if mirrored else steer_offset
     p[P_DRIVE_OFFSET] = vehicle.drive_offset_right_n if right else vehicle.drive_offset_n
+    p[P_FRONT_GRIP] = vehicle.front_grip_scale
     return p
 
 
@@ -196,7 +203,7 @@ def tyre_forces(speed_mps, sideslip_rad, yaw_rate_radps, steer_rad, drive_force_
             cap = 0.999 * rear_peak
             fxr = min(max(drive_force_n, -cap), cap)
             rear_peak = math.sqrt(rear_peak * rear_peak - fxr * fxr)
-        fyf = pacejka_lateral_force(alpha_f, mu * fzf, p[P_TYRE_B], p[P_TYRE_C])
+        fyf = pacejka_lateral_force(alpha_f, mu * p[P_FRONT_GRIP] * fzf, p[P_TYRE_B], p[P_TYRE_C])
         fyr = pacejka_lateral_force(alpha_r, rear_peak, p[P_TYRE_B], p[P_TYRE_C])
         if p[P_LOAD_TRANSFER] > 0.5:
             transfer = (fxr - fyf * math.sin(steer_rad)) * p[P_CG_HEIGHT] / wheelbase

@@ -5,13 +5,14 @@ refuses what cannot drift."""
 import json
 import subprocess
 import sys
+from dataclasses import replace
 
 import numpy as np
 import pytest
 from vehiclemodels.vehicle_dynamics_std import vehicle_dynamics_std
 
 from driftlab.core.commonroad.equilibrium import commonroad_drifts, describe_family, frozen_front_wheel_drifts
-from driftlab.core.commonroad.model_fit import fitted_model_vehicle
+from driftlab.core.commonroad.model_fit import _placed_at_drift, fitted_model_vehicle
 from driftlab.core.commonroad.parameters import _vehiclemodels, pack_commonroad, package_parameters
 from driftlab.core.commonroad.std import std_derivatives
 from driftlab.core.commonroad.weights import std_weights
@@ -174,6 +175,44 @@ def test_an_mb_episode_runs_in_the_same_loop_and_is_pure():
     first, again = (run_episode(Theta(), config, seed=1) for _ in range(2))
     assert first.J == again.J and np.array_equal(first.trajectory, again.trajectory)
     assert first.trajectory[0, 4] == pytest.approx(20.39, abs=0.2)  # it starts in MB's own drift
+
+
+def test_the_mb_model_answers_the_steering_as_the_car_does_and_std_keeps_its_read_off_grip():
+    from driftlab.core.commonroad.mb_equilibrium import mb_main_drift
+    from driftlab.core.commonroad.steering_gain import car_yaw_response, model_yaw_response
+    from driftlab.core.plant import PlantConfig
+
+    drift = mb_main_drift(2, 44.0, 0.5)
+    car, steering = car_yaw_response(PlantConfig.commonroad_mb(2), drift, 44.0)
+    fitted = fitted_model_vehicle(2, 44.0, 0.5, "commonroad_mb")
+    right = mb_main_drift(2, 44.0, 0.5, right=True)
+    read_off = _placed_at_drift(replace(fitted, front_grip_scale=1.0), 44.0, 0.5, drift, right)
+    assert car > 5 * model_yaw_response(read_off, drift, steering)  # the mismatch the fit removes
+    assert model_yaw_response(fitted, drift, steering) == pytest.approx(car, rel=1e-3)
+    assert 1.2 < fitted.front_grip_scale < 1.7
+    # The fitted model still drifts where the car does.
+    eq = drift_equilibrium(44.0, -0.5, pack_params(fitted))
+    assert eq.speed_mps == pytest.approx(drift.speed_mps, abs=1e-6) and eq.steer_rad == pytest.approx(
+        drift.steer_rad, abs=1e-6)
+    assert fitted_model_vehicle(2, 44.0, 0.5).front_grip_scale == 1.0  # STD's front axle is saturated
+
+
+def test_an_mb_plant_starts_steady_in_its_own_drift():
+    """With no variation the episode's first steps hold MB's drift: every wheel at its own slip, the body rolled."""
+    from driftlab.core.commonroad.mb_equilibrium import mb_main_drift
+    from driftlab.core.plant import DRIVE, SIDESLIP, SPEED, STEER, YAW_RATE, PlantConfig, make_plant
+
+    drift = mb_main_drift(2, 44.0, 0.5)
+    plant = make_plant(PlantConfig.commonroad_mb(2), fitted_model_vehicle(2, 44.0, 0.5, "commonroad_mb"))
+    plant.start_in_drift_of(44.0, 0.5)
+    loop = np.zeros(8)
+    loop[SPEED], loop[SIDESLIP], loop[YAW_RATE] = drift.speed_mps, drift.sideslip_rad, drift.yaw_rate_radps
+    loop[STEER], loop[DRIVE] = drift.steer_rad, drift.drive_n
+    state = plant.start_state(loop)
+    for _ in range(10):
+        state = plant.step(state, drift.steer_rad, drift.drive_n, 0.05)
+    assert abs(state[SPEED] - drift.speed_mps) < 1e-3 and abs(state[YAW_RATE] - drift.yaw_rate_radps) < 1e-3
+    assert abs(state[SIDESLIP] - drift.sideslip_rad) < 1e-4
 
 
 def test_a_plant_stepped_in_python_runs_the_same_loop_bit_for_bit():

@@ -36,7 +36,8 @@ def _speed_gap(friction: float, base: VehicleParams, radius_m: float, sideslip_r
 def fitted_model_vehicle(vehicle_id: int, radius_m: float, sideslip_rad: float,
                          model: str = "commonroad_std") -> VehicleParams:
     """The model of CommonRoad vehicle ``vehicle_id`` whose drift at (radius, sideslip) is the car's main drift
-    (the STD car's, or with ``model`` "commonroad_mb" the multi-body car's).
+    (the STD car's, or with ``model`` "commonroad_mb" the multi-body car's); the multi-body car's model also
+    answers the steering as strongly as the car does (its front grip, :func:`matched_front_grip`).
 
     Raises:
         ConfigError: the car has no countersteer drift there, or no friction of the model reaches its speed.
@@ -44,6 +45,34 @@ def fitted_model_vehicle(vehicle_id: int, radius_m: float, sideslip_rad: float,
     left = _main_drift(vehicle_id, radius_m, sideslip_rad, False, model)
     right = _main_drift(vehicle_id, radius_m, sideslip_rad, True, model)
     base = commonroad_model_vehicle(vehicle_id)
+    if model == "commonroad_mb":
+        base = replace(base, front_grip_scale=matched_front_grip(base, vehicle_id, radius_m, left, right, model))
+    return _placed_at_drift(base, radius_m, sideslip_rad, left, right)
+
+
+def matched_front_grip(base: VehicleParams, vehicle_id: int, radius_m: float, left, right, model: str) -> float:
+    """The front grip scale in [1, 3] at which the model's yaw rate answers a steering step from the drift as the
+    car's does (driftlab.core.commonroad.steering_gain); 1 when the car answers more weakly than the model read
+    off its tyre (STD's saturated front axle does). Each candidate is placed at the car's drift first."""
+    from driftlab.core.commonroad.steering_gain import car_yaw_response, model_yaw_response
+    from driftlab.core.plant import PlantConfig
+
+    car, steering = car_yaw_response(getattr(PlantConfig, model)(vehicle_id), left, radius_m)
+
+    def gap(grip: float) -> float:
+        vehicle = _placed_at_drift(replace(base, front_grip_scale=grip), radius_m, left.sideslip_rad, left, right)
+        return model_yaw_response(vehicle, left, steering) - car
+
+    if gap(1.0) >= 0.0:
+        return 1.0
+    if gap(3.0) <= 0.0:
+        return 3.0
+    return float(brentq(gap, 1.0, 3.0, xtol=1e-4))
+
+
+def _placed_at_drift(base: VehicleParams, radius_m: float, sideslip_rad: float, left, right) -> VehicleParams:
+    """``base`` with the friction that gives the car's drift speed and the offsets that put its equilibrium's
+    inputs on the car's, both ways."""
     # The drift speed grows with friction (V^2 ~ mu g R): bracket it, then solve (on the left-hand drift; the
     # right-hand one of vehicle 2 is 0.1 m/s slower, within what dV corrects).
     lo, hi = 0.3 * base.friction, min(1.9 * base.friction, 2.0)

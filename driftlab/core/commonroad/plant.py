@@ -58,6 +58,7 @@ from driftlab.core.plant import (
 )
 
 MB_SUSPENSION = [6, 8, 11, 13, 16, 18, 21, 27, 28]  # roll, pitch, heave, the axles' roll and heave, compliance
+MB_WHEELS = slice(23, 27)  # front left, front right, rear left, rear right wheel speeds [rad/s]
 OMEGA_F, OMEGA_R, DRIVE_ACTUATOR = N_PLANT_STATES, N_PLANT_STATES + 1, N_PLANT_STATES + 2
 A_LOCKED_DIFFERENTIAL = 4  # MB's actuator vector carries the differential after DriftLab's four actuator settings
 N_STD_PLANT_STATES = N_PLANT_STATES + 3
@@ -235,6 +236,9 @@ class CommonRoadMbPlant:
         z[25] = z[26] = rear
         if self.steady is not None:  # the body rolled and the axles deflected as in the drift, not at rest
             z[MB_SUSPENSION] = self.steady[MB_SUSPENSION]
+            # Every wheel at its slip in MB's own drift (rear -0.35 at 0.5 rad, not STD's -0.5): a start at
+            # another slip is a rear-force step of ~2 kN that the first second spends recovering from.
+            z[MB_WHEELS] = self.steady[MB_WHEELS] * max(z[3], 0.0) / self.steady[3]
         out = np.zeros(N_MB_PLANT_STATES)
         zz = np.zeros(N_MB + 1)
         zz[:N_MB], zz[N_MB] = z, s[DRIVE]

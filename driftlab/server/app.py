@@ -11,10 +11,12 @@ from fastapi.exceptions import RequestValidationError
 from fastapi.responses import JSONResponse
 from sqlalchemy.exc import OperationalError
 from starlette.exceptions import HTTPException as StarletteHTTPException
+from starlette.routing import Match
 
 from driftlab.core.errors import ConfigError
 from driftlab.db import storage
 from driftlab.server.edge import EdgeGuard
+from driftlab.server.openapi import document_edge
 from driftlab.server.routes import evaluations, jobs, pages, studies
 from driftlab.server.view import RecordingCache, add_view_routes
 from driftlab.settings import Settings
@@ -42,6 +44,19 @@ def _field(err: dict) -> str:
     if err.get("type") == "json_invalid" or (len(err["loc"]) == 2 and isinstance(err["loc"][1], int)):
         return "body"
     return ".".join(str(p) for p in err["loc"] if p != "body") or "body"
+
+
+METHODS = ("GET", "HEAD", "POST", "PUT", "PATCH", "DELETE", "OPTIONS")
+
+
+def _allowed_methods(request: Request) -> str:
+    """Every method a route serves at the request's path: Starlette's 405 names the first matching route's
+    only, and FastAPI makes a route per method (GET and DELETE /api/jobs/{job_id} are two). Asked of the routes
+    one method at a time, as routing would: FastAPI nests the routes of included routers."""
+    routes = request.app.router.routes
+    allowed = [method for method in METHODS
+               if any(route.matches({**request.scope, "method": method})[0] == Match.FULL for route in routes)]
+    return ", ".join(allowed)
 
 
 def create_app(db_url: str, *, workers: int | None = 2, start_worker: bool = True,
@@ -76,6 +91,7 @@ def create_app(db_url: str, *, workers: int | None = 2, start_worker: bool = Tru
     add_view_routes(app, lambda: app.state.dashboard.port if hasattr(app.state, "dashboard") else None,
                     app.state.recordings,
                     lambda: len(app.state.dashboard.sessions) if hasattr(app.state, "dashboard") else 0)
+    document_edge(app, token_set=bool(settings.token))
 
     @app.exception_handler(RequestValidationError)
     async def _validation(_request: Request, exc: RequestValidationError):
@@ -101,6 +117,8 @@ def create_app(db_url: str, *, workers: int | None = 2, start_worker: bool = Tru
             message = "body: not a UTF-8 JSON document"
             return JSONResponse({"detail": message, "errors": [{"field": "body", "message": message}]},
                                 status_code=422)
+        if exc.status_code == 405:
+            return JSONResponse({"detail": exc.detail}, status_code=405, headers={"Allow": _allowed_methods(request)})
         return await http_exception_handler(request, exc)
 
     @app.exception_handler(OperationalError)

@@ -23,6 +23,7 @@ from sqlalchemy.orm import Session, sessionmaker
 
 from driftlab.db import storage
 from driftlab.server.edge import TOKEN_COOKIE
+from driftlab.server.responses import ViewStatus, errors, media
 from driftlab.server.schemas import EvaluationId
 from driftlab.web.recording import EpisodeRecorder
 from driftlab.web.sources import frames_of_evaluation, track_of_spec
@@ -65,7 +66,7 @@ def add_view_routes(app: FastAPI, upstream_port: Callable[[], int | None], recor
     page = CLIENT_PAGE.read_bytes()
     page_gzip = gzip.compress(page)
 
-    @app.get("/api/view", tags=["view"])
+    @app.get("/api/view", tags=["view"], response_model=ViewStatus)
     def view_status() -> dict[str, int | None]:
         """The 3D view: open browser tabs, and the loopback port of the viser server behind ``/viser``."""
         return {"clients": n_clients(), "viser_port": upstream_port()}
@@ -91,13 +92,16 @@ def add_view_routes(app: FastAPI, upstream_port: Callable[[], int | None], recor
     async def view_socket(websocket: WebSocket) -> None:
         await relay(websocket, upstream_port())
 
-    @app.get("/api/evaluations/{evaluation_id}/recording.viser", tags=["view"])
+    @app.get("/api/evaluations/{evaluation_id}/recording.viser", tags=["view"], response_class=Response, responses={
+        **media("application/octet-stream", {"type": "string", "format": "binary"}, "a viser recording"),
+        **errors(404, 422, 503)})
     def recording(evaluation_id: EvaluationId) -> Response:
         """The episode as a viser recording: open it with ``/viser/?playbackPath=<this URL>``."""
         return Response(recordings.get(evaluation_id, "viser"), media_type="application/octet-stream",
                         headers={"Content-Disposition": f'attachment; filename="evaluation-{evaluation_id}.viser"'})
 
-    @app.get("/api/evaluations/{evaluation_id}/replay.html", tags=["view"])
+    @app.get("/api/evaluations/{evaluation_id}/replay.html", tags=["view"], response_class=Response, responses={
+        **media("text/html", {"type": "string"}, "a page that replays the episode"), **errors(404, 422, 503)})
     def replay(evaluation_id: EvaluationId) -> Response:
         """A standalone HTML page that replays the episode with no server."""
         return Response(recordings.get(evaluation_id, "html"), media_type="text/html",

@@ -83,6 +83,29 @@ def test_a_foreign_host_is_400_and_a_foreign_origin_may_not_mutate(open_server):
     assert httpx.get(f"{url}/api/jobs", headers={"origin": "http://evil.example"}).status_code == 200  # reads
 
 
+def test_the_openapi_document_states_the_edge(open_server, token_server):
+    """The bearer scheme and its 401 only when a token is set; without one, the 403 for another origin."""
+    open_doc = httpx.get(f"{open_server[1]}/openapi.json").json()
+    token_doc = httpx.get(f"{token_server[1]}/openapi.json").json()
+    create = open_doc["paths"]["/api/jobs"]["post"]
+    assert "security" not in create and {"400", "403", "413", "422"} <= set(create["responses"])
+    assert "401" not in create["responses"] and "securitySchemes" not in open_doc["components"]
+    create = token_doc["paths"]["/api/jobs"]["post"]
+    assert create["security"] == [{"bearerToken": []}] and "401" in create["responses"]
+    assert token_doc["components"]["securitySchemes"]["bearerToken"]["scheme"] == "bearer"
+    assert "security" not in token_doc["paths"]["/api/jobs"]["get"]  # reading needs no token
+    error = create["responses"]["409"]["content"]["application/json"]["schema"]
+    assert error == {"$ref": "#/components/schemas/ErrorBody"}
+
+
+def test_an_unsupported_method_is_a_405_allowing_every_method_of_the_path(open_server):
+    _, url = open_server
+    r = httpx.request("OPTIONS", f"{url}/api/jobs/1")
+    assert r.status_code == 405 and r.headers["allow"] == "GET, PATCH, DELETE"
+    r = httpx.put(f"{url}/api/jobs", json={})
+    assert r.status_code == 405 and r.headers["allow"] == "GET, POST" and r.json()["detail"]
+
+
 def _ws(url, **kwargs):
     return connect(url.replace("http", "ws") + "/viser", subprotocols=[SUBPROTOCOL], open_timeout=10, **kwargs)
 

@@ -9,6 +9,7 @@ from sqlalchemy.orm import Session, sessionmaker
 
 from driftlab.db import storage
 from driftlab.export import trajectory_csv, trajectory_json
+from driftlab.server.responses import Evaluation, TrajectoryDocument, errors, media
 from driftlab.server.routes.deps import factory
 from driftlab.server.schemas import EvaluationId
 from driftlab.server.serialize import evaluation_dict, trajectory_metadata
@@ -17,13 +18,15 @@ router = APIRouter(prefix="/api/evaluations", tags=["evaluations"])
 Factory = Annotated[sessionmaker[Session], Depends(factory)]
 
 
-@router.get("/{evaluation_id}")
+@router.get("/{evaluation_id}", response_model=Evaluation, responses=errors(404, 422, 503))
 def get_evaluation(evaluation_id: EvaluationId, db: Factory) -> dict[str, Any]:
     with storage.snapshot(db) as session:
         return evaluation_dict(storage.get_evaluation(session, evaluation_id=evaluation_id))
 
 
-@router.get("/{evaluation_id}/trajectory")
+@router.get("/{evaluation_id}/trajectory", response_model=TrajectoryDocument, responses={
+    **media("text/csv", {"type": "string"}, "format=csv (the default): a '# driftlab: {metadata}' line, then a "
+            "header and one row per control step; format=json: the document below"), **errors(404, 422, 503)})
 def trajectory(evaluation_id: EvaluationId, db: Factory,
                format: str = Query("csv", pattern="^(csv|json)$")) -> Response:  # noqa: A002
     """The stored episode (its seed: the evaluation's ``trajectory_seed``), one row per control step, with its

@@ -12,6 +12,7 @@ from driftlab.core.drivability import check_drivable
 from driftlab.core.tuning import TuningSpec
 from driftlab.db import lifecycle, storage
 from driftlab.server import quotas
+from driftlab.server.responses import Evaluation, Job, errors, media
 from driftlab.server.routes.deps import factory, require_token, wake_runner
 from driftlab.server.schemas import After, JobCreate, JobId, JobPatch, Limit, check_document_types
 from driftlab.server.serialize import evaluation_dict, evaluations_csv, job_dict
@@ -25,7 +26,7 @@ def _conflict(exc: lifecycle.TransitionError) -> HTTPException:
     return HTTPException(409, str(exc))
 
 
-@router.post("", status_code=201, dependencies=Mutating)
+@router.post("", status_code=201, dependencies=Mutating, response_model=Job, responses=errors(409, 422, 503))
 def create_job(body: JobCreate, db: Factory, request: Request) -> dict[str, Any]:
     doc = body.model_dump(exclude_none=True, exclude={"name"})
     check_document_types(doc)
@@ -45,19 +46,19 @@ def create_job(body: JobCreate, db: Factory, request: Request) -> dict[str, Any]
     return out
 
 
-@router.get("")
+@router.get("", response_model=list[Job], responses=errors(503))
 def list_jobs(db: Factory) -> list[dict[str, Any]]:
     with storage.snapshot(db) as session:
         return [job_dict(session, j) for j in storage.list_jobs(session)]
 
 
-@router.get("/{job_id}")
+@router.get("/{job_id}", response_model=Job, responses=errors(404, 422, 503))
 def get_job(job_id: JobId, db: Factory) -> dict[str, Any]:
     with storage.snapshot(db) as session:
         return job_dict(session, storage.get_job(session, job_id=job_id))
 
 
-@router.post("/{job_id}/pause", dependencies=Mutating)
+@router.post("/{job_id}/pause", dependencies=Mutating, response_model=Job, responses=errors(404, 409, 422, 503))
 def pause(job_id: JobId, db: Factory) -> dict[str, Any]:
     """409 unless queued or running; a running job stops after the evaluations in flight."""
     try:
@@ -67,7 +68,7 @@ def pause(job_id: JobId, db: Factory) -> dict[str, Any]:
         raise _conflict(exc) from None
 
 
-@router.post("/{job_id}/resume", dependencies=Mutating)
+@router.post("/{job_id}/resume", dependencies=Mutating, response_model=Job, responses=errors(404, 409, 422, 503))
 def resume(job_id: JobId, db: Factory, request: Request) -> dict[str, Any]:
     """409 unless paused or failed."""
     try:
@@ -79,7 +80,7 @@ def resume(job_id: JobId, db: Factory, request: Request) -> dict[str, Any]:
     return out
 
 
-@router.patch("/{job_id}", dependencies=Mutating)
+@router.patch("/{job_id}", dependencies=Mutating, response_model=Job, responses=errors(404, 422, 503))
 def extend(job_id: JobId, body: JobPatch, db: Factory, request: Request) -> dict[str, Any]:
     """A new budget (>= the evaluations stored); a finished job with more iterations continues."""
     try:
@@ -93,7 +94,7 @@ def extend(job_id: JobId, body: JobPatch, db: Factory, request: Request) -> dict
     return out
 
 
-@router.delete("/{job_id}", status_code=204, dependencies=Mutating)
+@router.delete("/{job_id}", status_code=204, dependencies=Mutating, responses=errors(404, 409, 422, 503))
 def delete(job_id: JobId, db: Factory) -> Response:
     """The job, its evaluations and trajectories; 409 while a runner holds it (pause it first)."""
     try:
@@ -104,7 +105,8 @@ def delete(job_id: JobId, db: Factory) -> Response:
     return Response(status_code=204)
 
 
-@router.get("/{job_id}/evaluations")
+@router.get("/{job_id}/evaluations", response_model=list[Evaluation], responses={
+    **media("text/csv", {"type": "string"}, "format=csv: one row per evaluation"), **errors(404, 422, 503)})
 def list_evaluations(job_id: JobId, db: Factory, after: After = -1, limit: Limit = 1000,
                      format: str = Query("json", pattern="^(csv|json)$")) -> Response:  # noqa: A002
     """Evaluations with index > after, in order, at most ``limit`` (page with the last index you have).
@@ -119,7 +121,7 @@ def list_evaluations(job_id: JobId, db: Factory, after: After = -1, limit: Limit
     return Response(json.dumps(rows), media_type="application/json")
 
 
-@router.get("/{job_id}/best")
+@router.get("/{job_id}/best", response_model=Evaluation, responses=errors(404, 422, 503))
 def best(job_id: JobId, db: Factory) -> dict[str, Any]:
     with storage.snapshot(db) as session:
         storage.get_job(session, job_id=job_id)

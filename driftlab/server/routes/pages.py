@@ -5,6 +5,8 @@ from __future__ import annotations
 from fastapi import APIRouter
 from fastapi.responses import HTMLResponse
 
+from driftlab.server.responses import Health
+
 router = APIRouter()
 
 LANDING_PAGE = """<!doctype html><html><head><meta charset="utf-8"><title>DriftLab</title>
@@ -29,6 +31,6 @@ def landing() -> str:
     return LANDING_PAGE
 
 
-@router.get("/api/health", tags=["health"])
+@router.get("/api/health", tags=["health"], response_model=Health)
 def health() -> dict[str, str]:
     return {"status": "ok"}

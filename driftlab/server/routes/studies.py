@@ -10,6 +10,7 @@ from sqlalchemy.orm import Session, sessionmaker
 from driftlab import studies as study_views
 from driftlab.db import lifecycle, storage, studies
 from driftlab.server import quotas
+from driftlab.server.responses import ComparedJob, Study, StudyListItem, errors
 from driftlab.server.routes.deps import factory, require_token, wake_runner
 from driftlab.server.schemas import StudyCreate, StudyId, check_document_types
 
@@ -18,7 +19,8 @@ Factory = Annotated[sessionmaker[Session], Depends(factory)]
 Mutating = [Depends(require_token)]
 
 
-@router.post("/api/studies", status_code=201, dependencies=Mutating)
+@router.post("/api/studies", status_code=201, dependencies=Mutating, response_model=Study,
+             responses=errors(404, 409, 422, 503))
 def create_study(body: StudyCreate, db: Factory, request: Request) -> dict[str, Any]:
     """ConfigError -> 422 naming the field; an unknown evaluation_id -> 404; nothing is stored on error."""
     doc = body.model_dump(exclude_none=True, exclude={"name"})
@@ -34,20 +36,21 @@ def create_study(body: StudyCreate, db: Factory, request: Request) -> dict[str, 
     return out
 
 
-@router.get("/api/studies")
+@router.get("/api/studies", response_model=list[StudyListItem], responses=errors(503))
 def list_studies(db: Factory) -> list[dict[str, Any]]:
     with storage.snapshot(db) as session:
         return [{"id": s.id, "name": s.name, "kind": s.kind, "status": studies.study_status(session, s)}
                 for s in studies.list_studies(session)]
 
 
-@router.get("/api/studies/{study_id}")
+@router.get("/api/studies/{study_id}", response_model=Study, responses=errors(404, 422, 503))
 def get_study(study_id: StudyId, db: Factory) -> dict[str, Any]:
     with storage.snapshot(db) as session:
         return study_views.study_summary(session, studies.get_study(session, study_id=study_id))
 
 
-@router.post("/api/studies/{study_id}/pause", dependencies=Mutating)
+@router.post("/api/studies/{study_id}/pause", dependencies=Mutating, response_model=Study,
+             responses=errors(404, 409, 422, 503))
 def pause(study_id: StudyId, db: Factory) -> dict[str, Any]:
     """409 unless something of it is queued or running."""
     try:
@@ -57,7 +60,8 @@ def pause(study_id: StudyId, db: Factory) -> dict[str, Any]:
         raise HTTPException(409, str(exc)) from None
 
 
-@router.post("/api/studies/{study_id}/resume", dependencies=Mutating)
+@router.post("/api/studies/{study_id}/resume", dependencies=Mutating, response_model=Study,
+             responses=errors(404, 409, 422, 503))
 def resume(study_id: StudyId, db: Factory, request: Request) -> dict[str, Any]:
     """409 unless something of it is paused or failed."""
     try:
@@ -69,7 +73,8 @@ def resume(study_id: StudyId, db: Factory, request: Request) -> dict[str, Any]:
     return out
 
 
-@router.delete("/api/studies/{study_id}", status_code=204, dependencies=Mutating)
+@router.delete("/api/studies/{study_id}", status_code=204, dependencies=Mutating,
+               responses=errors(404, 409, 422, 503))
 def delete(study_id: StudyId, db: Factory) -> Response:
     """The study with its cells, or its jobs and their evaluations; 409 while any of it runs."""
     try:
@@ -80,20 +85,17 @@ def delete(study_id: StudyId, db: Factory) -> Response:
     return Response(status_code=204)
 
 
-def _job_ids(jobs: str) -> list[int]:
-    try:
-        ids = [int(part) for part in jobs.split(",") if part.strip()]
-    except ValueError:
-        raise HTTPException(422, f"jobs: comma-separated job ids, got {jobs!r}") from None
-    if not ids or len(ids) > study_views.MAX_COMPARED_JOBS or any(i < 1 for i in ids):
-        raise HTTPException(422, f"jobs: 1 to {study_views.MAX_COMPARED_JOBS} job ids >= 1, got {jobs!r}")
-    return ids
+# 1 to MAX_COMPARED_JOBS ids >= 1, comma-separated (spaces allowed): in the schema, so that a client (and
+# schemathesis) knows the form; at most 18 digits, so every id is one SQLite can hold.
+_ID = " *0*[1-9][0-9]{0,17} *"
+JOB_IDS = f"^{_ID}(,{_ID}){{0,{study_views.MAX_COMPARED_JOBS - 1}}}$"
 
 
-@router.get("/api/compare")
-def compare(db: Factory, jobs: str = Query(..., max_length=400, description="job ids, e.g. 1,2,3")
+@router.get("/api/compare", response_model=list[ComparedJob], responses=errors(404, 422, 503))
+def compare(db: Factory, jobs: str = Query(..., max_length=400, pattern=JOB_IDS,
+                                           description=f"job ids, e.g. 1,2,3 (1 to {study_views.MAX_COMPARED_JOBS})")
             ) -> list[dict[str, Any]]:
     """For each job, in the order given: its best (theta, J), n_done and convergence (J and best so far)."""
-    ids = _job_ids(jobs)
+    ids = [int(part) for part in jobs.split(",")]  # the pattern holds: each part is an id
     with storage.snapshot(db) as session:
         return study_views.compare_jobs(session, job_ids=ids)

@@ -1,0 +1,190 @@
+"""What the REST API answers: the response bodies of its routes and of its errors, for the OpenAPI document
+(clients and schemathesis read it) and as the routes' ``response_model`` (FastAPI checks a route's answer
+against it). The bodies themselves are built in driftlab.server.serialize and driftlab.studies."""
+
+from __future__ import annotations
+
+from typing import Annotated, Any, Literal
+
+from pydantic import BaseModel, Field
+
+JobStatusName = Literal["queued", "running", "paused", "finished", "failed"]  # driftlab.db.lifecycle.JobStatus
+Timestamp = Annotated[str, Field(description="ISO 8601, UTC")]
+
+
+class FieldError(BaseModel):
+    field: str = Field(description="the request field, dotted (e.g. iterations, config.plant.mass_scale, body)")
+    message: str
+
+
+class ErrorBody(BaseModel):
+    """Every error: what went wrong in ``detail`` (it starts with the field for a bad request); a 422 about a
+    request field also lists the fields in ``errors``."""
+
+    detail: str
+    errors: list[FieldError] | None = None
+
+
+ERROR_DESCRIPTIONS = {
+    400: "The Host header names another server than this one (127.0.0.1, localhost or DRIFTLAB_ALLOWED_HOSTS).",
+    401: "A token is set (DRIFTLAB_TOKEN) and the request does not carry 'Authorization: Bearer <token>'.",
+    403: "No token is set and a browser on another origin sent the request.",
+    404: "No such job, evaluation or study (or nothing of it yet).",
+    409: "Not in this state: the resource's status does not allow it, or the name is taken.",
+    413: "The body is larger than DRIFTLAB_MAX_BODY_BYTES.",
+    422: "The request is invalid: ``detail`` says why, naming the field.",
+    503: "The storage is unavailable (read-only, full, locked past the timeout); nothing was changed.",
+}
+
+
+def errors(*codes: int) -> dict[int | str, dict[str, Any]]:
+    """The ``responses=`` of a route that can answer with these error codes."""
+    return {code: {"model": ErrorBody, "description": ERROR_DESCRIPTIONS[code]} for code in codes}
+
+
+def media(content_type: str, schema: dict[str, Any], description: str) -> dict[int | str, dict[str, Any]]:
+    """The 200 of a route that answers with another content type than JSON (too)."""
+    return {200: {"description": description, "content": {content_type: {"schema": schema}}}}
+
+
+class Health(BaseModel):
+    status: Literal["ok"]
+
+
+class ViewStatus(BaseModel):
+    clients: int = Field(description="open browser tabs of the 3D view")
+    viser_port: int | None = Field(description="the loopback port of the viser server behind /viser")
+
+
+class Evaluation(BaseModel):
+    id: int
+    job_id: int
+    index: int = Field(description="0-based, in order of completion")
+    theta: dict[str, float]
+    J: float = Field(description="mean over its seeded episodes, a failed one at its failure penalty")
+    status: str
+    completed: bool
+    metrics: dict[str, Any]
+    trigger_points: list[dict[str, Any]]
+    wall_ms: float
+    seeds: list[dict[str, Any]] | None = Field(description="one entry per episode: seed, status, J, ...")
+    trajectory_seed: int | None
+    created_at: Timestamp
+
+
+class BestSummary(BaseModel):
+    """The best evaluation so far, as a job shows it (``id`` is the evaluation's)."""
+
+    id: int
+    index: int
+    theta: dict[str, float]
+    J: float
+    status: str
+    seeds: list[dict[str, Any]] | None
+    trajectory_seed: int | None
+
+
+class Job(BaseModel):
+    id: int
+    name: str
+    status: JobStatusName
+    detail: str | None = Field(description="what a running job does when its status alone does not say")
+    seed: int
+    n_done: int
+    iterations: int
+    progress: float
+    eta_s: float | None
+    error: str | None
+    best: BestSummary | None
+    runner_id: str | None
+    study_id: int | None
+    spec: dict[str, Any] = Field(description="the validated job document (POST /api/jobs), config in full")
+    created_at: Timestamp
+
+
+class TrajectoryDocument(BaseModel):
+    """``format=json`` of a trajectory: one row per control step."""
+
+    metadata: dict[str, Any]
+    columns: list[str]
+    rows: list[list[Any]]
+
+
+class JobBrief(BaseModel):
+    """A job as a study or the comparison shows it."""
+
+    id: int
+    name: str
+    status: JobStatusName
+    seed: int
+    study_id: int | None
+    iterations: int
+    n_done: int
+    best: BestSummary | None
+
+
+class Convergence(BaseModel):
+    index: list[int]
+    J: list[float]
+    completed: list[bool]
+    best_so_far: list[float | None] = Field(description="the lowest completed J so far (null before the first)")
+
+
+class ComparedJob(JobBrief):
+    convergence: Convergence
+
+
+class Band(BaseModel):
+    """Median and quartiles of the jobs' best-so-far curves, at the iterations where any has a value."""
+
+    iterations: list[int]
+    median: list[float]
+    q25: list[float]
+    q75: list[float]
+    n: list[int]
+
+
+class StudyListItem(BaseModel):
+    id: int
+    name: str
+    kind: Literal["seeds", "robustness"]
+    status: str
+
+
+class _StudyCommon(BaseModel):
+    id: int
+    name: str
+    status: str
+    error: str | None
+    spec: dict[str, Any]
+    created_at: Timestamp
+    job_ids: list[int]
+
+
+class SeedsStudy(_StudyCommon):
+    kind: Literal["seeds"]
+    jobs: list[JobBrief]
+    band: Band
+    final_best_J: list[float]
+
+
+class Cell(BaseModel):
+    index: int
+    settings: dict[str, Any] = Field(description="dotted config key -> value")
+    status: str
+    J: float | None
+    n_completed: int | None
+    seeds: list[dict[str, Any]] | None
+    wall_ms: float | None
+
+
+class RobustnessStudy(_StudyCommon):
+    kind: Literal["robustness"]
+    theta: dict[str, float]
+    grid: dict[str, list[Any]]
+    n_cells: int
+    n_done: int
+    cells: list[Cell]
+
+
+Study = Annotated[SeedsStudy | RobustnessStudy, Field(discriminator="kind")]

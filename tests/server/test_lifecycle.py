@@ -282,8 +282,8 @@ def test_schemathesis_all_checks_pass(tmp_path):
               "DRIFTLAB_MAX_QUEUED_JOBS": "20", "DRIFTLAB_TOKEN": ST_TOKEN}
     proc, url = start_server(tmp_path / "st.db", free_port(), env_extra=quotas, extra_args=("--workers", "1"))
     try:
-        out = subprocess.run(["st", "--config-file", str(SCHEMATHESIS_CONFIG), "run", f"{url}/openapi.json", "--checks", "all",
-                              "--max-examples", "10", "--seed", "1", "--workers", "1", "--no-color",
+        out = subprocess.run(["st", "--config-file", str(SCHEMATHESIS_CONFIG), "run", f"{url}/openapi.json",
+                              "--checks", "all", "--max-examples", "10", "--seed", "1", "--workers", "1", "--no-color",
                               "--request-timeout", "30", "--generation-database", "none",
                               "-H", f"Authorization: Bearer {ST_TOKEN}"],
                              capture_output=True, text=True, timeout=600, cwd=tmp_path,

@@ -4,7 +4,11 @@ episodes on 2 worker processes. Prints, per kind of request, the count, 5xx coun
 Readers cycle through what a dashboard and a script read (health, jobs, the running job, its evaluations since a
 point, its best, one trajectory); writers create a small job, raise its budget, pause it and delete it.
 
-Run: python benchmarks/bench_load.py [--seconds 120] [--readers 26] [--writers 4] [--workers 2]
+Run: python benchmarks/bench_load.py [--seconds 120] [--readers 26] [--writers 4] [--workers 2] [--processes]
+--db FILE --read-job ID: the readers read a stored job of a copy of FILE (a 500-evaluation job's full list is
+~750 kB of JSON) while a new job runs.
+--processes: each client a process of its own (30 Python processes on the same 2 cores, as 30 separate scripts
+would be), instead of 30 concurrent clients in one event loop.
 """
 
 from __future__ import annotations
@@ -12,6 +16,7 @@ from __future__ import annotations
 import argparse
 import asyncio
 import os
+import shutil
 import socket
 import statistics
 import subprocess
@@ -78,16 +83,47 @@ async def _load(url: str, job_id: int, seconds: float, readers: int, writers: in
     return out
 
 
+def _one_client(args: tuple[str, int, float, bool]):
+    """A client in a process of its own: its samples."""
+    url, job_id, seconds, writer = args
+    out: dict[tuple[str, str], list[tuple[float, int]]] = defaultdict(list)
+
+    async def run():
+        async with httpx.AsyncClient(base_url=url, timeout=60.0) as client:
+            stop_at = time.monotonic() + seconds
+            await (_writer(client, stop_at, out) if writer else _reader(client, job_id, stop_at, out))
+
+    asyncio.run(run())
+    return dict(out)
+
+
+def _load_in_processes(url: str, job_id: int, seconds: float, readers: int, writers: int):
+    from multiprocessing import Pool
+
+    out: dict[tuple[str, str], list[tuple[float, int]]] = defaultdict(list)
+    jobs = [(url, job_id, seconds, False)] * readers + [(url, job_id, seconds, True)] * writers
+    with Pool(len(jobs)) as pool:
+        for samples in pool.map(_one_client, jobs):
+            for key, values in samples.items():
+                out[key].extend(values)
+    return out
+
+
 def main() -> None:
     parser = argparse.ArgumentParser()
     parser.add_argument("--seconds", type=float, default=120.0)
     parser.add_argument("--readers", type=int, default=26)
     parser.add_argument("--writers", type=int, default=4)
     parser.add_argument("--workers", type=int, default=2)
+    parser.add_argument("--processes", action="store_true")
+    parser.add_argument("--db", help="start from a copy of this database")
+    parser.add_argument("--read-job", type=int, help="the stored job the readers read (default: the running one)")
     args = parser.parse_args()
     folder = tempfile.mkdtemp(prefix="driftlab-load-")
     port = _free_port()
     url = f"http://127.0.0.1:{port}"
+    if args.db:
+        shutil.copy(args.db, os.path.join(folder, "load.db"))
     proc = subprocess.Popen([sys.executable, "-m", "driftlab.cli", "serve", "--port", str(port), "--db",
                              os.path.join(folder, "load.db"), "--workers", str(args.workers)],
                             env={**os.environ, "OMP_NUM_THREADS": "1"}, stdout=subprocess.DEVNULL,
@@ -102,12 +138,18 @@ def main() -> None:
         job = httpx.post(f"{url}/api/jobs", json={"iterations": 500, "name": "under-load"}).json()
         while httpx.get(f"{url}/api/jobs/{job['id']}").json()["n_done"] < 3:  # episodes in flight, warm
             time.sleep(0.5)
-        out = asyncio.run(_load(url, job["id"], args.seconds, args.readers, args.writers))
+        read_job = args.read_job or job["id"]
+        if args.processes:
+            out = _load_in_processes(url, read_job, args.seconds, args.readers, args.writers)
+        else:
+            out = asyncio.run(_load(url, read_job, args.seconds, args.readers, args.writers))
         done = httpx.get(f"{url}/api/jobs/{job['id']}").json()["n_done"]
     finally:
         proc.terminate()
         proc.wait(timeout=60)
-    print(f"{args.readers} readers, {args.writers} writers, {args.seconds:g} s, job on {args.workers} workers "
+    total = sum(len(v) for v in out.values())
+    print(f"{args.readers} readers, {args.writers} writers ({'processes' if args.processes else 'one event loop'}), "
+          f"{args.seconds:g} s, {total / args.seconds:.0f} requests/s, job on {args.workers} workers "
           f"({done} evaluations done by the end)")
     reads = [s for (kind, _), v in out.items() if kind == "read" for s in v]
     for name, samples in [(("all", "reads"), reads)] + sorted(out.items()):

@@ -16,6 +16,7 @@ from starlette.routing import Match
 from driftlab.core.errors import ConfigError
 from driftlab.db import storage
 from driftlab.server.edge import EdgeGuard
+from driftlab.server.evaluation_pages import EvaluationPages
 from driftlab.server.openapi import document_edge
 from driftlab.server.routes import evaluations, jobs, pages, studies
 from driftlab.server.view import RecordingCache, add_view_routes
@@ -82,6 +83,7 @@ def create_app(db_url: str, *, workers: int | None = 2, start_worker: bool = Tru
     app.add_middleware(EdgeGuard, token=settings.token, allowed_hosts=settings.allowed_host_names(),
                        max_body_bytes=settings.max_body_bytes)
     app.state.factory = factory
+    app.state.evaluation_pages = EvaluationPages()
     app.state.runner = runner
     app.state.recordings = RecordingCache(factory)
     app.include_router(pages.router)

@@ -7,11 +7,16 @@ import secrets
 from fastapi import HTTPException, Request
 from sqlalchemy.orm import Session, sessionmaker
 
+from driftlab.server.evaluation_pages import EvaluationPages
 from driftlab.settings import Settings
 
 
 def factory(request: Request) -> sessionmaker[Session]:
     return request.app.state.factory
+
+
+def evaluation_pages(request: Request) -> EvaluationPages:
+    return request.app.state.evaluation_pages
 
 
 def wake_runner(request: Request) -> None:

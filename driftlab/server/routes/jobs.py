@@ -2,7 +2,6 @@
 
 from __future__ import annotations
 
-import json
 from typing import Annotated, Any
 
 from fastapi import APIRouter, Depends, HTTPException, Query, Request, Response
@@ -12,13 +11,15 @@ from driftlab.core.drivability import check_drivable
 from driftlab.core.tuning import TuningSpec
 from driftlab.db import lifecycle, storage
 from driftlab.server import quotas
+from driftlab.server.evaluation_pages import EvaluationPages
 from driftlab.server.responses import Evaluation, Job, errors, media
-from driftlab.server.routes.deps import factory, require_token, wake_runner
+from driftlab.server.routes.deps import evaluation_pages, factory, require_token, wake_runner
 from driftlab.server.schemas import After, JobCreate, JobId, JobPatch, Limit, check_document_types
 from driftlab.server.serialize import evaluation_dict, evaluations_csv, job_dict
 
 router = APIRouter(prefix="/api/jobs", tags=["jobs"])
 Factory = Annotated[sessionmaker[Session], Depends(factory)]
+Pages = Annotated[EvaluationPages, Depends(evaluation_pages)]
 Mutating = [Depends(require_token)]
 
 
@@ -107,18 +108,18 @@ def delete(job_id: JobId, db: Factory) -> Response:
 
 @router.get("/{job_id}/evaluations", response_model=list[Evaluation], responses={
     **media("text/csv", {"type": "string"}, "format=csv: one row per evaluation"), **errors(404, 422, 503)})
-def list_evaluations(job_id: JobId, db: Factory, after: After = -1, limit: Limit = 1000,
+def list_evaluations(job_id: JobId, db: Factory, pages: Pages, after: After = -1, limit: Limit = 1000,
                      format: str = Query("json", pattern="^(csv|json)$")) -> Response:  # noqa: A002
     """Evaluations with index > after, in order, at most ``limit`` (page with the last index you have).
     ``format=csv``: one row per evaluation, theta at full precision (what you copy reproduces)."""
     with storage.snapshot(db) as session:
+        if format == "json":  # each evaluation's JSON made once (driftlab.server.evaluation_pages)
+            return Response(pages.page(session, job_id=job_id, after=after, limit=limit),
+                            media_type="application/json")
         storage.get_job(session, job_id=job_id)
         rows = [evaluation_dict(e) for e in storage.evaluations(session, job_id=job_id, after=after, limit=limit)]
-    if format == "csv":
-        return Response(evaluations_csv(rows), media_type="text/csv", headers={
-            "Content-Disposition": f'attachment; filename="job-{job_id}-evaluations.csv"'})
-    # Plain JSON types already: skip FastAPI's generic encoder, which dominates the cost at 500 rows.
-    return Response(json.dumps(rows), media_type="application/json")
+    return Response(evaluations_csv(rows), media_type="text/csv", headers={
+        "Content-Disposition": f'attachment; filename="job-{job_id}-evaluations.csv"'})
 
 
 @router.get("/{job_id}/best", response_model=Evaluation, responses=errors(404, 422, 503))

@@ -8,6 +8,8 @@ import pytest
 
 from driftlab.export import read_csv_metadata
 
+pytestmark = pytest.mark.e2e  # real processes: servers, browsers, Dask, the CLI
+
 EPISODE_KEYS = {"status", "J", "theta", "seed", "completed_fraction", "mean_abs_e_m", "max_abs_e_m",
                 "mean_abs_beta_err_rad", "beta_flip_s", "min_speed_mps", "trigger_times_s", "wall_ms"}
 

@@ -11,6 +11,8 @@ from driftlab.core.convergence import best_so_far
 from driftlab.core.robust import tuning_seeds
 from driftlab.db import storage, studies
 
+pytestmark = pytest.mark.e2e  # real processes: servers, browsers, Dask, the CLI
+
 
 def _run(*args):
     return subprocess.run([sys.executable, "-m", "driftlab.cli", *args], capture_output=True, text=True, timeout=300)

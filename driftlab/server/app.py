@@ -60,21 +60,24 @@ def _allowed_methods(request: Request) -> str:
     return ", ".join(allowed)
 
 
-def create_app(db_url: str, *, workers: int | None = 2, start_worker: bool = True,
+def create_app(db_url: str, *, workers: int | None = 2, start_worker: bool = True, start_view: bool = True,
                settings: Settings | None = None) -> FastAPI:
+    """The app; ``start_worker=False, start_view=False`` starts no process and no thread (in-process tests)."""
     settings = settings or Settings()
     factory = storage.open_database(db_url)
     runner = JobRunner(factory, workers=workers, dask_address=settings.dask_address)
 
     @asynccontextmanager
     async def lifespan(app: FastAPI):
-        _start_view(app, factory)
+        if start_view:
+            _start_view(app, factory)
         if start_worker:
             runner.start()
         yield
         if start_worker:
             runner.stop()
-        _stop_view(app)
+        if start_view:
+            _stop_view(app)
 
     app = FastAPI(title="DriftLab", version="0.1.0", lifespan=lifespan,
                   description="Learning-based inertia drift: tuning jobs, evaluations, trajectories.")

@@ -115,6 +115,7 @@ def test_the_plant_key_brings_the_cars_controller_and_switching_back_restores_th
     assert kept.mpc.q_sideslip == 500.0 and kept.mpc.q_steer == MpcConfig().q_steer  # mpc keys given: kept
 
 
+@pytest.mark.e2e
 @pytest.mark.parametrize(("beta", "expected"), [("-0.5", None), ("-0.4", "steers into the turn")])
 def test_driftlab_equilibrium_prints_the_plants_drift_family(beta, expected):
     out = subprocess.run([sys.executable, "-m", "driftlab.cli", "equilibrium", "--plant", "commonroad_std",

@@ -3,6 +3,8 @@
 import subprocess
 import sys
 
+import pytest
+
 from driftlab.core.compiled import episode_kernels_cached
 from driftlab.core.config import EpisodeConfig, Theta
 from driftlab.core.episode import run_episode
@@ -10,6 +12,7 @@ from driftlab.core.episode import run_episode
 CHECK = "from driftlab.core.compiled import episode_kernels_cached; print(episode_kernels_cached())"
 
 
+@pytest.mark.e2e
 def test_an_empty_cache_means_compiling_and_a_warm_one_does_not(tmp_path):
     run_episode(Theta(), EpisodeConfig.preset(plant="nominal", controller="paper"))  # this process's cache: warm
     assert episode_kernels_cached() is True

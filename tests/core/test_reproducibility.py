@@ -33,6 +33,7 @@ def test_same_theta_same_result_before_and_after_other_episodes(reference):
     assert np.array_equal(again.trajectory, reference.trajectory)
 
 
+@pytest.mark.e2e
 def test_same_result_in_a_fresh_process(reference):
     theta = ",".join(f"{k}={v!r}" for k, v in CLIFF_THETA.as_dict().items())
     out = subprocess.run([sys.executable, "-m", "driftlab.cli", "episode", "--theta", theta, "--seed", "3"],
@@ -53,6 +54,7 @@ np.save(sys.argv[1], np.vstack([np.full((1, result.trajectory.shape[1]), result.
 """
 
 
+@pytest.mark.e2e
 @pytest.mark.parametrize("threads", [None, "1", "2"])
 def test_same_bits_whatever_the_blas_thread_count(reference, threads, tmp_path):
     # OpenBLAS with two threads sums a product's partial results in another order: before the episode pinned
@@ -67,6 +69,7 @@ def test_same_bits_whatever_the_blas_thread_count(reference, threads, tmp_path):
     assert np.array_equal(saved[1:], reference.trajectory)
 
 
+@pytest.mark.e2e
 def test_same_result_in_a_pool_worker_after_other_episodes(reference):
     executor = LocalProcessExecutor(1)
     try:

@@ -14,6 +14,8 @@ from websockets.sync.client import connect
 
 from tests.server_process import free_port, start_server, wait_status
 
+pytestmark = pytest.mark.e2e  # real processes: servers, browsers, Dask, the CLI
+
 TOKEN = "edge-test-token"
 SUBPROTOCOL = f"viser-v{viser.__version__}"
 

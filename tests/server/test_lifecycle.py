@@ -14,6 +14,8 @@ import pytest
 
 from tests.server_process import free_port, start_server, wait_released, wait_status
 
+pytestmark = pytest.mark.e2e  # real processes: servers, browsers, Dask, the CLI
+
 
 def _cli(*args, env=None):
     return subprocess.run([sys.executable, "-m", "driftlab.cli", *args], capture_output=True, text=True,

@@ -17,6 +17,8 @@ import pytest
 from driftlab.core.robust import tuning_seeds
 from tests.server_process import free_port, start_server, wait_for
 
+pytestmark = pytest.mark.e2e  # real processes: servers, browsers, Dask, the CLI
+
 JOB_SPEC = {"iterations": 5, "seed_points": 5, "robust_samples": 1, "confirm_samples": 0}
 
 

@@ -13,6 +13,8 @@ from playwright.sync_api import sync_playwright
 from tests.server_process import free_port, start_server
 from tests.web.test_view_browser import CHROMIUM, CHROMIUM_ARGS, SCREENSHOT_DIR, ConsoleLog
 
+pytestmark = pytest.mark.e2e  # real processes: servers, browsers, Dask, the CLI
+
 JOB_SPEC = {"iterations": 6, "seed_points": 6, "robust_samples": 1, "confirm_samples": 0}
 GRID = {"plant.friction_scale": [0.9, 1.0, 1.1, 1.2], "plant.mass_scale": [0.9, 1.0, 1.1]}
 

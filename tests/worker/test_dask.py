@@ -12,6 +12,8 @@ import pytest
 
 from driftlab.db import storage
 
+pytestmark = pytest.mark.e2e  # real processes: servers, browsers, Dask, the CLI
+
 BIN = os.path.dirname(sys.executable)
 ENV = {**os.environ, "OMP_NUM_THREADS": "1", "PATH": BIN + os.pathsep + os.environ["PATH"]}
 

@@ -1,0 +1,51 @@
+"""The REST API's contract in-process (TestClient on a real SQLite file, no worker): bad requests name the field and
+store nothing, unknown ids are 404, the token guards every mutation."""
+
+import pytest
+
+from tests.server.conftest import in_process_client
+
+
+@pytest.mark.parametrize(("body", "field"), [
+    ({"iterations": "many"}, "iterations"),
+    ({"iterations": 0}, "iterations"),
+    ({"iterations": 10**6}, "iterations"),
+    ({"iterations": 5, "bounds": {"k": [0.1, 0.05]}}, "bounds.k"),
+    ({"iterations": 5, "bounds": {"speed": [0, 1]}}, "bounds.speed"),
+    ({"iterations": 5, "config": {"plant.no_such_key": 1}}, "plant.no_such_key"),
+    ({"iterations": 5, "config": {"plant.friction_scale": 9.0}}, "plant.friction_scale"),
+    ({"iterations": 5, "colour": "red"}, "colour"),
+    ({"iterations": 5, "config": {"plant.friction_scale": 1.2}}, "not drivable"),
+    ({"iterations": 5, "config": {"plant.model": "commonroad_std"}}, "steers into the turn"),  # sideslip 0.4
+    ({"iterations": 5, "config": {"plant.model": "commonroad_std", "plant.commonroad_vehicle": 1,
+                                  "scenario.sideslip_rad": 0.5}}, "front-wheel drive"),
+])
+def test_bad_requests_name_the_field_and_store_nothing(api, body, field):
+    r = api.post("/api/jobs", json=body)
+    assert r.status_code == 422, r.text
+    assert field in r.json()["detail"]
+    assert api.get("/api/jobs").json() == []
+
+
+def test_a_good_request_is_stored_queued(api):
+    r = api.post("/api/jobs", json={"iterations": 3, "name": "queued"})
+    assert r.status_code == 201, r.text
+    assert [(j["name"], j["status"], j["n_done"]) for j in api.get("/api/jobs").json()] == [("queued", "queued", 0)]
+
+
+def test_unknown_ids_are_404(api):
+    assert api.get("/api/jobs/999999").status_code == 404
+    assert api.post("/api/jobs/999999/pause").status_code == 404
+    assert api.get("/api/evaluations/999999").status_code == 404
+    assert api.get("/api/evaluations/999999/trajectory").status_code == 404
+
+
+def test_token_guards_mutating_endpoints(tmp_path):
+    with in_process_client(tmp_path / "tok.db", token="s3cret") as client:
+        assert client.post("/api/jobs", json={"iterations": 1}).status_code == 401
+        assert client.get("/api/jobs").status_code == 200  # reads stay open
+        ok = client.post("/api/jobs", json={"iterations": 1}, headers={"Authorization": "Bearer s3cret"})
+        assert ok.status_code == 201
+        job_id = ok.json()["id"]
+        assert client.delete(f"/api/jobs/{job_id}").status_code == 401
+        assert client.delete(f"/api/jobs/{job_id}", headers={"Authorization": "Bearer s3cret"}).status_code == 204

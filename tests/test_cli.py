@@ -158,8 +158,8 @@ def test_rescore_of_an_unknown_job_is_one_line_exit_2(tmp_path):
     ("paper", ["--seed-points", "7", "--iterations", "30"], {"iterations": 30, "seed_points": 7, "active_set": 400}),
 ])
 def test_tune_presets_set_the_bo_budget_and_explicit_options_win(preset, extra, expected):
-    from driftlab.cli import _tuning_spec, build_parser
+    from driftlab.cli import build_parser, tuning_spec
 
     args = build_parser().parse_args(["tune", "--preset", preset, *extra])
-    spec = _tuning_spec(args).to_dict()
+    spec = tuning_spec(args).to_dict()
     assert {k: spec[k] for k in expected} == expected

@@ -1,0 +1,7 @@
+"""`python -m driftlab.cli`."""
+
+import sys
+
+from driftlab.cli import main
+
+sys.exit(main())

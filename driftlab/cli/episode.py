@@ -1,0 +1,75 @@
+"""`driftlab equilibrium` and `driftlab episode`: one drift equilibrium, one episode (JSON, CSV, plot)."""
+
+from __future__ import annotations
+
+import argparse
+import json
+import os
+import sys
+from typing import Any
+
+from driftlab.cli.options import PLOT_SUFFIXES, check_output_file, episode_config, finite, key_values
+from driftlab.core.config import Theta, config_to_dict
+from driftlab.core.drivability import check_drivable
+from driftlab.core.equilibrium import drift_equilibrium
+from driftlab.core.errors import ConfigError, NoEquilibriumError
+from driftlab.core.vehicle import pack_params
+
+
+def cmd_equilibrium(args: argparse.Namespace) -> int:
+    config = episode_config(args)
+    try:
+        eq = drift_equilibrium(args.radius, args.beta, pack_params(config.vehicle))
+    except NoEquilibriumError as exc:
+        sys.stderr.write(f"driftlab: error: {exc}\n")
+        return 2
+    out: dict[str, Any] = eq.as_dict()
+    if args.plant and config.plant.model != "driftlab":
+        from driftlab.core.commonroad.family import family_summary
+
+        plant = family_summary(config.plant, args.radius, args.beta)
+        if "V" in plant:
+            plant["mismatch"] = {"dV": plant["V"] - eq.speed_mps, "ddelta": plant["delta"] - eq.steer_rad,
+                                 "dFxr": plant["drive_n"] - eq.drive_force_n}
+        out["plant"] = plant
+    elif args.plant:
+        try:
+            plant_eq = drift_equilibrium(args.radius, args.beta, config.plant.packed_params(config.vehicle))
+            out["plant"] = plant_eq.as_dict()
+            out["plant"]["mismatch"] = {"dV": plant_eq.speed_mps - eq.speed_mps,
+                                        "ddelta": plant_eq.steer_rad - eq.steer_rad,
+                                        "dFxr": plant_eq.drive_force_n - eq.drive_force_n}
+        except NoEquilibriumError as exc:
+            out["plant"] = {"error": str(exc)}
+    print(json.dumps(out))
+    return 0
+
+
+def cmd_episode(args: argparse.Namespace) -> int:
+    from driftlab.core.episode import COLUMNS, run_episode
+    from driftlab.core.track import FigureEight
+
+    config = episode_config(args)
+    theta = Theta.from_mapping(key_values(args.theta.split(",") if args.theta else [], "--theta"))
+    for option, path in (("--csv", args.csv), ("--plot", args.plot)):  # before the episode runs, not after
+        check_output_file(option, path)
+    if args.plot and os.path.splitext(args.plot)[1].lower() not in PLOT_SUFFIXES:
+        raise ConfigError(f"--plot {args.plot}: the file name must end in one of {', '.join(PLOT_SUFFIXES)}")
+    check_drivable(config)
+    result = run_episode(theta, config, seed=args.seed)
+    print(json.dumps(finite(result.summary())))
+    if args.csv:
+        from driftlab.export import trajectory_csv
+
+        metadata = {"theta": theta.as_dict(), "seed": args.seed, "J_episode": result.J, "episode_status": result.status,
+                    "J": result.J, "status": result.status, "n_seeds": 1, "config": config_to_dict(config)}
+        with open(args.csv, "w", newline="") as handle:
+            handle.write(trajectory_csv(list(COLUMNS), result.trajectory, metadata))
+    if args.plot:
+        from driftlab.plotting import plot_episode
+
+        scenario = config.scenario
+        plot_episode(result, FigureEight(scenario.left_radius_m, scenario.right_radius_m), args.plot,
+                     title=f"{args.plant} plant, {args.controller} controller, seed {args.seed}\n"
+                           f"theta {theta.as_dict()}\n{result.status}, J = {result.J:.3f}")
+    return 0

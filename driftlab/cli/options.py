@@ -1,0 +1,132 @@
+"""What the subcommands share: argument types, the config from --plant and --set, the database and the cluster."""
+
+from __future__ import annotations
+
+import argparse
+import math
+import os
+import sys
+from typing import Any
+
+from driftlab.core.config import PLANT_PRESETS, EpisodeConfig, apply_overrides
+from driftlab.core.errors import ConfigError
+from driftlab.core.robust import MAX_ROBUST_SAMPLES
+from driftlab.core.tuning import DEFAULT_CONFIRM_SAMPLES, DEFAULT_ROBUST_SAMPLES
+
+DB_HELP = ("SQLite file or SQLAlchemy URL (default: DRIFTLAB_DATABASE_URL, else the shared "
+           "~/.local/share/driftlab/driftlab.db)")
+
+
+def int_in(lo: int, hi: int):
+    """An argparse type: an integer in [lo, hi], with a one-line error naming the range."""
+    def parse(text: str) -> int:
+        try:
+            value = int(text)
+        except ValueError:
+            raise argparse.ArgumentTypeError(f"must be an integer in [{lo}, {hi}], got {text!r}") from None
+        if not lo <= value <= hi:
+            raise argparse.ArgumentTypeError(f"must be an integer in [{lo}, {hi}], got {value}")
+        return value
+    return parse
+
+
+DASK_HELP = ("run episodes on this Dask scheduler, e.g. tcp://HOST:8786 (default: DRIFTLAB_DASK_ADDRESS, else a "
+             "local process pool)")
+
+
+class Parser(argparse.ArgumentParser):
+    """argparse that reports bad arguments on one line with exit code 2."""
+
+    def error(self, message: str) -> None:  # type: ignore[override]
+        sys.stderr.write(f"driftlab: error: {message}\n")
+        sys.exit(2)
+
+
+def finite(value: Any) -> Any:
+    """JSON has no NaN: non-finite numbers become null."""
+    if isinstance(value, float) and not math.isfinite(value):
+        return None
+    if isinstance(value, list):
+        return [finite(v) for v in value]
+    if isinstance(value, dict):
+        return {k: finite(v) for k, v in value.items()}
+    return value
+
+
+PLOT_SUFFIXES = (".png", ".pdf", ".svg")
+
+
+def check_output_file(option: str, path: str | None) -> None:
+    """A file we may write: not a folder, in a folder that exists."""
+    if not path:
+        return
+    folder = os.path.dirname(os.path.abspath(path))
+    if os.path.isdir(path):
+        raise ConfigError(f"{option} {path}: is a folder; give a file name")
+    if not os.path.isdir(folder):
+        raise ConfigError(f"{option} {path}: the folder {folder} does not exist")
+
+
+def key_values(items: list[str], what: str) -> dict[str, str]:
+    pairs = {}
+    for item in items:
+        key, sep, value = item.partition("=")
+        if not sep or not key.strip():
+            raise ConfigError(f"{what} expects key=value, got {item!r}")
+        if key.strip() in pairs:
+            raise ConfigError(f"{what} sets {key.strip()!r} twice")
+        pairs[key.strip()] = value.strip()
+    return pairs
+
+
+PLANT_CHOICES = tuple(PLANT_PRESETS)
+
+
+def episode_config(args: argparse.Namespace) -> EpisodeConfig:
+    preset = EpisodeConfig.preset(args.plant or "default", getattr(args, "controller", "default"))
+    return apply_overrides(preset, key_values(args.set or [], "--set"))
+
+
+def dask_address(args: argparse.Namespace) -> str | None:
+    from driftlab.settings import Settings
+
+    return args.dask or Settings().dask_address
+
+
+def db_url(db: str | None) -> str:
+    from driftlab.settings import database_url
+
+    return database_url(db)
+
+
+def add_job_options(parser: argparse.ArgumentParser) -> None:
+    """The options of a tuning job's specification (shared by `tune` and `study seeds`), but its seed."""
+    parser.add_argument("--iterations", type=int, help="evaluations in total (default 500 for a new job); on a "
+                        "stored job a new budget: a finished job continues to it")
+    parser.add_argument("--preset", choices=("default", "paper"), default="default",
+                        help="paper: the paper's BO, 500 iterations, 20 space-filling points, active set 400, "
+                             "theta's four parameters only (default: 12 space-filling points, model correction on); "
+                             "options given explicitly win")
+    parser.add_argument("--model-correction", choices=("on", "off"),
+                        help="also learn the controller model's friction and tyre-C scales (theta.model_mu_scale, "
+                             "theta.model_c_scale); default on, off with --preset paper")
+    parser.add_argument("--deterministic", action="store_true", default=None,
+                        help="one evaluation at a time (its seeds still in parallel): the thetas depend on the seed "
+                             "and settings only, not on the number of workers or which episode finishes first")
+    parser.add_argument("--seed-points", type=int, help="space-filling evaluations before the GP (default 12)")
+    parser.add_argument("--active-set", type=int, help="most evaluations the GP is fit on (default 400)")
+    parser.add_argument("--robust-samples", type=int, default=DEFAULT_ROBUST_SAMPLES, metavar="N",
+                        help=f"seeded episodes per evaluation, 1..{MAX_ROBUST_SAMPLES} (default "
+                             f"{DEFAULT_ROBUST_SAMPLES}): J is their mean and an evaluation completes only if all "
+                             "of them do")
+    parser.add_argument("--confirm-samples", type=int, default=DEFAULT_CONFIRM_SAMPLES, metavar="N",
+                        help=f"more seeds an evaluation must also complete before it counts as the best so far "
+                             f"(0..64, default {DEFAULT_CONFIRM_SAMPLES}; 0: off)")
+    parser.add_argument("--plant", choices=PLANT_CHOICES, default="default",
+                        help="the plant preset the --set overrides start from (commonroad_std: CommonRoad's STD, "
+                             "vehicle 2, sideslip 0.5, needs the commonroad extra)")
+    parser.add_argument("--controller", choices=("default", "paper"), default="default")
+    parser.add_argument("--set", action="append", metavar="KEY=VALUE",
+                        help="config override, e.g. plant.steer_lag_s=0.02")
+    parser.add_argument("--bound", action="append", metavar="NAME=LO:HI", help="theta bound, e.g. k=0:0.1 or "
+                        "model_c_scale=0.9:1.2")

@@ -1,0 +1,45 @@
+"""`driftlab serve`: the REST API, the job runner and the 3D view in one process."""
+
+from __future__ import annotations
+
+import argparse
+
+from driftlab.cli.options import db_url
+from driftlab.core.errors import ConfigError
+
+
+def cmd_serve(args: argparse.Namespace) -> int:
+    import socket
+
+    import uvicorn
+
+    from driftlab.server.app import create_app
+    from driftlab.settings import Settings
+
+    settings = Settings()
+    if args.host not in ("127.0.0.1", "localhost", "::1") and not settings.token:
+        # Reachable from other machines: every client there could start, pause and delete jobs.
+        raise ConfigError(f"--host {args.host}: serving beyond this machine needs DRIFTLAB_TOKEN (mutations then "
+                          "need 'Authorization: Bearer <token>', the view /viser/?token=<token>); or bind 127.0.0.1")
+    # Bind before touching any job: a second server on a taken port must leave the first one's jobs alone.
+    family = socket.AF_INET6 if ":" in args.host else socket.AF_INET
+    sock = socket.socket(family, socket.SOCK_STREAM)
+    sock.setsockopt(socket.SOL_SOCKET, socket.SO_REUSEADDR, 1)
+    try:
+        sock.bind((args.host, args.port))
+    except OSError as exc:
+        sock.close()
+        raise ConfigError(f"--port {args.port} on {args.host}: {exc.strerror or exc}") from None
+    sock.listen(2048)
+    sock.set_inheritable(True)
+    if args.dask:
+        settings = settings.model_copy(update={"dask_address": args.dask})
+    workers = args.workers or (None if settings.dask_address else 2)
+    app = create_app(db_url(args.db), workers=workers, settings=settings)
+    shown_host = "localhost" if args.host == "0.0.0.0" else args.host
+    login = "?token=<DRIFTLAB_TOKEN>" if settings.token else ""
+    print(f"DriftLab: the 3D view on http://{shown_host}:{args.port}/viser/{login}, the API docs on "
+          f"http://{shown_host}:{args.port}/docs", flush=True)
+    server = uvicorn.Server(uvicorn.Config(app, log_level="info"))
+    server.run(sockets=[sock])
+    return 0

@@ -1,0 +1,142 @@
+"""`driftlab tune`, `rescore` and `report`: a tuning job in this process, fresh seeds for its best, the tables."""
+
+from __future__ import annotations
+
+import argparse
+import json
+import os
+import sys
+import time
+
+from driftlab.cli.options import dask_address, db_url, episode_config, finite
+from driftlab.core.drivability import check_drivable
+from driftlab.core.errors import ConfigError
+from driftlab.shutdown import stop_on_sigterm
+
+
+def tuning_spec(args: argparse.Namespace):
+    from driftlab.core.tuning import TuningSpec
+
+    config = episode_config(args)
+    check_drivable(config)
+    bounds = {}
+    for item in args.bound or []:
+        name, _, pair = item.partition("=")
+        lo, _, hi = pair.partition(":")
+        bounds[name.strip()] = [lo, hi]
+    from driftlab.core.tuning import DEFAULT_SEED_POINTS, PAPER_PRESET
+
+    preset = PAPER_PRESET if args.preset == "paper" else {"iterations": 500, "seed_points": DEFAULT_SEED_POINTS,
+                                                          "active_set": 400, "model_correction": True}
+    iterations = preset["iterations"] if args.iterations is None else args.iterations
+    seed_points = preset["seed_points"] if args.seed_points is None else args.seed_points
+    active_set = preset["active_set"] if args.active_set is None else args.active_set
+    correction = preset["model_correction"] if args.model_correction is None else args.model_correction == "on"
+    return TuningSpec(iterations=iterations, seed_points=seed_points, active_set=active_set,
+                      seed=args.seed, robust_samples=args.robust_samples, confirm_samples=args.confirm_samples,
+                      bounds=bounds, config=config, model_correction=correction,
+                      deterministic=bool(args.deterministic))
+
+
+def open_tuning_job(factory, args: argparse.Namespace, runner: str) -> tuple[int, str]:
+    """Create the job, or take up the stored one of that name (its settings win; a given --iterations extends
+    it); then claim its lease. A job another live runner holds is refused (LeaseHeld: exit 2)."""
+    from driftlab.db import lifecycle, storage
+    from driftlab.db.lifecycle import JobStatus
+
+    with storage.transaction(factory) as session:
+        job = storage.find_job(session, name=args.name) if args.name else None
+        if job is None:
+            spec = tuning_spec(args)
+            name = args.name or storage.unique_job_name(session, "tune")
+            job = storage.create_job(session, name=name, spec=spec.to_dict(), seed=spec.seed)
+            message = f"job {job.name} (id {job.id}): {spec.iterations} iterations"
+        else:
+            if lifecycle.lease_is_live(job):  # refuse before changing anything
+                lifecycle.claim(session, job_id=job.id, runner=runner)
+            if args.iterations is not None and args.iterations != job.spec["iterations"]:
+                lifecycle.extend(session, job_id=job.id, iterations=args.iterations)
+            done = storage.count_evaluations(session, job_id=job.id)
+            message = f"resuming job {job.name} (id {job.id}) at {done} of {job.spec['iterations']}"
+        job_id, name, status = job.id, job.name, job.status
+    if status != JobStatus.FINISHED:
+        with storage.transaction(factory) as session:
+            lifecycle.claim(session, job_id=job_id, runner=runner,
+                            from_statuses=(JobStatus.QUEUED, JobStatus.PAUSED, JobStatus.FAILED))
+    sys.stderr.write(message + "\n")
+    return job_id, name
+
+
+def cmd_tune(args: argparse.Namespace) -> int:
+    from driftlab.core.compiled import episode_kernels_cached
+    from driftlab.db import lifecycle, storage
+    from driftlab.worker.executor import open_executor
+    from driftlab.worker.job_loop import Progress, run_job
+
+    stop_on_sigterm()
+    factory = storage.open_database(db_url(args.db))
+    runner = lifecycle.new_runner_id("tune")
+    job_id, name = open_tuning_job(factory, args, runner)
+
+    def progress(p: Progress) -> None:
+        best = f"{p.best_J:.3f}" if p.best_J is not None else "-"
+        eta = f"{p.eta_s:.0f} s" if p.eta_s is not None else "-"
+        line = f"[{p.n_done}/{p.iterations}] best J {best}  last {p.last.status} J {p.last.J:.3f}  ETA {eta}"
+        if sys.stderr.isatty():
+            sys.stderr.write(f"\r{line}    ")
+        elif p.n_done % 25 == 0 or p.n_done == p.iterations:  # logs: a line now and then, not a blob
+            sys.stderr.write(line + "\n")
+        sys.stderr.flush()
+
+    started = time.perf_counter()
+    with storage.transaction(factory) as session:
+        status = storage.get_job(session, job_id=job_id).status
+    if status == lifecycle.JobStatus.RUNNING and episode_kernels_cached() is False:
+        sys.stderr.write("compiling the simulation (numba, once after an install); the first evaluation follows\n")
+    if status == lifecycle.JobStatus.RUNNING:  # ours now
+        executor, workers = open_executor(args.workers, dask_address(args))
+        try:
+            status = run_job(factory, job_id, executor, runner=runner, workers=workers, on_progress=progress)
+        except KeyboardInterrupt:
+            with storage.transaction(factory) as session:
+                lifecycle.release(session, job_id=job_id, runner=runner, status=lifecycle.JobStatus.PAUSED)
+            sys.stderr.write(f"\njob {name} paused; run the same command to continue\n")
+            return 130
+        finally:
+            executor.shutdown()
+    with storage.transaction(factory) as session:
+        error = storage.get_job(session, job_id=job_id).error
+        if status == lifecycle.JobStatus.PAUSED and error:
+            sys.stderr.write(f"\ndriftlab: job {name} paused: {error}; run the same command to continue\n")
+        best = storage.best_evaluation(session, job_id=job_id)
+        out = {"job": name, "id": job_id, "status": str(status), "wall_s": round(time.perf_counter() - started, 2),
+               "n_done": storage.count_evaluations(session, job_id=job_id),
+               "best": storage.best_summary(best)}
+    sys.stderr.write("\n")
+    print(json.dumps(out))
+    return 0 if status != "failed" else 1
+
+
+def cmd_rescore(args: argparse.Namespace) -> int:
+    from driftlab.worker.scoring import rescore_job
+
+    print(json.dumps(finite(rescore_job(db_url=db_url(args.db), name=args.name, samples=args.samples,
+                                         workers=args.workers, dask_address=dask_address(args)))))
+    return 0
+
+
+def cmd_report(args: argparse.Namespace) -> int:
+    from driftlab.report import write_report
+
+    if os.path.exists(args.out) and not os.path.isdir(args.out):
+        raise ConfigError(f"--out {args.out}: is a file; give a folder (created if missing)")
+    if args.study:
+        from driftlab.study_report import write_study_report
+
+        print(json.dumps({"report": str(write_study_report(db_url=db_url(args.db), name=args.study,
+                                                           out_dir=args.out))}))
+        return 0
+    path = write_report(db_url=db_url(args.db), name=args.name, out_dir=args.out, baseline_samples=args.baselines,
+                        rescore_samples=args.rescore_samples, dask_address=dask_address(args))
+    print(json.dumps({"report": str(path)}))
+    return 0

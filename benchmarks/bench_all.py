@@ -118,7 +118,7 @@ def tuning_run(robust: bool) -> dict[str, float]:
     from driftlab.core.tuning import TuningSpec
     from driftlab.db import lifecycle, storage
     from driftlab.worker import job_loop
-    from driftlab.worker.executor import LocalProcessExecutor
+    from driftlab.worker.executors import LocalProcessExecutor
 
     spec = TuningSpec(iterations=500, seed_points=20, active_set=400, seed=0,
                       **({} if robust else {"robust_samples": 1, "confirm_samples": 0}))

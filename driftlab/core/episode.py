@@ -32,6 +32,7 @@ from driftlab.core.config import EpisodeConfig, Theta
 from driftlab.core.controller import build_controller_model
 from driftlab.core.errors import ConfigError, NoEquilibriumError
 from driftlab.core.metrics import EpisodeMetrics, compute_metrics
+from driftlab.core.mpc import QpSession
 from driftlab.core.planner import Phase, initial_plan_state
 from driftlab.core.plant import (
     DRIVE,
@@ -132,7 +133,8 @@ def run_episode(theta: Theta, config: EpisodeConfig, *, seed: int = 0) -> Episod
     settings = _loop_settings(config, theta, track, n_steps, variation.noisy, plant.kind)
     loop = new_loop_state(state, initial_plan_state(), start.inputs, n_steps, len(model.left_qp.step_limit))
     # OSQP runs here, between stretches of the compiled loop; its warm start lives and dies with the episode.
-    sessions = {LEFT: model.left_qp.session(), RIGHT: model.right_qp.session()}
+    # A fresh solver per episode: no OSQP warm start or cache survives into the next one.
+    sessions = {LEFT: QpSession(model.left_qp), RIGHT: QpSession(model.right_qp)}
     qa_left, qa_right = model.left_qp.arrays, model.right_qp.arrays
     # A plant stepped in Python has no compiled parameters: the kernel gets placeholders of the same types.
     args = (plant.params, plant.actuators) if plant.kind != PLANT_EXTERNAL else (np.zeros(1), np.zeros(4))

@@ -21,7 +21,7 @@ from driftlab.db import lifecycle, storage
 from driftlab.db.lifecycle import JobStatus
 from driftlab.db.models import Job
 from driftlab.settings import Settings
-from driftlab.worker.executor import EpisodeExecutor, EpisodeOutcome
+from driftlab.worker.executors import EpisodeExecutor, EpisodeOutcome
 
 
 @dataclass

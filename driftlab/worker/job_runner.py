@@ -15,7 +15,7 @@ from sqlalchemy.orm import Session, sessionmaker
 
 from driftlab.db import lifecycle, storage, studies
 from driftlab.db.models import Job, Study
-from driftlab.worker.executor import EpisodeExecutor, open_executor
+from driftlab.worker.executors import EpisodeExecutor, open_executor
 from driftlab.worker.job_loop import EXECUTOR_LOST, claim_job, run_job
 from driftlab.worker.study_runner import run_study
 

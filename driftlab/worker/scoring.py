@@ -11,7 +11,7 @@ from typing import Any
 from driftlab.core.robust import SampleResult, rescore_seeds, summarize
 from driftlab.core.tuning import TuningSpec
 from driftlab.db import storage
-from driftlab.worker.executor import EpisodeExecutor, open_executor
+from driftlab.worker.executors import EpisodeExecutor, open_executor
 
 
 def score_thetas(executor: EpisodeExecutor, thetas: list[dict[str, float]], config_doc: dict[str, Any],

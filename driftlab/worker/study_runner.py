@@ -23,7 +23,7 @@ from driftlab.core.study import RobustnessStudySpec
 from driftlab.db import lifecycle, storage, studies
 from driftlab.db.lifecycle import JobStatus
 from driftlab.db.models import Study
-from driftlab.worker.executor import EpisodeExecutor, EpisodeOutcome
+from driftlab.worker.executors import EpisodeExecutor, EpisodeOutcome
 from driftlab.worker.job_loop import EXECUTOR_LOST, is_executor_lost
 
 

@@ -7,7 +7,7 @@ import pytest
 from scipy.optimize import Bounds, LinearConstraint, minimize
 
 from driftlab.core.equilibrium import drift_equilibrium
-from driftlab.core.mpc import MpcConfig, ReferenceQp, to_scaled
+from driftlab.core.mpc import MpcConfig, QpSession, ReferenceQp, to_scaled
 from driftlab.core.vehicle import VehicleParams, pack_params
 
 P = pack_params(VehicleParams())
@@ -65,7 +65,7 @@ def test_constrained_solution_matches_independent_solve(config):
     z_left = to_scaled(LEFT.state, LEFT.inputs)
     z_now = qp.pack_state(z_left[:3], np.array([0.4, -0.05]), z_left[3:], z_left[3:])
     z_ref = to_scaled(RIGHT.state, RIGHT.inputs)
-    sol = qp.session().solve(z_now, z_ref, np.zeros(3))
+    sol = QpSession(qp).solve(z_now, z_ref, np.zeros(3))
     assert sol.used_osqp and sol.ok
     expected, cost = _independent_solution(qp, z_now, z_ref)
     assert cost(sol.increments) == pytest.approx(cost(expected), rel=1e-6)
@@ -81,7 +81,7 @@ def test_solution_respects_every_limit():
     config = MpcConfig()
     qp = ReferenceQp(config, RIGHT, P)
     z_now = _packed(qp, LEFT, (0.5, 0.02))
-    sol = qp.session().solve(z_now, to_scaled(RIGHT.state, RIGHT.inputs), np.zeros(3))
+    sol = QpSession(qp).solve(z_now, to_scaled(RIGHT.state, RIGHT.inputs), np.zeros(3))
     du = sol.increments
     # OSQP's primal feasibility tolerance: eps_abs + eps_rel * |bound| (the applied input is clipped exactly).
     tol = config.osqp_eps * (1.0 + np.max(np.abs(qp.input_lo)))
@@ -98,7 +98,7 @@ def test_unconstrained_shortcut_equals_the_qp_solution():
     z_ref = to_scaled(LEFT.state, LEFT.inputs)
     z_now = _packed(qp, LEFT, (0.1, -0.01))
     z_now[:3] += np.array([0.05, 0.002, -0.003])
-    fast = qp.session().solve(z_now, z_ref, np.zeros(3))
+    fast = QpSession(qp).solve(z_now, z_ref, np.zeros(3))
     assert not fast.used_osqp
     expected, cost = _independent_solution(qp, z_now, z_ref)
     np.testing.assert_allclose(fast.increments, expected, atol=1e-5)
@@ -107,7 +107,7 @@ def test_unconstrained_shortcut_equals_the_qp_solution():
 def test_at_the_reference_the_mpc_holds_the_equilibrium_inputs():
     qp = ReferenceQp(MpcConfig(), LEFT, P)
     z = to_scaled(LEFT.state, LEFT.inputs)
-    sol = qp.session().solve(_packed(qp, LEFT), z, np.zeros(3))
+    sol = QpSession(qp).solve(_packed(qp, LEFT), z, np.zeros(3))
     assert sol.steer_rad == pytest.approx(LEFT.steer_rad, abs=1e-12)
     assert sol.drive_force_n == pytest.approx(LEFT.drive_force_n, abs=1e-8)
 

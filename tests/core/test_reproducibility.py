@@ -13,7 +13,7 @@ from driftlab.core.config import EpisodeConfig, Theta, apply_overrides, config_t
 from driftlab.core.episode import run_episode
 from driftlab.core.plant import PlantConfig
 from driftlab.core.variation import draw_variation
-from driftlab.worker.executor import LocalProcessExecutor
+from driftlab.worker.executors import LocalProcessExecutor
 
 # The learned theta of the paper run that gripped up on re-runs (it sits at a cliff: the most sensitive case).
 CLIFF_THETA = Theta(c_lr=0.0237, c_rl=0.0221, dV=-0.029, k=0.117)

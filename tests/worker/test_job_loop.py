@@ -11,7 +11,7 @@ import pytest
 
 from driftlab.core.tuning import TuningSpec
 from driftlab.db import storage
-from driftlab.worker.executor import EpisodeOutcome
+from driftlab.worker.executors import EpisodeOutcome
 from driftlab.worker.job_loop import claim_job, run_job
 
 

@@ -18,7 +18,6 @@ from driftlab.core.mpc.model import (
     with_path_errors,
     with_steer_feedback,
 )
-from driftlab.core.mpc.session import QpSession
 
 
 class ReferenceQp:
@@ -122,7 +121,3 @@ class ReferenceQp:
         return pack_state(bool(self.path_states), bool(self.models_lag), np.asarray(state, float),
                           np.asarray(path_errors, float), np.asarray(actuators_scaled, float),
                           np.asarray(previous_commands_scaled, float))
-
-    def session(self) -> QpSession:
-        """A fresh solver for one episode (its OSQP warm start and caches die with the episode)."""
-        return QpSession(self)

@@ -2,17 +2,13 @@
 
 from __future__ import annotations
 
-from typing import TYPE_CHECKING
-
 import daqp
 import numpy as np
 
 from driftlab.core.mpc.arrays import MpcSolution
+from driftlab.core.mpc.condensing import ReferenceQp
 from driftlab.core.mpc.config import KN, N_U
 from driftlab.core.mpc.kernels import constrained_terms, next_commands, reference_terms, unconstrained_increments
-
-if TYPE_CHECKING:  # the QP makes its sessions (ReferenceQp.new_session)
-    from driftlab.core.mpc.condensing import ReferenceQp
 
 
 class QpSession:

@@ -18,7 +18,7 @@ import time
 from concurrent.futures import Future
 from typing import Any
 
-from driftlab.worker.executor import EpisodeOutcome, evaluate_episode
+from driftlab.worker.executors.episode import EpisodeOutcome, evaluate_episode
 
 RECONNECT_EVERY_S = 3.0
 

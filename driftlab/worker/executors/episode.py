@@ -1,0 +1,56 @@
+"""What an executor runs and returns: one episode of (theta, config, seed), and the interface every executor
+implements (submit -> Future, shutdown)."""
+
+from __future__ import annotations
+
+import math
+from concurrent.futures import Future
+from dataclasses import dataclass
+from typing import Any, Protocol
+
+import numpy as np
+
+from driftlab.core.robust import SampleResult
+
+
+@dataclass
+class EpisodeOutcome:
+    """What a worker process sends back: everything storage needs, as plain data."""
+
+    theta: dict[str, float]
+    seed: int
+    status: str
+    J: float
+    metrics: dict[str, Any]
+    trigger_points: list[dict[str, float]]
+    wall_ms: float
+    columns: list[str]
+    trajectory: np.ndarray
+
+    @property
+    def completed(self) -> bool:
+        return self.status == "completed"
+
+    def sample(self) -> SampleResult:
+        """This episode as one sample of a robust evaluation."""
+        error = self.metrics.get("mean_abs_e_m")
+        return SampleResult(self.seed, self.status, float(self.J), float(self.metrics.get("completed_fraction", 0.0)),
+                            float(error) if error is not None and math.isfinite(error) else None)
+
+
+class EpisodeExecutor(Protocol):
+    def submit(self, theta: dict[str, float], config_doc: dict[str, Any], seed: int = 0) -> Future[EpisodeOutcome]:
+        ...
+
+    def shutdown(self) -> None: ...
+
+
+def evaluate_episode(theta: dict[str, float], config_doc: dict[str, Any], seed: int = 0) -> EpisodeOutcome:
+    """Runs in the worker process. A pure function of its arguments (see run_episode)."""
+    from driftlab.core.config import Theta, config_from_dict
+    from driftlab.core.episode import COLUMNS, run_episode
+
+    result = run_episode(Theta.from_mapping(theta), config_from_dict(config_doc), seed=seed)
+    return EpisodeOutcome(theta=dict(theta), seed=seed, status=result.status, J=float(result.J),
+                          metrics=result.metrics.as_dict(), trigger_points=result.trigger_points,
+                          wall_ms=float(result.wall_ms), columns=list(COLUMNS), trajectory=result.trajectory)

@@ -1,0 +1,68 @@
+"""Episodes in local worker processes (spawned, one BLAS thread each, dying with their parent)."""
+
+from __future__ import annotations
+
+import multiprocessing
+import os
+import signal
+import threading
+import time
+from concurrent.futures import Future, ProcessPoolExecutor
+from typing import Any
+
+from driftlab.worker.executors.episode import EpisodeOutcome, evaluate_episode
+
+
+def _exit_with_parent(parent_pid: int, period_s: float = 0.5) -> None:
+    """A worker whose parent died (kill -9 included: no cleanup ran) exits within ``period_s`` instead of
+    living on as an orphan; it notices by being re-parented."""
+    while True:
+        time.sleep(period_s)
+        if os.getppid() != parent_pid:
+            os._exit(0)
+
+
+def _die_with_parent() -> None:
+    """Linux: the kernel kills this process the moment its parent dies (PR_SET_PDEATHSIG), even while a compiled
+    episode holds the interpreter and the watcher thread below cannot run."""
+    try:
+        import ctypes
+
+        libc = ctypes.CDLL("libc.so.6", use_errno=True)
+        libc.prctl(1, signal.SIGKILL)  # PR_SET_PDEATHSIG
+    except (OSError, AttributeError):
+        pass  # not Linux: the watcher thread alone
+
+
+def _init_worker(niceness: int, parent_pid: int) -> None:
+    # BLAS oversubscription on 2 cores costs up to 8x.
+    os.environ["OMP_NUM_THREADS"] = "1"
+    if niceness:
+        os.nice(niceness)
+    _die_with_parent()
+    if os.getppid() != parent_pid:  # the parent died before the signal was armed
+        os._exit(0)
+    threading.Thread(target=_exit_with_parent, args=(parent_pid,), name="exit-with-parent", daemon=True).start()
+
+
+class LocalProcessExecutor:
+    """Episodes in separate processes (never in the caller's thread or event loop)."""
+
+    def __init__(self, workers: int = 1, *, niceness: int = 0) -> None:
+        """``niceness`` > 0 lowers the workers' CPU priority (batch work that must not slow interactive work)."""
+        os.environ.setdefault("OMP_NUM_THREADS", "1")
+        self.workers = workers
+        self.pool = ProcessPoolExecutor(max_workers=workers, mp_context=multiprocessing.get_context("spawn"),
+                                        initializer=_init_worker, initargs=(niceness, os.getpid()))
+
+    def submit(self, theta: dict[str, float], config_doc: dict[str, Any], seed: int = 0) -> Future[EpisodeOutcome]:
+        return self.pool.submit(evaluate_episode, theta, config_doc, seed)
+
+    def warm_up(self) -> Future[EpisodeOutcome]:
+        """Start the workers and load the compiled dynamics now, so the first real episode is not slow."""
+        futures = [self.pool.submit(evaluate_episode, {}, {"scenario": {"max_time_s": 1.0}})
+                   for _ in range(self.workers)]
+        return futures[-1]
+
+    def shutdown(self) -> None:
+        self.pool.shutdown(wait=True, cancel_futures=True)

@@ -15,7 +15,7 @@ from driftlab.core.tuning import TuningSpec
 from driftlab.core.vehicle import pack_params
 from driftlab.db import storage
 from driftlab.plotting import plot_convergence, plot_episode
-from driftlab.worker.executor import open_executor
+from driftlab.worker.executors import open_executor
 from driftlab.worker.scoring import score_thetas
 
 # The paper's Table I (left-hand drift at R = 44 m, beta = -0.4; REFERENCE.md section 2).

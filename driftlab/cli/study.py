@@ -144,7 +144,7 @@ def cmd_study(args: argparse.Namespace, tuning_spec, db_url: str, dask_address: 
     """Create (or take up by name) and run a study; print its summary as JSON. ``show`` only prints."""
     from driftlab import studies as study_views
     from driftlab.db import lifecycle, storage, studies
-    from driftlab.worker.executor import open_executor
+    from driftlab.worker.executors import open_executor
 
     factory = storage.open_database(db_url)
     if args.kind == "show":

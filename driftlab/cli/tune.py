@@ -70,7 +70,7 @@ def open_tuning_job(factory, args: argparse.Namespace, runner: str) -> tuple[int
 def cmd_tune(args: argparse.Namespace) -> int:
     from driftlab.core.compiled import episode_kernels_cached
     from driftlab.db import lifecycle, storage
-    from driftlab.worker.executor import open_executor
+    from driftlab.worker.executors import open_executor
     from driftlab.worker.job_loop import Progress, run_job
 
     stop_on_sigterm()

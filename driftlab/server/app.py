@@ -22,7 +22,7 @@ from driftlab.server.routes import evaluations, jobs, pages, studies
 from driftlab.server.view import RecordingCache, add_view_routes
 from driftlab.settings import Settings
 from driftlab.web.dashboard import Dashboard
-from driftlab.worker.executor import LocalProcessExecutor
+from driftlab.worker.executors import LocalProcessExecutor
 from driftlab.worker.job_runner import JobRunner
 
 

@@ -34,7 +34,7 @@ from driftlab.web.sources import (
 )
 from driftlab.web.viser_server import quiet_viser_server
 
-# run_episode(theta, config_doc, seed) -> Future of an EpisodeOutcome (see driftlab.worker.executor).
+# run_episode(theta, config_doc, seed) -> Future of an EpisodeOutcome (see driftlab.worker.executors).
 EpisodeRunner = Callable[[dict[str, float], dict[str, Any], int], Future]
 COMPARE_EVERY_POLLS = 4  # studies and comparisons every 2 s at the default 0.5 s poll
 

@@ -5,28 +5,25 @@ runner (the server's worker or a `driftlab tune`) run a job at a time.
     running --request_pause--> paused (the runner sees it at its next heartbeat and stops)
     paused | failed --requeue--> queued;  finished --extend--> queued;  any but running --delete--> gone
 
-The lease is two columns of the job: ``runner_id`` and ``heartbeat_at``. A runner claims a job with one
-conditional UPDATE (so two runners racing for it cannot both win), renews the heartbeat while it runs, and
-clears the lease when it stops. A lease whose heartbeat is older than ``LEASE_TIMEOUT_S`` belongs to a dead
-runner (kill -9, power loss) and may be taken over.
+The lease (``runner_id``, ``heartbeat_at``) is driftlab.db.lease's, the same for jobs and robustness studies.
 """
 
 from __future__ import annotations
 
-import os
-import socket
-import uuid
-from datetime import datetime, timedelta
+from datetime import datetime
 from enum import StrEnum
 
 from sqlalchemy import delete, or_, select, update
 from sqlalchemy.orm import Session
 
+from driftlab.db import lease
+from driftlab.db.lease import HEARTBEAT_S, LEASE_TIMEOUT_S, new_runner_id
 from driftlab.db.models import Evaluation, Job, Study, Trajectory, utcnow
 from driftlab.db.storage import count_evaluations, get_job
 
-LEASE_TIMEOUT_S = 15.0  # a runner renews every HEARTBEAT_S; three missed renewals and more mean it is gone
-HEARTBEAT_S = 2.0
+__all__ = ["HEARTBEAT_S", "LEASE_TIMEOUT_S", "JobStatus", "LeaseHeld", "TransitionError", "claim", "delete_job",
+           "extend", "heartbeat", "lease_is_live", "new_runner_id", "next_claimable", "release", "request_pause",
+           "requeue"]
 
 
 class JobStatus(StrEnum):
@@ -45,39 +42,19 @@ class LeaseHeld(TransitionError):
     """Another live runner holds the job."""
 
 
-def new_runner_id(kind: str) -> str:
-    """A runner's identity: what it is, where, which process, and a nonce (pids are reused)."""
-    return f"{kind}@{socket.gethostname()}:{os.getpid()}:{uuid.uuid4().hex[:8]}"
-
-
-def _naive(moment: datetime) -> datetime:
-    return moment.replace(tzinfo=None)  # SQLite stores naive datetimes; compare like with like
-
-
-def _stale_before(now: datetime) -> datetime:
-    return _naive(now - timedelta(seconds=LEASE_TIMEOUT_S))
-
-
-def _lease_is_stale(now: datetime):
-    """SQL: the job's heartbeat is missing or older than the lease timeout (its runner is gone)."""
-    return or_(Job.heartbeat_at.is_(None), Job.heartbeat_at < _stale_before(now))
-
-
 def _study_held_by_another(now: datetime, runner: str | None):
     """SQL: the job belongs to a seeds study that another live runner holds (``driftlab study seeds`` runs its
     jobs one after another and holds the study from the moment it creates it, so no other runner starts one).
     False, not NULL, for a job of no study (NOT NULL would be NULL and filter the job out)."""
     holders = select(Study.id).where(Study.kind == "seeds", Study.runner_id.is_not(None),
-                                     Study.heartbeat_at >= _stale_before(now))
+                                     Study.heartbeat_at >= lease.stale_before(now))
     if runner is not None:
         holders = holders.where(Study.runner_id != runner)
     return Job.study_id.is_not(None) & Job.study_id.in_(holders)
 
 
 def lease_is_live(job: Job, now: datetime | None = None) -> bool:
-    now = now or utcnow()
-    return (job.status == JobStatus.RUNNING and job.runner_id is not None and job.heartbeat_at is not None
-            and _naive(job.heartbeat_at) >= _stale_before(now))
+    return lease.is_live(job, now)
 
 
 def claim(session: Session, *, job_id: int, runner: str, from_statuses: tuple[JobStatus, ...] = (JobStatus.QUEUED,)
@@ -90,18 +67,15 @@ def claim(session: Session, *, job_id: int, runner: str, from_statuses: tuple[Jo
         TransitionError: the job's status allows no claim.
     """
     now = utcnow()
-    claimable = or_(Job.status.in_([str(s) for s in from_statuses]),
-                    (Job.status == JobStatus.RUNNING) & _lease_is_stale(now)) & ~_study_held_by_another(now, runner)
-    result = session.execute(update(Job).where(Job.id == job_id, claimable)
-                             .values(status=JobStatus.RUNNING, runner_id=runner, heartbeat_at=_naive(now), error=None)
-                             .execution_options(synchronize_session=False))
+    taken = lease.take(session, Job, row_id=job_id, runner=runner, from_statuses=from_statuses, now=now,
+                       also=~_study_held_by_another(now, runner))
     job = get_job(session, job_id=job_id)
     session.refresh(job)
-    if result.rowcount == 1:
+    if taken:
         job.started_at = now  # this run's start: the ETA counts only the time since (pauses excluded)
         return job
     if lease_is_live(job, now):
-        age = (_naive(now) - _naive(job.heartbeat_at)).total_seconds()
+        age = (lease.naive(now) - lease.naive(job.heartbeat_at)).total_seconds()
         raise LeaseHeld(f"job {job.name!r} is being run by {job.runner_id} (last heartbeat {age:.1f} s ago); "
                         "pause it first, or wait for it to finish")
     if job.study_id is not None:
@@ -116,24 +90,17 @@ def claim(session: Session, *, job_id: int, runner: str, from_statuses: tuple[Jo
 def heartbeat(session: Session, *, job_id: int, runner: str) -> bool:
     """Renew the lease (and the runner's hold on the job's seeds study, if it holds it); False when the runner
     no longer holds the job (paused, deleted or taken over): stop."""
-    now = _naive(utcnow())
-    result = session.execute(update(Job).where(Job.id == job_id, Job.runner_id == runner,
-                                               Job.status == JobStatus.RUNNING)
-                             .values(heartbeat_at=now).execution_options(synchronize_session=False))
+    now = lease.naive(utcnow())
+    held = lease.renew(session, Job, row_id=job_id, runner=runner, now=now)
     study_of_job = select(Job.study_id).where(Job.id == job_id).scalar_subquery()
     session.execute(update(Study).where(Study.id == study_of_job, Study.kind == "seeds", Study.runner_id == runner)
                     .values(heartbeat_at=now).execution_options(synchronize_session=False))
-    return result.rowcount == 1
+    return held
 
 
 def release(session: Session, *, job_id: int, runner: str, status: JobStatus, error: str | None = None) -> None:
-    """The runner stops: the job takes ``status`` unless someone changed it meanwhile (a pause request stays
-    paused; a job taken over stays with its new runner)."""
-    values = {"runner_id": None, "heartbeat_at": None, "status": status, "error": error}
-    session.execute(update(Job).where(Job.id == job_id, Job.runner_id == runner, Job.status == JobStatus.RUNNING)
-                    .values(**values).execution_options(synchronize_session=False))
-    session.execute(update(Job).where(Job.id == job_id, Job.runner_id == runner)
-                    .values(runner_id=None, heartbeat_at=None).execution_options(synchronize_session=False))
+    """The runner stops: the job takes ``status`` unless someone changed it meanwhile (driftlab.db.lease)."""
+    lease.release(session, Job, row_id=job_id, runner=runner, status=status, error=error)
 
 
 def request_pause(session: Session, *, job_id: int) -> Job:
@@ -186,7 +153,7 @@ def delete_job(session: Session, *, job_id: int, with_its_study: bool = False) -
 def next_claimable(session: Session) -> int | None:
     """The oldest queued job, or one whose runner died (not of a seeds study another runner holds)."""
     now = utcnow()
-    stale = (Job.status == JobStatus.RUNNING) & _lease_is_stale(now)
+    stale = (Job.status == JobStatus.RUNNING) & lease.is_stale(Job, now)
     query = (select(Job.id).where(or_(Job.status == JobStatus.QUEUED, stale), ~_study_held_by_another(now, None))
              .order_by(Job.id).limit(1))
     return session.scalar(query)

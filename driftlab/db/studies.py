@@ -10,13 +10,12 @@ Each cell is stored as soon as its episodes are back.
 
 from __future__ import annotations
 
-from datetime import datetime, timedelta
 from typing import Any
 
 from sqlalchemy import delete, or_, select, update
 from sqlalchemy.orm import Session
 
-from driftlab.db import lifecycle, storage
+from driftlab.db import lease, lifecycle, storage
 from driftlab.db.lifecycle import JobStatus, TransitionError
 from driftlab.db.models import Job, Study, StudyCell, utcnow
 
@@ -96,21 +95,9 @@ def study_status(session: Session, study: Study) -> str:
 
 
 # -- lifecycle ---------------------------------------------------------------------------------------------
-def _lease_is_stale(now: datetime):
-    stale_before = (now.replace(tzinfo=None) - timedelta(seconds=lifecycle.LEASE_TIMEOUT_S))
-    return or_(Study.heartbeat_at.is_(None), Study.heartbeat_at < stale_before)
-
-
-def _lease_is_live(study: Study) -> bool:
-    if study.status != JobStatus.RUNNING or study.runner_id is None or study.heartbeat_at is None:
-        return False
-    age_s = (utcnow().replace(tzinfo=None) - study.heartbeat_at.replace(tzinfo=None)).total_seconds()
-    return age_s <= lifecycle.LEASE_TIMEOUT_S
-
-
 def next_claimable_study(session: Session) -> int | None:
     """The oldest queued robustness study, or one whose runner died."""
-    stale = (Study.status == JobStatus.RUNNING) & _lease_is_stale(utcnow())
+    stale = (Study.status == JobStatus.RUNNING) & lease.is_stale(Study, utcnow())
     query = (select(Study.id).where(Study.kind == "robustness", or_(Study.status == JobStatus.QUEUED, stale))
              .order_by(Study.id).limit(1))
     return session.scalar(query)
@@ -118,30 +105,18 @@ def next_claimable_study(session: Session) -> int | None:
 
 def claim_study(session: Session, *, study_id: int, runner: str) -> bool:
     """Take the study's lease (from queued, or from a dead runner); False if another runner was quicker."""
-    now = utcnow()
-    claimable = or_(Study.status == JobStatus.QUEUED, (Study.status == JobStatus.RUNNING) & _lease_is_stale(now))
-    result = session.execute(update(Study).where(Study.id == study_id, Study.kind == "robustness", claimable)
-                             .values(status=JobStatus.RUNNING, runner_id=runner, heartbeat_at=now.replace(tzinfo=None),
-                                     error=None).execution_options(synchronize_session=False))
-    return result.rowcount == 1
+    return lease.take(session, Study, row_id=study_id, runner=runner, from_statuses=(JobStatus.QUEUED,),
+                      now=utcnow(), also=Study.kind == "robustness")
 
 
 def heartbeat_study(session: Session, *, study_id: int, runner: str) -> bool:
     """Renew the lease; False when the runner no longer holds it (paused, deleted or taken over): stop."""
-    result = session.execute(update(Study).where(Study.id == study_id, Study.runner_id == runner,
-                                                 Study.status == JobStatus.RUNNING)
-                             .values(heartbeat_at=utcnow().replace(tzinfo=None))
-                             .execution_options(synchronize_session=False))
-    return result.rowcount == 1
+    return lease.renew(session, Study, row_id=study_id, runner=runner)
 
 
 def release_study(session: Session, *, study_id: int, runner: str, status: str, error: str | None = None) -> None:
     """The runner stops: the study takes ``status`` unless a pause request changed it meanwhile."""
-    session.execute(update(Study).where(Study.id == study_id, Study.runner_id == runner,
-                                        Study.status == JobStatus.RUNNING)
-                    .values(status=status, error=error).execution_options(synchronize_session=False))
-    session.execute(update(Study).where(Study.id == study_id, Study.runner_id == runner)
-                    .values(runner_id=None, heartbeat_at=None).execution_options(synchronize_session=False))
+    lease.release(session, Study, row_id=study_id, runner=runner, status=status, error=error)
 
 
 def hold_seeds_study(session: Session, *, study_id: int, runner: str) -> None:
@@ -153,7 +128,7 @@ def hold_seeds_study(session: Session, *, study_id: int, runner: str) -> None:
         LeaseHeld: another live runner holds the study.
     """
     now = utcnow()
-    free = or_(Study.runner_id.is_(None), Study.runner_id == runner, _lease_is_stale(now))
+    free = or_(Study.runner_id.is_(None), Study.runner_id == runner, lease.is_stale(Study, now))
     result = session.execute(update(Study).where(Study.id == study_id, Study.kind == "seeds", free)
                              .values(runner_id=runner, heartbeat_at=now.replace(tzinfo=None))
                              .execution_options(synchronize_session=False))
@@ -204,7 +179,7 @@ def delete_study(session: Session, *, study_id: int) -> None:
     """The study with its cells or its jobs (and their evaluations); TransitionError while any of it runs."""
     study = get_study(session, study_id=study_id)
     jobs = study_jobs(session, study_id=study_id)
-    if _lease_is_live(study) or any(lifecycle.lease_is_live(j) for j in jobs):
+    if lease.is_live(study) or any(lifecycle.lease_is_live(j) for j in jobs):
         raise TransitionError(f"study {study_id} is running; pause it first")
     for job in jobs:
         lifecycle.delete_job(session, job_id=job.id, with_its_study=True)

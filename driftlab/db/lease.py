@@ -1,0 +1,79 @@
+"""The lease that lets exactly one runner run a thing at a time: a job, or a robustness study (any table with the
+columns ``status``, ``runner_id``, ``heartbeat_at`` and ``error``).
+
+A runner takes the lease with one conditional UPDATE (two runners racing for it cannot both win), renews the
+heartbeat while it runs, and clears the lease when it stops. A heartbeat older than ``LEASE_TIMEOUT_S`` belongs to
+a dead runner (kill -9, power loss) and may be taken over.
+"""
+
+from __future__ import annotations
+
+import os
+import socket
+import uuid
+from datetime import datetime, timedelta
+from typing import Any
+
+from sqlalchemy import or_, update
+from sqlalchemy.orm import Session
+
+from driftlab.db.models import utcnow
+
+LEASE_TIMEOUT_S = 15.0  # a runner renews every HEARTBEAT_S; three missed renewals and more mean it is gone
+HEARTBEAT_S = 2.0
+RUNNING = "running"
+
+
+def new_runner_id(kind: str) -> str:
+    """A runner's identity: what it is, where, which process, and a nonce (pids are reused)."""
+    return f"{kind}@{socket.gethostname()}:{os.getpid()}:{uuid.uuid4().hex[:8]}"
+
+
+def naive(moment: datetime) -> datetime:
+    return moment.replace(tzinfo=None)  # SQLite stores naive datetimes; compare like with like
+
+
+def stale_before(now: datetime) -> datetime:
+    return naive(now - timedelta(seconds=LEASE_TIMEOUT_S))
+
+
+def is_stale(table: Any, now: datetime):
+    """SQL: the heartbeat is missing or older than the lease timeout (its runner is gone)."""
+    return or_(table.heartbeat_at.is_(None), table.heartbeat_at < stale_before(now))
+
+
+def is_live(row: Any, now: datetime | None = None) -> bool:
+    """A runner holds ``row`` now."""
+    now = now or utcnow()
+    return (row.status == RUNNING and row.runner_id is not None and row.heartbeat_at is not None
+            and naive(row.heartbeat_at) >= stale_before(now))
+
+
+def take(session: Session, table: Any, *, row_id: int, runner: str, from_statuses: tuple[str, ...], now: datetime,
+         also: Any = True) -> bool:
+    """Take the lease of ``table`` row ``row_id`` from one of ``from_statuses`` or from a dead runner, where ``also``
+    (an SQL condition) holds; False if the row is not claimable (or another runner was quicker)."""
+    claimable = or_(table.status.in_([str(s) for s in from_statuses]),
+                    (table.status == RUNNING) & is_stale(table, now)) & also
+    result = session.execute(update(table).where(table.id == row_id, claimable)
+                             .values(status=RUNNING, runner_id=runner, heartbeat_at=naive(now), error=None)
+                             .execution_options(synchronize_session=False))
+    return result.rowcount == 1
+
+
+def renew(session: Session, table: Any, *, row_id: int, runner: str, now: datetime | None = None) -> bool:
+    """Renew the heartbeat; False when ``runner`` no longer holds the row (paused, deleted or taken over): stop."""
+    result = session.execute(update(table).where(table.id == row_id, table.runner_id == runner,
+                                                 table.status == RUNNING)
+                             .values(heartbeat_at=naive(now or utcnow()))
+                             .execution_options(synchronize_session=False))
+    return result.rowcount == 1
+
+
+def release(session: Session, table: Any, *, row_id: int, runner: str, status: str, error: str | None = None) -> None:
+    """The runner stops: the row takes ``status`` unless someone changed it meanwhile (a pause request stays
+    paused; a row taken over stays with its new runner), and the lease is cleared."""
+    session.execute(update(table).where(table.id == row_id, table.runner_id == runner, table.status == RUNNING)
+                    .values(status=status, error=error).execution_options(synchronize_session=False))
+    session.execute(update(table).where(table.id == row_id, table.runner_id == runner)
+                    .values(runner_id=None, heartbeat_at=None).execution_options(synchronize_session=False))

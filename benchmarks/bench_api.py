@@ -3,33 +3,18 @@
 Run: python benchmarks/bench_api.py DB_FILE [JOB_ID]   (e.g. the database of a 500-iteration `driftlab tune`)
 """
 
-import os
-import socket
 import statistics
-import subprocess
 import sys
 import time
 from concurrent.futures import ThreadPoolExecutor
 
 import httpx
+from served import served
 
 
 def main() -> None:
     db, job_id = sys.argv[1], int(sys.argv[2]) if len(sys.argv) > 2 else 1
-    with socket.socket() as s:
-        s.bind(("127.0.0.1", 0))
-        port = s.getsockname()[1]
-    proc = subprocess.Popen([sys.executable, "-m", "driftlab.cli", "serve", "--port", str(port), "--db", db],
-                            env={**os.environ, "OMP_NUM_THREADS": "1"}, stdout=subprocess.DEVNULL,
-                            stderr=subprocess.DEVNULL)
-    url = f"http://127.0.0.1:{port}"
-    try:
-        for _ in range(100):
-            try:
-                httpx.get(f"{url}/api/health", timeout=1)
-                break
-            except httpx.HTTPError:
-                time.sleep(0.1)
+    with served(db) as url:
         n_evals = len(httpx.get(f"{url}/api/jobs/{job_id}/evaluations").json())
 
         def one(_):
@@ -51,9 +36,6 @@ def main() -> None:
             print(f"{n_evals} evaluations, {concurrency} concurrent clients: "
                   f"{statistics.median(r[0] for r in runs):.1f} req/s, "
                   f"p95 {1e3 * statistics.median(r[1] for r in runs):.0f} ms (median of 3 x 60 requests)")
-    finally:
-        proc.terminate()
-        proc.wait(timeout=30)
 
 
 if __name__ == "__main__":

@@ -17,21 +17,13 @@ import argparse
 import asyncio
 import os
 import shutil
-import socket
 import statistics
-import subprocess
-import sys
 import tempfile
 import time
 from collections import defaultdict
 
 import httpx
-
-
-def _free_port() -> int:
-    with socket.socket() as s:
-        s.bind(("127.0.0.1", 0))
-        return s.getsockname()[1]
+from served import served
 
 
 def _percentile(values: list[float], q: float) -> float:
@@ -120,21 +112,10 @@ def main() -> None:
     parser.add_argument("--read-job", type=int, help="the stored job the readers read (default: the running one)")
     args = parser.parse_args()
     folder = tempfile.mkdtemp(prefix="driftlab-load-")
-    port = _free_port()
-    url = f"http://127.0.0.1:{port}"
     if args.db:
         shutil.copy(args.db, os.path.join(folder, "load.db"))
-    proc = subprocess.Popen([sys.executable, "-m", "driftlab.cli", "serve", "--port", str(port), "--db",
-                             os.path.join(folder, "load.db"), "--workers", str(args.workers)],
-                            env={**os.environ, "OMP_NUM_THREADS": "1"}, stdout=subprocess.DEVNULL,
-                            stderr=open(os.path.join(folder, "serve.log"), "w"))
-    try:
-        for _ in range(600):
-            try:
-                httpx.get(f"{url}/api/health", timeout=1)
-                break
-            except httpx.HTTPError:
-                time.sleep(0.1)
+    with served(os.path.join(folder, "load.db"), "--workers", str(args.workers),
+                log_file=os.path.join(folder, "serve.log")) as url:
         job = httpx.post(f"{url}/api/jobs", json={"iterations": 500, "name": "under-load"}).json()
         while httpx.get(f"{url}/api/jobs/{job['id']}").json()["n_done"] < 3:  # episodes in flight, warm
             time.sleep(0.5)
@@ -144,9 +125,6 @@ def main() -> None:
         else:
             out = asyncio.run(_load(url, read_job, args.seconds, args.readers, args.writers))
         done = httpx.get(f"{url}/api/jobs/{job['id']}").json()["n_done"]
-    finally:
-        proc.terminate()
-        proc.wait(timeout=60)
     total = sum(len(v) for v in out.values())
     print(f"{args.readers} readers, {args.writers} writers ({'processes' if args.processes else 'one event loop'}), "
           f"{args.seconds:g} s, {total / args.seconds:.0f} requests/s, job on {args.workers} workers "

@@ -10,20 +10,12 @@ from __future__ import annotations
 import argparse
 import os
 import random
-import socket
-import subprocess
-import sys
 import tempfile
 import threading
 import time
 
 import httpx
-
-
-def _free_port() -> int:
-    with socket.socket() as s:
-        s.bind(("127.0.0.1", 0))
-        return s.getsockname()[1]
+from served import served
 
 
 def main() -> None:
@@ -32,21 +24,10 @@ def main() -> None:
     parser.add_argument("--clients", type=int, default=6)
     args = parser.parse_args()
     folder = tempfile.mkdtemp(prefix="driftlab-skew-")
-    port = _free_port()
-    url = f"http://127.0.0.1:{port}"
-    proc = subprocess.Popen([sys.executable, "-m", "driftlab.cli", "serve", "--port", str(port), "--db",
-                             os.path.join(folder, "skew.db")], env={**os.environ, "OMP_NUM_THREADS": "1"},
-                            stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
     seen: list[tuple[int, int]] = []
     codes: dict[int, int] = {}
     lock = threading.Lock()
-    try:
-        for _ in range(600):
-            try:
-                httpx.get(f"{url}/api/health", timeout=1)
-                break
-            except httpx.HTTPError:
-                time.sleep(0.1)
+    with served(os.path.join(folder, "skew.db")) as url:
         # Spins out within ~2 s of simulated time: evaluations come fast, so the race has many chances.
         job = httpx.post(f"{url}/api/jobs", json={"iterations": 5000, "robust_samples": 1, "confirm_samples": 0,
                                                   "config": {"plant.friction_scale": 0.8}}).json()
@@ -74,9 +55,6 @@ def main() -> None:
         time.sleep(2.0)  # the runner's last evaluation lands or is refused
         final = httpx.get(f"{url}/api/jobs/{job['id']}").json()
         stored = len(httpx.get(f"{url}/api/jobs/{job['id']}/evaluations").json())
-    finally:
-        proc.terminate()
-        proc.wait(timeout=60)
     over = [s for s in seen if s[0] > s[1]]
     print(f"{args.clients} clients, {args.seconds:g} s: {len(seen)} reads, "
           f"PATCH statuses {dict(sorted(codes.items()))}")

@@ -18,7 +18,7 @@ from driftlab.plotting import plot_convergence, plot_episode
 from driftlab.worker.executors import open_executor
 from driftlab.worker.scoring import score_thetas
 
-# The paper's Table I (left-hand drift at R = 44 m, beta = -0.4; REFERENCE.md section 2).
+# The paper's Table I (left-hand drift at R = 44 m, beta = -0.4; docs/reference.md, The car).
 PAPER_TABLE_I = {"V": 19.1, "beta": -0.4, "r": 0.434, "delta": -0.270, "Fxr": 4324.0}
 
 

@@ -115,7 +115,7 @@ class ScenarioConfig:
 
 @dataclass(frozen=True)
 class FailureLimits:
-    """When an episode is stopped as failed (REFERENCE.md section 7's rules, none flagged a good run).
+    """When an episode is stopped as failed (docs/reference.md, The paper's controller: rules, none flagged a good run).
 
     Attributes:
         max_sideslip_rad: |beta| above this: spun out.

@@ -1,6 +1,6 @@
 """Drift equilibria of the single-track model, its Jacobians and local stability.
 
-The drift family is parametrized by the sideslip beta at a given radius R (REFERENCE.md section 2: at
+The drift family is parametrized by the sideslip beta at a given radius R (docs/reference.md, The car: at
 R = 44 m, V = 19.1 m/s alone has six equilibria). Solving Vdot = betadot = rdot = 0 with r = V / R
 (paper section II-B) for (V, delta, Fxr) from several starts, we keep the countersteer branch: delta
 opposite to r, front tyre below its force peak, rear tyre beyond it.

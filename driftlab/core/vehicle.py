@@ -5,7 +5,7 @@ the equilibrium solver and the plant. The plant switches on what the paper's mod
 (rear friction circle, longitudinal load transfer) through flags in the packed parameter vector; with the
 flags off it *is* the paper's model.
 
-Sign convention (REFERENCE.md section 2): y to the left, sideslip ``beta = atan(vy / vx)``, yaw rate and
+Sign convention (docs/reference.md, The car): y to the left, sideslip ``beta = atan(vy / vx)``, yaw rate and
 steering positive to the left, tyre slip = wheel velocity direction minus wheel heading, tyre force opposes
 slip. A left-hand drift has r > 0, beta < 0 and countersteer delta < 0.
 """
@@ -45,7 +45,7 @@ _LOAD_TRANSFER_PASSES = 3
 
 @dataclass(frozen=True)
 class VehicleParams:
-    """A car for the single-track model. Defaults: the Table-I fit of REFERENCE.md section 2.
+    """A car for the single-track model. Defaults: the Table-I fit of docs/reference.md (The car).
 
     Attributes:
         mass_kg: vehicle mass m [kg].

@@ -1,4 +1,4 @@
-"""The drift model against the paper's Table I and REFERENCE.md section 2."""
+"""The drift model against the paper's Table I and docs/reference.md (The car)."""
 
 import numpy as np
 import pytest
@@ -78,7 +78,7 @@ def test_no_equilibrium_is_a_clear_error(beta):
 
 
 def test_load_transfer_without_more_grip_removes_the_drift():
-    # REFERENCE.md section 2: a CG height of 0.2 m already removes the beta = -0.4 drift of this car.
+    # docs/reference.md, The car: a CG height of 0.2 m already removes the beta = -0.4 drift of this car.
     plant = PlantConfig(friction_scale=1.0, tyre_c_scale=1.0, friction_circle=False, cg_height_m=0.2)
     with pytest.raises(NoEquilibriumError):
         drift_equilibrium(44.0, -0.4, plant.packed_params(VehicleParams()))

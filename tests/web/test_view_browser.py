@@ -16,7 +16,8 @@ from tests.server_process import free_port, start_server
 pytestmark = pytest.mark.e2e  # real processes: servers, browsers, Dask, the CLI
 
 CHROMIUM = os.environ.get("DRIFTLAB_CHROMIUM") or shutil.which("chromium") or "/usr/bin/chromium"
-# Software WebGL without a GPU (REFERENCE.md section 5); no background connections on a closed network.
+# Software WebGL without a GPU (docs/reference.md, The view in a headless browser); no background connections on a
+# closed network.
 CHROMIUM_ARGS = ["--headless=new", "--no-sandbox", "--disable-gpu", "--use-angle=swiftshader",
                  "--enable-unsafe-swiftshader", "--disable-background-networking", "--disable-component-update",
                  "--disable-sync", "--no-first-run", "--disable-dev-shm-usage"]

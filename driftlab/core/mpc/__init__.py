@@ -1,7 +1,7 @@
 """The linear MPC drift controller (paper section II-B), condensed and solved with OSQP.
 
 Augmented state z = [V, beta, r, delta, Fxr] with Fxr in kN (in newtons OSQP needs thousands of iterations,
-REFERENCE.md section 4), inputs the increments [d_delta, d_Fxr]. The model is linearized about the reference
+docs/reference.md, The QP's units), inputs the increments [d_delta, d_Fxr]. The model is linearized about the reference
 drift equilibrium and discretized (forward Euler as in the paper, or exact zero-order hold). Cost:
 sum_{k=1..Np} ||z_k - z_ref||_Q^2 + sum_{k=0..Nc-1} ||du_k||_R^2 (paper eq. 7), Np = Nc, box limits on
 delta, Fxr and both increments.

@@ -23,7 +23,7 @@ class MpcConfig:
     course errors as model states (path_states), first-order actuator lags in the model, exact (ZOH)
     discretization, and weights from a random search on the default plant (benchmarks/tune_weights.py; the
     defaults are its best set, rounded).
-    Paper: 3-state model linearized at the target, Euler, REFERENCE.md section 7's weights.
+    Paper: 3-state model linearized at the target, Euler, the weights of docs/reference.md (The paper's controller).
 
     Attributes:
         dt_s: sampling time [s].
@@ -87,7 +87,8 @@ class MpcConfig:
 
     @classmethod
     def paper(cls) -> MpcConfig:
-        """The paper's formulation with the weights that complete the nominal 8 (REFERENCE.md section 7)."""
+        """The paper's formulation with the weights that complete the nominal 8 (docs/reference.md, The paper's
+        controller)."""
         return cls(q_speed=1.0, q_sideslip=417.0, q_yaw_rate=26.0, q_steer=5.5, q_drive_kn=0.2,
                    r_steer_step=56.0, r_drive_step_kn=0.024, steer_rate_radps=3.0, discretization="euler",
                    model_steer_lag_s=0.0, model_drive_lag_s=0.0, path_states=False, q_lateral_error=0.0,

@@ -12,6 +12,7 @@ import matplotlib.pyplot as plt  # noqa: E402
 import numpy as np  # noqa: E402
 from matplotlib.colors import ListedColormap  # noqa: E402
 
+from driftlab.core.convergence import best_so_far
 from driftlab.core.episode import EpisodeResult  # noqa: E402
 from driftlab.core.track import FigureEight  # noqa: E402
 
@@ -64,8 +65,8 @@ def plot_convergence(values: np.ndarray, failed: np.ndarray, path: str | Path, t
     index = np.arange(len(values))
     ax.plot(index[~failed], values[~failed], ".", color="tab:blue", ms=4, label="completed")
     ax.plot(index[failed], values[failed], "x", color="tab:red", ms=4, label="failed (penalty)")
-    best = np.minimum.accumulate(np.where(failed, np.inf, values))
-    ax.plot(index, np.where(np.isfinite(best), best, np.nan), "-", color="k", lw=1.5, label="best so far")
+    best = [np.nan if b is None else b for b in best_so_far(values, ~failed)]
+    ax.plot(index, best, "-", color="k", lw=1.5, label="best so far")
     ax.set_xlabel("iteration")
     ax.set_ylabel("J")
     ax.set_title(title)

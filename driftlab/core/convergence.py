@@ -11,6 +11,13 @@ from collections.abc import Sequence
 import numpy as np
 
 
+def best_position(values: Sequence[float], completed: Sequence[bool]) -> int | None:
+    """The job's best: the position of the lowest J among completed evaluations, the earliest on a tie (None
+    before the first completed one). driftlab.db.storage.best_evaluation is the same rule in SQL."""
+    done = [i for i, ok in enumerate(completed) if ok]
+    return min(done, key=lambda i: (values[i], i)) if done else None
+
+
 def best_so_far(values: Sequence[float], completed: Sequence[bool]) -> list[float | None]:
     """The lowest J among completed evaluations 0..i, for each i (None before the first completed one)."""
     out: list[float | None] = []

@@ -198,7 +198,9 @@ def get_evaluation(session: Session, *, evaluation_id: int) -> Evaluation:
 
 
 def best_evaluation(session: Session, *, job_id: int) -> Evaluation | None:
-    """The completed evaluation with the lowest J (failed ones only if none completed)."""
+    """The job's best (driftlab.core.convergence.best_position's rule, in SQL: the lowest completed J, the earliest
+    on a tie); while none has completed, the failure with the lowest J (its penalty: the one that drove furthest),
+    so that a job always shows something to watch."""
     for status_filter in (Evaluation.status == "completed", Evaluation.status != "completed"):
         best = session.scalar(select(Evaluation).where(Evaluation.job_id == job_id, status_filter)
                               .order_by(Evaluation.J, Evaluation.index).limit(1))

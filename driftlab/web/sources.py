@@ -10,6 +10,7 @@ import numpy as np
 from sqlalchemy.orm import Session, sessionmaker
 
 from driftlab import studies as study_views
+from driftlab.core.convergence import best_position, best_so_far
 from driftlab.core.track import FigureEight
 from driftlab.db import storage, studies
 from driftlab.db.models import Evaluation
@@ -85,8 +86,7 @@ class JobHistory:
     def best_position(self) -> int | None:
         """Position (= evaluation index) of the lowest J among completed evaluations."""
         with self._lock:
-            done = [i for i, ok in enumerate(self.completed) if ok]
-            return min(done, key=lambda i: self.values[i]) if done else None
+            return best_position(self.values, self.completed)
 
     def convergence(self) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
         """(index, J of completed or NaN, best-so-far J or NaN, failed marker or NaN).
@@ -99,7 +99,7 @@ class JobHistory:
             ok = np.array(self.completed, dtype=bool)
         index = np.arange(len(values), dtype=float)
         j_done = np.where(ok, values, np.nan)
-        best = np.fmin.accumulate(j_done) if len(j_done) else j_done
+        best = np.array([np.nan if b is None else b for b in best_so_far(values, ok)], dtype=float)
         top = np.nanmax(j_done) if ok.any() else 0.0
         failed = np.where(ok, np.nan, top)
         return index, j_done, best, failed

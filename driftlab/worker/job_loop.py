@@ -14,6 +14,7 @@ from dataclasses import dataclass, field
 
 from sqlalchemy.orm import Session, sessionmaker
 
+from driftlab.core.convergence import best_so_far
 from driftlab.core.optimizer import BayesianOptimizer
 from driftlab.core.robust import RobustScore, SampleResult, aggregate
 from driftlab.core.tuning import TuningSpec
@@ -159,7 +160,7 @@ def run_job(factory: sessionmaker[Session], job_id: int, executor: EpisodeExecut
         spec = TuningSpec.from_dict(job.spec)
         stored = storage.evaluations(session, job_id=job_id)
         history = [(e.theta, e.J if e.completed else None, e.J) for e in stored]
-        best = min((e.J for e in stored if e.completed), default=None)
+        best = best_so_far([e.J for e in stored], [e.completed for e in stored])[-1] if stored else None
     optimizer = restore_optimizer(spec, history)
     config_doc = spec.to_dict()["config"]
     seeds, confirm_seeds = spec.episode_seeds, spec.confirm_seeds

@@ -30,6 +30,7 @@ from driftlab.core.controller import (
 )
 from driftlab.core.mpc import (
     KN,
+    N_PER_KN,
     N_U,
     clip,
     constrained_terms,
@@ -39,7 +40,7 @@ from driftlab.core.mpc import (
     unconstrained_increments,
     update_estimate,
 )
-from driftlab.core.planner import PLAN_PHASE, advance_phase, phase_direction
+from driftlab.core.planner import PLAN_PHASE, Phase, advance_phase, phase_direction
 from driftlab.core.plant import (
     DRIVE,
     HEADING,
@@ -87,6 +88,8 @@ DONE, NEEDS_QP, NEEDS_PLANT = 0, 1, 2
 # Float loop state: last trigger time, grip-up start, the seen errors of the step waiting for OSQP.
 F_LAST_TRIGGER_S, F_GRIPUP_SINCE_S, F_SEEN_E, F_SEEN_DPSI = range(4)
 MAX_EVENTS = 16
+
+PHASE_FINISHED = int(Phase.FINISHED)  # a plain int: a compile-time constant in the kernels
 
 
 class LoopSettings(NamedTuple):
@@ -247,7 +250,7 @@ def run_until_constrained(cfg, st, qa_left, qa_right, model_params, plant_params
             event = st.events[ints[I_EVENTS]]
             event[0], event[1], event[2], event[3] = t, phase, sensed[X_POS], sensed[Y_POS]
             ints[I_EVENTS] += 1
-        if phase != 5 and phase_direction(phase) != direction:
+        if phase != PHASE_FINISHED and phase_direction(phase) != direction:
             direction = phase_direction(phase)
             seen = _errors(cfg, direction, sensed[X_POS], sensed[Y_POS], sensed[HEADING] + sensed[SIDESLIP])
             ref = _reference(cfg, qa_left if direction == LEFT else qa_right, st, direction)
@@ -261,13 +264,13 @@ def run_until_constrained(cfg, st, qa_left, qa_right, model_params, plant_params
         row[C_E], row[C_DPSI], row[C_C] = errors[0], errors[1], errors[3]
         row[C_PHASE] = phase
         row[C_V_REF], row[C_BETA_REF], row[C_R_REF] = ref[0], ref[1], ref[2]
-        row[C_DELTA_REF], row[C_FXR_REF] = ref[3], ref[4] * 1e3
+        row[C_DELTA_REF], row[C_FXR_REF] = ref[3], ref[4] * N_PER_KN
         ints[I_ROWS] += 1
         failure = _failure(cfg, st, t, s, errors[0], ref[1])
         if failure != RUNNING:
             ints[I_STATUS] = failure
             return DONE
-        if phase == 5:
+        if phase == PHASE_FINISHED:
             ints[I_STATUS] = COMPLETED
             return DONE
         in_flick = not (phase == 0 or phase == 2 or phase == 4)

@@ -156,7 +156,8 @@ def run_episode(theta: Theta, config: EpisodeConfig, *, seed: int = 0) -> Episod
     triggers = [{"t_s": float(t), "x_m": float(x), "y_m": float(y), "phase": int(phase)}
                 for t, phase, x, y in loop.events[:int(loop.ints[I_EVENTS])]
                 if phase in (Phase.INERTIA_LEFT_TO_RIGHT, Phase.INERTIA_RIGHT_TO_LEFT)]
-    metrics = compute_metrics(trajectory, [e["t_s"] for e in triggers], track, COL)
+    metrics = compute_metrics(trajectory, [e["t_s"] for e in triggers], track, COL,
+                              config.scenario.settle_tolerance_rad)
     if status == "completed":
         j_value = metrics.objective_j
     else:

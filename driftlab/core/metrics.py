@@ -24,7 +24,7 @@ class EpisodeMetrics:
     max_abs_e_m: float
     mean_abs_beta_err_rad: float  # sustained phases only
     beta_flip_s: list[float]  # per transition: trigger to beta changing sign
-    beta_settle_s: list[float]  # per transition: trigger to |beta - beta_ref| < 0.05 rad
+    beta_settle_s: list[float]  # per transition: trigger to |beta - beta_ref| < the scenario's settle tolerance
     min_speed_mps: float
     max_abs_yaw_rate_radps: float
     trigger_times_s: list[float]
@@ -74,7 +74,8 @@ def _transition_times(t: np.ndarray, beta: np.ndarray, beta_ref: np.ndarray, tri
 
 
 def compute_metrics(traj: np.ndarray, trigger_times_s: list[float], track: FigureEight,
-                    col: dict[str, int]) -> EpisodeMetrics:
+                    col: dict[str, int], settle_tolerance_rad: float = 0.05) -> EpisodeMetrics:
+    """``settle_tolerance_rad``: the scenario's, so that beta_settle_s means what ends an inertia phase."""
     if len(traj) == 0:
         return EpisodeMetrics(math.log(1e3), 0.0, math.nan, math.nan, math.nan, [], [], math.nan, math.nan, [], 0.0)
     t = traj[:, col["t_s"]]
@@ -90,7 +91,7 @@ def compute_metrics(traj: np.ndarray, trigger_times_s: list[float], track: Figur
     sustained = np.isin(phase, [int(p) for p in SUSTAINED_PHASES])
     flips, settles = [], []
     for trigger in trigger_times_s:
-        flip, settle = _transition_times(t, beta, beta_ref, trigger, 0.05)
+        flip, settle = _transition_times(t, beta, beta_ref, trigger, settle_tolerance_rad)
         flips.append(flip)
         settles.append(settle)
     return EpisodeMetrics(

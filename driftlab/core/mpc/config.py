@@ -10,6 +10,7 @@ from driftlab.core.errors import ConfigError
 from driftlab.core.validation import check_ranges
 
 KN = 1e-3  # the QP's drive-force unit is kN
+N_PER_KN = 1e3  # its inverse, exactly (1 / KN is not)
 N_X = 3
 N_U = 2
 N_Z = N_X + N_U

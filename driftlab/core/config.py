@@ -21,6 +21,12 @@ MODEL_SCALE_LIMITS = (0.5, 2.0)
 THETA_KEYS = ("c_lr", "c_rl", "dV", "k", "model_mu_scale", "model_c_scale")
 
 
+# What each of theta's values may be (a job's bounds may span at most this, driftlab.core.tuning).
+THETA_LIMITS: dict[str, tuple[float, float]] = {"c_lr": (0.0, 0.5), "c_rl": (0.0, 0.5), "dV": (-5.0, 5.0),
+                                                "k": (-1.0, 1.0), "model_mu_scale": MODEL_SCALE_LIMITS,
+                                                "model_c_scale": MODEL_SCALE_LIMITS}
+
+
 @dataclass(frozen=True)
 class Theta:
     """The parameters BO learns (paper section III-C).
@@ -48,9 +54,7 @@ class Theta:
     model_c_scale: float = 1.0
 
     def __post_init__(self) -> None:
-        limits = {"c_lr": (0.0, 0.5), "c_rl": (0.0, 0.5), "dV": (-5.0, 5.0), "k": (-1.0, 1.0),
-                  "model_mu_scale": MODEL_SCALE_LIMITS, "model_c_scale": MODEL_SCALE_LIMITS}
-        check_ranges(self, "theta", limits)
+        check_ranges(self, "theta", THETA_LIMITS)
 
     @classmethod
     def from_mapping(cls, values: dict[str, Any]) -> Theta:

@@ -11,8 +11,8 @@ from dataclasses import dataclass, field
 from typing import Any
 
 from driftlab.core.config import (
-    MODEL_SCALE_LIMITS,
     THETA_KEYS,
+    THETA_LIMITS,
     EpisodeConfig,
     Theta,
     config_from_document,
@@ -30,10 +30,7 @@ DEFAULT_BOUNDS: dict[str, tuple[float, float]] = {
 # benchmarks/envelope.py: with the untuned theta, the plants that fail with the model as configured complete
 # with the model's C x 0.9 (nominal plant, C x 0.9) to x 1.25 (default plant, C x 1.3), or mu x 0.85 to x 1.15.
 MODEL_BOUNDS: dict[str, tuple[float, float]] = {"model_mu_scale": (0.85, 1.2), "model_c_scale": (0.85, 1.3)}
-# What a bound may span: theta's own validity range.
-BOUND_LIMITS: dict[str, tuple[float, float]] = {"c_lr": (0.0, 0.5), "c_rl": (0.0, 0.5), "dV": (-5.0, 5.0),
-                                                "k": (-1.0, 1.0), "model_mu_scale": MODEL_SCALE_LIMITS,
-                                                "model_c_scale": MODEL_SCALE_LIMITS}
+BOUND_LIMITS = THETA_LIMITS  # what a bound may span: theta's own validity range
 MAX_ITERATIONS = JOB_LIMITS["iterations"][1]
 # Episodes per evaluation by default: with 4 seeds a theta that fails one run in ten still fails an evaluation
 # 34% of the time, enough for the failure model to steer away from it, at 4x the episodes (2 workers keep

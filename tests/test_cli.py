@@ -6,7 +6,7 @@ import sys
 
 import pytest
 
-from driftlab.export import read_csv_metadata
+from driftlab.reports.export import read_csv_metadata
 
 pytestmark = pytest.mark.e2e  # real processes: servers, browsers, Dask, the CLI
 

@@ -1,6 +1,6 @@
 """The report says so when the learned theta is no better than the untuned one."""
 
-from driftlab.report import _verdict
+from driftlab.reports.job import _verdict
 
 
 def _summary(j_mean, rate):

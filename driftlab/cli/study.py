@@ -61,8 +61,8 @@ def study_doc(args: argparse.Namespace, tuning_spec) -> dict[str, Any]:
 def _open_study(factory, args: argparse.Namespace, tuning_spec, runner: str) -> int:
     """Create the study (or take it up by name); a seeds study is held by ``runner`` in the same transaction, so a
     server on the same database cannot start one of its jobs (raises LeaseHeld if another runner holds it)."""
-    from driftlab import studies as study_views
     from driftlab.db import storage, studies
+    from driftlab.services import studies as study_views
 
     with storage.transaction(factory) as session:
         study = studies.find_study(session, name=args.name) if args.name else None
@@ -142,8 +142,8 @@ def brief_summary(summary: dict[str, Any], every: int = 10) -> dict[str, Any]:
 
 def cmd_study(args: argparse.Namespace, tuning_spec, db_url: str, dask_address: str | None) -> int:
     """Create (or take up by name) and run a study; print its summary as JSON. ``show`` only prints."""
-    from driftlab import studies as study_views
     from driftlab.db import lifecycle, storage, studies
+    from driftlab.services import studies as study_views
     from driftlab.worker.executors import open_executor
 
     factory = storage.open_database(db_url)
@@ -152,7 +152,7 @@ def cmd_study(args: argparse.Namespace, tuning_spec, db_url: str, dask_address: 
             summary = study_views.study_summary(session, studies.get_study_by_name(session, name=args.name))
         print(json.dumps(brief_summary(summary, args.every)))
         return 0
-    from driftlab.shutdown import stop_on_sigterm
+    from driftlab.cli.shutdown import stop_on_sigterm
 
     stop_on_sigterm()
     runner = lifecycle.new_runner_id("study")

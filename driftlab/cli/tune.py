@@ -9,9 +9,9 @@ import sys
 import time
 
 from driftlab.cli.options import dask_address, db_url, episode_config, finite
+from driftlab.cli.shutdown import stop_on_sigterm
 from driftlab.core.drivability import check_drivable
 from driftlab.core.errors import ConfigError
-from driftlab.shutdown import stop_on_sigterm
 
 
 def tuning_spec(args: argparse.Namespace):
@@ -126,12 +126,12 @@ def cmd_rescore(args: argparse.Namespace) -> int:
 
 
 def cmd_report(args: argparse.Namespace) -> int:
-    from driftlab.report import write_report
+    from driftlab.reports.job import write_report
 
     if os.path.exists(args.out) and not os.path.isdir(args.out):
         raise ConfigError(f"--out {args.out}: is a file; give a folder (created if missing)")
     if args.study:
-        from driftlab.study_report import write_study_report
+        from driftlab.reports.study import write_study_report
 
         print(json.dumps({"report": str(write_study_report(db_url=db_url(args.db), name=args.study,
                                                            out_dir=args.out))}))

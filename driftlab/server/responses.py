@@ -1,6 +1,6 @@
 """What the REST API answers: the response bodies of its routes and of its errors, for the OpenAPI document
 (clients and schemathesis read it) and as the routes' ``response_model`` (FastAPI checks a route's answer
-against it). The bodies themselves are built in driftlab.server.serialize and driftlab.studies."""
+against it). The bodies themselves are built in driftlab.server.serialize and driftlab.services.studies."""
 
 from __future__ import annotations
 

@@ -9,11 +9,11 @@ from typing import Any
 import numpy as np
 from sqlalchemy.orm import Session, sessionmaker
 
-from driftlab import studies as study_views
 from driftlab.core.convergence import best_position, best_so_far
 from driftlab.core.track import FigureEight
 from driftlab.db import storage, studies
 from driftlab.db.models import Evaluation
+from driftlab.services import studies as study_views
 from driftlab.web.frames import EpisodeFrames
 
 

@@ -8,7 +8,7 @@ import httpx
 import pytest
 
 from driftlab.core.config import THETA_KEYS, Theta
-from driftlab.export import read_csv_metadata
+from driftlab.reports.export import read_csv_metadata
 from tests.server_process import free_port as _free_port
 from tests.server_process import start_server as _start
 from tests.server_process import wait_released

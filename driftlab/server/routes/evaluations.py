@@ -8,7 +8,7 @@ from fastapi import APIRouter, Depends, Query, Response
 from sqlalchemy.orm import Session, sessionmaker
 
 from driftlab.db import storage
-from driftlab.export import trajectory_csv, trajectory_json
+from driftlab.reports.export import trajectory_csv, trajectory_json
 from driftlab.server.responses import Evaluation, TrajectoryDocument, errors, media
 from driftlab.server.routes.deps import factory
 from driftlab.server.schemas import EvaluationId

@@ -7,12 +7,12 @@ from typing import Annotated, Any
 from fastapi import APIRouter, Depends, HTTPException, Query, Request, Response
 from sqlalchemy.orm import Session, sessionmaker
 
-from driftlab import studies as study_views
 from driftlab.db import lifecycle, storage, studies
 from driftlab.server import quotas
 from driftlab.server.responses import ComparedJob, Study, StudyListItem, errors
 from driftlab.server.routes.deps import factory, require_token, wake_runner
 from driftlab.server.schemas import StudyCreate, StudyId, check_document_types
+from driftlab.services import studies as study_views
 
 router = APIRouter(tags=["studies"])
 Factory = Annotated[sessionmaker[Session], Depends(factory)]

@@ -14,7 +14,7 @@ from driftlab.core.track import FigureEight
 from driftlab.core.tuning import TuningSpec
 from driftlab.core.vehicle import pack_params
 from driftlab.db import storage
-from driftlab.plotting import plot_convergence, plot_episode
+from driftlab.reports.plotting import plot_convergence, plot_episode
 from driftlab.worker.executors import open_executor
 from driftlab.worker.scoring import score_thetas
 

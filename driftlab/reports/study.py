@@ -6,10 +6,10 @@ from __future__ import annotations
 import statistics
 from pathlib import Path
 
-from driftlab import studies as study_views
 from driftlab.core.study import grid_table
 from driftlab.db import storage, studies
-from driftlab.plotting import plot_band, plot_heatmap
+from driftlab.reports.plotting import plot_band, plot_heatmap
+from driftlab.services import studies as study_views
 
 
 def _seeds_lines(summary: dict, session, out: Path) -> list[str]:

@@ -1,0 +1,1 @@
+"""What the REST routes and the CLI both call (one implementation for both edges)."""

@@ -177,7 +177,7 @@ def cmd_study(args: argparse.Namespace, tuning_spec, db_url: str, dask_address: 
     with storage.transaction(factory) as session:
         summary = study_views.study_summary(session, studies.get_study(session, study_id=study_id))
     print(json.dumps({**brief_summary(summary, args.every), "wall_s": round(time.perf_counter() - started, 2)}))
-    return 0 if summary["status"] != "failed" else 1
+    return 0 if summary["status"] != lifecycle.JobStatus.FAILED else 1
 
 
 def add_study_parser(sub, db_help: str, dask_help: str, int_in, tune_options) -> argparse.ArgumentParser:

@@ -114,7 +114,7 @@ def cmd_tune(args: argparse.Namespace) -> int:
                "best": storage.best_summary(best)}
     sys.stderr.write("\n")
     print(json.dumps(out))
-    return 0 if status != "failed" else 1
+    return 0 if status != lifecycle.JobStatus.FAILED else 1
 
 
 def cmd_rescore(args: argparse.Namespace) -> int:

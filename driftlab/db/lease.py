@@ -17,11 +17,11 @@ from typing import Any
 from sqlalchemy import or_, update
 from sqlalchemy.orm import Session
 
-from driftlab.db.models import utcnow
+from driftlab.db.models import JobStatus, utcnow
 
 LEASE_TIMEOUT_S = 15.0  # a runner renews every HEARTBEAT_S; three missed renewals and more mean it is gone
 HEARTBEAT_S = 2.0
-RUNNING = "running"
+RUNNING = JobStatus.RUNNING
 
 
 def new_runner_id(kind: str) -> str:

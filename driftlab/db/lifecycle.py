@@ -11,27 +11,18 @@ The lease (``runner_id``, ``heartbeat_at``) is driftlab.db.lease's, the same for
 from __future__ import annotations
 
 from datetime import datetime
-from enum import StrEnum
 
 from sqlalchemy import delete, or_, select, update
 from sqlalchemy.orm import Session
 
 from driftlab.db import lease
 from driftlab.db.lease import HEARTBEAT_S, LEASE_TIMEOUT_S, new_runner_id
-from driftlab.db.models import Evaluation, Job, Study, Trajectory, utcnow
+from driftlab.db.models import Evaluation, Job, JobStatus, Study, Trajectory, utcnow
 from driftlab.db.storage import count_evaluations, get_job
 
 __all__ = ["HEARTBEAT_S", "LEASE_TIMEOUT_S", "JobStatus", "LeaseHeld", "TransitionError", "claim", "delete_job",
            "extend", "heartbeat", "lease_is_live", "new_runner_id", "next_claimable", "release", "request_pause",
            "requeue"]
-
-
-class JobStatus(StrEnum):
-    QUEUED = "queued"
-    RUNNING = "running"
-    PAUSED = "paused"
-    FINISHED = "finished"
-    FAILED = "failed"
 
 
 class TransitionError(Exception):

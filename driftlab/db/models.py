@@ -5,6 +5,7 @@ changes only through a revision in driftlab/db/migrations (see driftlab.db.schem
 from __future__ import annotations
 
 from datetime import UTC, datetime
+from enum import StrEnum
 from typing import Any
 
 from sqlalchemy import JSON, Float, ForeignKey, Integer, LargeBinary, String, UniqueConstraint
@@ -13,6 +14,16 @@ from sqlalchemy.orm import DeclarativeBase, Mapped, mapped_column, relationship
 
 def utcnow() -> datetime:
     return datetime.now(UTC)
+
+
+class JobStatus(StrEnum):
+    """A job's (and a robustness study's) status; the transitions are driftlab.db.lifecycle's."""
+
+    QUEUED = "queued"
+    RUNNING = "running"
+    PAUSED = "paused"
+    FINISHED = "finished"
+    FAILED = "failed"
 
 
 class Base(DeclarativeBase):
@@ -27,7 +38,7 @@ class Job(Base):
     name: Mapped[str] = mapped_column(String(200), unique=True)
     spec: Mapped[dict[str, Any]] = mapped_column(JSON)  # TuningSpec.to_dict()
     seed: Mapped[int] = mapped_column(Integer)
-    status: Mapped[str] = mapped_column(String(20), default="queued")  # a lifecycle.JobStatus
+    status: Mapped[str] = mapped_column(String(20), default=JobStatus.QUEUED)
     error: Mapped[str | None] = mapped_column(String(2000), default=None)
     created_at: Mapped[datetime] = mapped_column(default=utcnow)
     updated_at: Mapped[datetime] = mapped_column(default=utcnow, onupdate=utcnow)
@@ -96,7 +107,7 @@ class Study(Base):
     name: Mapped[str] = mapped_column(String(200), unique=True)
     kind: Mapped[str] = mapped_column(String(20))  # "seeds" | "robustness"
     spec: Mapped[dict[str, Any]] = mapped_column(JSON)  # SeedsStudySpec / RobustnessStudySpec .to_dict()
-    status: Mapped[str] = mapped_column(String(20), default="queued")  # robustness only; seeds: from its jobs
+    status: Mapped[str] = mapped_column(String(20), default=JobStatus.QUEUED)  # robustness only; seeds: its jobs'
     error: Mapped[str | None] = mapped_column(String(2000), default=None)
     runner_id: Mapped[str | None] = mapped_column(String(100), default=None)
     heartbeat_at: Mapped[datetime | None] = mapped_column(default=None)

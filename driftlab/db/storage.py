@@ -23,7 +23,7 @@ from sqlalchemy import Engine, create_engine, event, func, select
 from sqlalchemy.orm import Session, sessionmaker
 
 from driftlab.db import schema
-from driftlab.db.models import Evaluation, Job, Trajectory
+from driftlab.db.models import Evaluation, Job, JobStatus, Trajectory
 
 _BUSY_TIMEOUT_MS = 30_000
 _BEGIN_OPTION = "driftlab_sqlite_begin"
@@ -79,7 +79,7 @@ def snapshot(factory: sessionmaker[Session]) -> Iterator[Session]:
 
 # -- jobs --------------------------------------------------------------------------------------------------
 def create_job(session: Session, *, name: str, spec: dict[str, Any], seed: int, study_id: int | None = None) -> Job:
-    job = Job(name=name, spec=spec, seed=seed, status="queued", study_id=study_id)
+    job = Job(name=name, spec=spec, seed=seed, status=JobStatus.QUEUED, study_id=study_id)
     session.add(job)
     session.flush()
     return job
@@ -105,13 +105,6 @@ def get_job_by_name(session: Session, *, name: str) -> Job:
 
 def list_jobs(session: Session) -> list[Job]:
     return list(session.scalars(select(Job).order_by(Job.id)))
-
-
-def set_job_status(session: Session, *, job_id: int, status: str, error: str | None = None) -> Job:
-    job = get_job(session, job_id=job_id)
-    job.status = status
-    job.error = error
-    return job
 
 
 def count_evaluations(session: Session, *, job_id: int) -> int:

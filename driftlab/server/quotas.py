@@ -9,7 +9,7 @@ from fastapi import HTTPException
 from sqlalchemy import func, select
 from sqlalchemy.orm import Session
 
-from driftlab.db.models import Job, Study
+from driftlab.db.models import Job, JobStatus, Study
 from driftlab.settings import Settings
 
 
@@ -26,7 +26,7 @@ def check_job(settings: Settings, spec: dict) -> None:
 
 
 def check_queue(settings: Settings, session: Session, adding: int) -> None:
-    queued = session.scalar(select(func.count()).select_from(Job).where(Job.status == "queued")) or 0
+    queued = session.scalar(select(func.count()).select_from(Job).where(Job.status == JobStatus.QUEUED)) or 0
     if queued + adding > settings.max_queued_jobs:
         raise HTTPException(422, f"jobs: {queued} jobs are queued and this adds {adding}; the limit is "
                                  f"{settings.max_queued_jobs} (DRIFTLAB_MAX_QUEUED_JOBS): wait, or delete some")

@@ -10,7 +10,7 @@ from typing import Any
 from driftlab.core.compiled import episode_kernels_cached
 from driftlab.core.config import THETA_KEYS, Theta
 from driftlab.db import storage
-from driftlab.db.models import Evaluation, Job
+from driftlab.db.models import Evaluation, Job, JobStatus
 
 
 def evaluation_dict(e: Evaluation) -> dict[str, Any]:
@@ -44,7 +44,7 @@ def job_dict(session, job: Job) -> dict[str, Any]:
     n_done = storage.count_evaluations(session, job_id=job.id)
     iterations = job.spec["iterations"]
     best = storage.best_evaluation(session, job_id=job.id)
-    running = job.status == "running"
+    running = job.status == JobStatus.RUNNING
     rate = storage.seconds_per_evaluation(session, job_id=job.id, since=job.started_at) if running else None
     eta = None if rate is None else rate * (iterations - n_done)
     return {"id": job.id, "name": job.name, "status": job.status, "detail": job_detail(job.status, rate),
@@ -60,7 +60,7 @@ COMPILING = "compiling the simulation (numba, once after an install; no evaluati
 
 def job_detail(status: str, seconds_per_evaluation: float | None) -> str | None:
     """What a running job does when its status alone does not say: compiling before its run's first evaluation."""
-    if status == "running" and seconds_per_evaluation is None and episode_kernels_cached() is False:
+    if status == JobStatus.RUNNING and seconds_per_evaluation is None and episode_kernels_cached() is False:
         return COMPILING
     return None
 

@@ -17,6 +17,7 @@ import viser
 import viser.uplot
 
 from driftlab.core.compiled import episode_kernels_cached
+from driftlab.db.models import JobStatus
 from driftlab.web.compare import ComparePanel
 from driftlab.web.frames import EpisodeFrames
 from driftlab.web.playback import Playback
@@ -138,7 +139,7 @@ class ClientSession:
             f"**{history.values[best_pos]:.3f}** (lower is better), evaluation id {history.ids[best_pos]} "
             f"(index {best_pos})")
         compiling = " (**compiling the simulation**: numba, once after an install)" if (
-            history.status == "running" and episode_kernels_cached() is False) else ""
+            history.status == JobStatus.RUNNING and episode_kernels_cached() is False) else ""
         self.job_text.content = (f"**{history.name}**: {history.status}{compiling}, {history.n_done} / "
                                  f"{history.iterations} evaluations, {sum(history.completed)} completed; "
                                  f"best J {best_text}")

@@ -57,12 +57,12 @@ def test_a_seeds_studys_status_and_lifecycle_are_its_jobs(factory):
         assert studies.study_status(session, study) == "queued"
         studies.pause_study(session, study_id=study.id)
         assert studies.study_status(session, study) == "paused"
-        storage.set_job_status(session, job_id=ids[0], status="finished")
+        lifecycle.extend(session, job_id=ids[0], iterations=0)  # paused, nothing to do: finished
         studies.resume_study(session, study_id=study.id)
         assert [storage.get_job(session, job_id=i).status for i in ids] == ["finished", "queued"]
         with pytest.raises(lifecycle.TransitionError, match="no paused or failed job"):
             studies.resume_study(session, study_id=study.id)
-        storage.set_job_status(session, job_id=ids[1], status="finished")
+        lifecycle.extend(session, job_id=ids[1], iterations=0)
         assert studies.study_status(session, study) == "finished"
     with storage.transaction(factory) as session:
         studies.delete_study(session, study_id=study.id)

@@ -13,22 +13,18 @@ import sys
 import time
 from typing import Any
 
+from driftlab.cli.options import key_values
 from driftlab.core.errors import ConfigError
 
 
 def _grid(items: list[str]) -> dict[str, list[float]]:
     """--grid KEY=V1,V2,... (repeatable) -> {KEY: [V1, V2, ...]}."""
     grid: dict[str, list[float]] = {}
-    for item in items:
-        key, sep, values = item.partition("=")
-        if not sep or not key.strip():
-            raise ConfigError(f"--grid expects KEY=V1,V2,..., got {item!r}")
-        if key.strip() in grid:
-            raise ConfigError(f"--grid sets {key.strip()!r} twice")
+    for key, values in key_values(items, "--grid").items():
         try:
-            grid[key.strip()] = [float(v) for v in values.split(",") if v.strip()]
+            grid[key] = [float(v) for v in values.split(",") if v.strip()]
         except ValueError:
-            raise ConfigError(f"grid.{key.strip()}: values must be numbers, got {values!r}") from None
+            raise ConfigError(f"grid.{key}: values must be numbers, got {values!r}") from None
     return grid
 
 
@@ -41,8 +37,6 @@ def _seeds(text: str) -> list[int]:
 
 def study_doc(args: argparse.Namespace, tuning_spec) -> dict[str, Any]:
     """The request document (as POST /api/studies takes) from the command line."""
-    from driftlab.cli.options import key_values
-
     if args.kind == "seeds":
         return {"kind": "seeds", "seeds": _seeds(args.seeds), "spec": tuning_spec(args).to_dict()}
     doc: dict[str, Any] = {"kind": "robustness", "grid": _grid(args.grid or [])}

@@ -138,7 +138,10 @@ def test_a_robustness_study_of_a_stored_evaluation_uses_its_jobs_config_and_seed
 
 def test_pause_resume_and_delete_a_robustness_study(server):
     grid = {"plant.friction_scale": [0.9, 1.0, 1.1, 1.2], "plant.mass_scale": [0.9, 1.0, 1.1]}
-    study = httpx.post(f"{server}/api/studies", json={"kind": "robustness", "theta": {"k": 0.05}, "grid": grid}).json()
+    # 16 seeds a cell: the 9 drivable cells take seconds, so the study cannot finish before the pause lands
+    # (with 1 seed it sometimes did, on a loaded machine, and the pause was a 409).
+    study = httpx.post(f"{server}/api/studies", json={"kind": "robustness", "theta": {"k": 0.05}, "grid": grid,
+                                                      "robust_samples": 16}).json()
     url = f"{server}/api/studies/{study['id']}"
     deadline = time.time() + 60
     while httpx.get(url).json()["n_done"] < 1 and time.time() < deadline:

@@ -87,15 +87,16 @@ def _residual(unknowns, radius_m, sideslip_rad, cp):
     return np.array([f[S_SPEED], f[S_YAW_RATE], f[S_SIDESLIP], f[S_OMEGA_F] * 1e-2, f[S_OMEGA_R] * 1e-2])
 
 
-def _physical(x, cp, frozen_front: bool) -> bool:
+def _physical(x, cp) -> bool:
+    """A state a car can be in (the front wheel's sign aside: see ``plant_drifts``)."""
     speed, steer, omega_f, omega_r, accel = x
-    return (speed > 2.0 and (omega_f < 0.0) == frozen_front and omega_r >= 0.0 and abs(steer) < cp[CR_STEER_MAX]
+    return (speed > 2.0 and omega_r >= 0.0 and abs(steer) < cp[CR_STEER_MAX]
             and acceleration_constraints(speed, accel, cp) == accel)
 
 
-def plant_drifts(radius_m: float, sideslip_rad: float, cp: np.ndarray, frozen_front: bool = False) -> list[PlantDrift]:
+def plant_drifts(radius_m: float, sideslip_rad: float, cp: np.ndarray) -> tuple[list[PlantDrift], list[PlantDrift]]:
     """Every distinct steady drift at ``radius_m`` and ``sideslip_rad`` (beta < 0: left-hand, > 0: right-hand),
-    fastest first; with ``frozen_front``, the ones held by a backward-turning front wheel instead."""
+    fastest first: (the ones a car can hold, the ones held only by a backward-turning front wheel), from one solve."""
     found: list[np.ndarray] = []
     wheel = cp[CR_WHEEL_RADIUS]
     side = -1.0 if sideslip_rad < 0 else 1.0
@@ -105,12 +106,12 @@ def plant_drifts(radius_m: float, sideslip_rad: float, cp: np.ndarray, frozen_fr
         sol = root(_residual, guess, args=(radius_m, sideslip_rad, cp), method="hybr", options={"xtol": 1e-12})
         if not sol.success or np.max(np.abs(_residual(sol.x, radius_m, sideslip_rad, cp))) > 1e-7:
             continue
-        if not _physical(sol.x, cp, frozen_front):
+        if not _physical(sol.x, cp):
             continue
         if all(np.max(np.abs(sol.x[:2] - f[:2])) > 1e-5 for f in found):
             found.append(sol.x)
-    drifts = [_drift(x, radius_m, sideslip_rad, cp) for x in found]
-    return sorted(drifts, key=lambda d: -d.speed_mps)
+    drifts = sorted((_drift(x, radius_m, sideslip_rad, cp) for x in found), key=lambda d: -d.speed_mps)
+    return [d for d in drifts if d.front_wheel_radps >= 0.0], [d for d in drifts if d.front_wheel_radps < 0.0]
 
 
 def _drift(x, radius_m, sideslip_rad, cp) -> PlantDrift:
@@ -126,21 +127,25 @@ def _drift(x, radius_m, sideslip_rad, cp) -> PlantDrift:
 
 
 @lru_cache(maxsize=256)
+def _family(vehicle_id: int, radius_m: float, sideslip_rad: float, friction_scale: float, mass_scale: float,
+            right: bool) -> tuple[tuple[PlantDrift, ...], tuple[PlantDrift, ...]]:
+    cp = pack_commonroad(vehicle_id, friction_scale=friction_scale, mass_scale=mass_scale)
+    holdable, frozen = plant_drifts(radius_m, abs(sideslip_rad) if right else -abs(sideslip_rad), cp)
+    return tuple(holdable), tuple(frozen)
+
+
 def commonroad_drifts(vehicle_id: int, radius_m: float, sideslip_rad: float, friction_scale: float = 1.0,
                       mass_scale: float = 1.0, right: bool = False) -> tuple[PlantDrift, ...]:
     """The drift family of a CommonRoad vehicle at a radius and |sideslip| (left-hand, or ``right``-hand),
     fastest first."""
-    cp = pack_commonroad(vehicle_id, friction_scale=friction_scale, mass_scale=mass_scale)
-    return tuple(plant_drifts(radius_m, abs(sideslip_rad) if right else -abs(sideslip_rad), cp))
+    return _family(vehicle_id, radius_m, sideslip_rad, friction_scale, mass_scale, right)[0]
 
 
-@lru_cache(maxsize=64)
 def frozen_front_wheel_drifts(vehicle_id: int, radius_m: float, sideslip_rad: float, friction_scale: float = 1.0,
                               mass_scale: float = 1.0, right: bool = False) -> tuple[PlantDrift, ...]:
     """The steady states that the package's frozen backward-turning front wheel holds (module docstring), fastest
     first: what a solver that does not check the wheel's sign reports as low-speed, high-wheelspin drifts."""
-    cp = pack_commonroad(vehicle_id, friction_scale=friction_scale, mass_scale=mass_scale)
-    return tuple(plant_drifts(radius_m, abs(sideslip_rad) if right else -abs(sideslip_rad), cp, frozen_front=True))
+    return _family(vehicle_id, radius_m, sideslip_rad, friction_scale, mass_scale, right)[1]
 
 
 def describe_family(drifts: tuple[PlantDrift, ...], frozen: tuple[PlantDrift, ...] = ()) -> str | None:

@@ -2,11 +2,12 @@
 the model's front grip that makes the two agree.
 
 Why: the multi-body car's front tyres are far from their peak in its drift, so a 0.02 rad step of steering
-raises its yaw rate by ~0.11 rad/s within 0.3 s; the model fitted to its drift (driftlab.core.commonroad.model_fit)
-with the front grip it reads off the tyre has its front axle near saturation and answers with ~0.016. An MPC that
-believes the steering 7x weaker than it is steers 7x too hard: MB's drift then oscillates at ~2.7 Hz and spins
-out. A front/rear grip split (``VehicleParams.front_grip_scale``) moves where on its curve the model's front tyre
-sits without moving the drift itself (friction and offsets are refitted for each split), and so sets the gain.
+raises its yaw rate by 0.106 rad/s (mean over 0.1..0.3 s); the model fitted to its drift
+(driftlab.core.commonroad.model_fit) with the front grip it reads off the tyre has its front axle near saturation
+and answers with 0.0087. An MPC that believes the steering 12x weaker than it is steers 12x too hard: MB's drift
+then oscillates at ~2.7 Hz and spins out. A front/rear grip split (``VehicleParams.front_grip_scale``) moves where
+on its curve the model's front tyre sits without moving the drift itself (friction and offsets are refitted for
+each split), and so sets the gain.
 
 The response is measured as a practitioner would on a car: from its steady drift, hold the drive, step the
 steering command, and read the yaw rate change averaged over 0.1..0.3 s. The model is fed the steering angle the

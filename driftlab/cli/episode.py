@@ -69,7 +69,7 @@ def cmd_episode(args: argparse.Namespace) -> int:
         from driftlab.reports.plotting import plot_episode
 
         scenario = config.scenario
-        plot_episode(result, FigureEight(scenario.left_radius_m, scenario.right_radius_m), args.plot,
+        plot_episode(result, FigureEight(scenario.left_radius_m, scenario.right_radius_m, scenario.laps), args.plot,
                      title=f"{args.plant} plant, {args.controller} controller, seed {args.seed}\n"
                            f"theta {theta.as_dict()}\n{result.status}, J = {result.J:.3f}")
     return 0

@@ -87,7 +87,7 @@ DONE, NEEDS_QP, NEEDS_PLANT = 0, 1, 2
  I_UPDATES, I_PLANT_DUE) = range(11)
 # Float loop state: last trigger time, grip-up start, the seen errors of the step waiting for OSQP.
 F_LAST_TRIGGER_S, F_GRIPUP_SINCE_S, F_SEEN_E, F_SEEN_DPSI = range(4)
-MAX_EVENTS = 16
+MAX_EVENTS = 40  # 4 phase changes a lap, MAX_LAPS laps, and the finish
 
 PHASE_FINISHED = int(Phase.FINISHED)  # a plain int: a compile-time constant in the kernels
 

@@ -13,6 +13,7 @@ from typing import Any
 from driftlab.core.errors import ConfigError
 from driftlab.core.mpc import MpcConfig
 from driftlab.core.plant import PlantConfig
+from driftlab.core.track import MAX_LAPS
 from driftlab.core.validation import check_ranges
 from driftlab.core.vehicle import VehicleParams
 
@@ -102,6 +103,8 @@ class ScenarioConfig:
         lookahead_m: look-ahead distance x_la of the steering feedback [m].
         max_time_s: the episode stops here if not finished [s].
         settle_tolerance_rad: |beta - beta_ref| that ends an inertia phase [rad].
+        laps: laps of the 8 in one episode: the paper's pattern repeated, J over the whole run; ``max_time_s``
+            is per lap.
     """
 
     left_radius_m: float = 44.0
@@ -110,11 +113,15 @@ class ScenarioConfig:
     lookahead_m: float = 7.0
     max_time_s: float = 40.0
     settle_tolerance_rad: float = 0.05
+    laps: int = 1
 
     def __post_init__(self) -> None:
         check_ranges(self, "scenario", {
             "left_radius_m": (5.0, 500.0), "right_radius_m": (5.0, 500.0), "sideslip_rad": (0.05, 1.0),
-            "lookahead_m": (0.0, 50.0), "max_time_s": (1.0, 300.0), "settle_tolerance_rad": (0.001, 0.5)})
+            "lookahead_m": (0.0, 50.0), "max_time_s": (1.0, 300.0), "settle_tolerance_rad": (0.001, 0.5),
+            "laps": (1, MAX_LAPS)})
+        if not isinstance(self.laps, int):
+            raise ConfigError(f"scenario.laps must be an integer in [1, {MAX_LAPS}], got {self.laps!r}")
 
 
 @dataclass(frozen=True)

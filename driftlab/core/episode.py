@@ -111,7 +111,7 @@ def run_episode(theta: Theta, config: EpisodeConfig, *, seed: int = 0) -> Episod
         raise ConfigError(f"seed must be an integer in [0, {MAX_SEED}], got {seed!r}")
     started = time.perf_counter()
     scenario = config.scenario
-    track = FigureEight(scenario.left_radius_m, scenario.right_radius_m)
+    track = FigureEight(scenario.left_radius_m, scenario.right_radius_m, scenario.laps)
     try:
         model = build_controller_model(theta.model_vehicle(config.vehicle), config.mpc, scenario.left_radius_m,
                                        scenario.right_radius_m, scenario.sideslip_rad, theta.k, scenario.lookahead_m)
@@ -120,7 +120,7 @@ def run_episode(theta: Theta, config: EpisodeConfig, *, seed: int = 0) -> Episod
         return EpisodeResult("diverged", failure_penalty(0.0), compute_metrics(empty, [], track, COL), empty,
                              wall_ms=(time.perf_counter() - started) * 1e3, theta=theta, seed=seed)
     dt = config.mpc.dt_s
-    n_steps = int(round(scenario.max_time_s / dt))
+    n_steps = int(round(scenario.max_time_s * scenario.laps / dt))
     variation = draw_variation(config.plant, seed, n_steps + 1)
     plant = make_plant(variation.plant, config.vehicle)
     if hasattr(plant, "start_in_drift_of"):  # a multi-body car starts with its body rolled as in the drift
@@ -131,7 +131,8 @@ def run_episode(theta: Theta, config: EpisodeConfig, *, seed: int = 0) -> Episod
         config, track, start.speed_mps + theta.dV + offset[0], start.sideslip_rad + offset[1],
         start.yaw_rate_radps + offset[2], start.steer_rad, start.drive_force_n))
     settings = _loop_settings(config, theta, track, n_steps, variation.noisy, plant.kind)
-    loop = new_loop_state(state, initial_plan_state(), start.inputs, n_steps, len(model.left_qp.step_limit))
+    loop = new_loop_state(state, initial_plan_state(scenario.laps), start.inputs, n_steps,
+                          len(model.left_qp.step_limit))
     # OSQP runs here, between stretches of the compiled loop; its warm start lives and dies with the episode.
     # A fresh solver per episode: no OSQP warm start or cache survives into the next one.
     sessions = {LEFT: QpSession(model.left_qp), RIGHT: QpSession(model.right_qp)}

@@ -29,6 +29,7 @@ class EpisodeMetrics:
     max_abs_yaw_rate_radps: float
     trigger_times_s: list[float]
     duration_s: float
+    lap_mean_abs_e_m: list[float]  # mean |e| over each lap of the 8 driven (by arc length; the last may be partial)
 
     def as_dict(self) -> dict:
         out = asdict(self)
@@ -42,16 +43,18 @@ def objective_j(e_m: np.ndarray, dpsi_rad: np.ndarray, beta_err_rad: np.ndarray)
     return float(math.log(max(float(np.mean(cost)), 1e-12)))
 
 
-def progress_m(traj: np.ndarray, track: FigureEight, col: dict[str, int]) -> float:
-    """Arc length driven along the scenario, summed over steps on the circle of each step's phase."""
+def cumulative_progress_m(traj: np.ndarray, track: FigureEight, col: dict[str, int]) -> np.ndarray:
+    """Arc length driven up to each step (0 at the first)."""
     left, right = track.left, track.right
-    return _progress_m(np.ascontiguousarray(traj[:, col["x_m"]]), np.ascontiguousarray(traj[:, col["y_m"]]),
-                       np.ascontiguousarray(traj[:, col["phase"]]), left.center_y_m, left.radius_m,
-                       right.center_y_m, right.radius_m)
+    return _cumulative_progress_m(np.ascontiguousarray(traj[:, col["x_m"]]),
+                                  np.ascontiguousarray(traj[:, col["y_m"]]),
+                                  np.ascontiguousarray(traj[:, col["phase"]]), left.center_y_m, left.radius_m,
+                                  right.center_y_m, right.radius_m)
 
 
 @njit(cache=True)
-def _progress_m(x_m, y_m, phase, left_center_y_m, left_radius_m, right_center_y_m, right_radius_m):
+def _cumulative_progress_m(x_m, y_m, phase, left_center_y_m, left_radius_m, right_center_y_m, right_radius_m):
+    cumulative = np.zeros(len(x_m))
     total = 0.0
     for i in range(1, len(x_m)):
         direction = phase_direction(int(phase[i]))
@@ -60,7 +63,14 @@ def _progress_m(x_m, y_m, phase, left_center_y_m, left_radius_m, right_center_y_
         a0 = math.atan2(y_m[i - 1] - center_y, x_m[i - 1] - 0.0)
         a1 = math.atan2(y_m[i] - center_y, x_m[i] - 0.0)
         total += direction * wrap_angle(a1 - a0) * radius
-    return total
+        cumulative[i] = total
+    return cumulative
+
+
+def lap_mean_abs_e_m(e_m: np.ndarray, cumulative_m: np.ndarray, track: FigureEight) -> list[float]:
+    """Mean |e| over each lap of the 8 driven, laps cut by arc length (one lap = ``track.lap_length_m``)."""
+    lap = np.minimum((np.maximum(cumulative_m, 0.0) // track.lap_length_m).astype(int), track.laps - 1)
+    return [float(np.mean(np.abs(e_m[lap == i]))) for i in range(int(lap.max()) + 1) if np.any(lap == i)]
 
 
 def _transition_times(t: np.ndarray, beta: np.ndarray, beta_ref: np.ndarray, trigger_s: float,
@@ -77,7 +87,8 @@ def compute_metrics(traj: np.ndarray, trigger_times_s: list[float], track: Figur
                     col: dict[str, int], settle_tolerance_rad: float = 0.05) -> EpisodeMetrics:
     """``settle_tolerance_rad``: the scenario's, so that beta_settle_s means what ends an inertia phase."""
     if len(traj) == 0:
-        return EpisodeMetrics(math.log(1e3), 0.0, math.nan, math.nan, math.nan, [], [], math.nan, math.nan, [], 0.0)
+        return EpisodeMetrics(math.log(1e3), 0.0, math.nan, math.nan, math.nan, [], [], math.nan, math.nan, [], 0.0,
+                              [])
     t = traj[:, col["t_s"]]
     e = traj[:, col["e_m"]]
     beta = traj[:, col["beta_rad"]]
@@ -86,7 +97,8 @@ def compute_metrics(traj: np.ndarray, trigger_times_s: list[float], track: Figur
     beta_err = beta - beta_ref
     finished = phase[-1] == Phase.FINISHED
     # An unfinished run never counts as whole, however far it went round.
-    driven = progress_m(traj, track, col) / track.scenario_length_m
+    cumulative = cumulative_progress_m(traj, track, col)
+    driven = float(cumulative[-1]) / track.scenario_length_m
     fraction = 1.0 if finished else min(max(driven, 0.0), 0.99)
     sustained = np.isin(phase, [int(p) for p in SUSTAINED_PHASES])
     flips, settles = [], []
@@ -106,4 +118,5 @@ def compute_metrics(traj: np.ndarray, trigger_times_s: list[float], track: Figur
         max_abs_yaw_rate_radps=float(np.max(np.abs(traj[:, col["r_radps"]]))),
         trigger_times_s=[float(x) for x in trigger_times_s],
         duration_s=float(t[-1]),
+        lap_mean_abs_e_m=lap_mean_abs_e_m(e, cumulative, track),
     )

@@ -9,6 +9,10 @@ within ``settle_tolerance_rad`` of its new reference.
 
 A trigger is armed only once the car is past the far half of its circle (c > 0.5 at some point, or the
 start point), so a freshly switched circle, whose c starts near 0 behind P0, cannot fire at once.
+
+Several laps (``scenario.laps``): the pattern repeats. Once the flick back into the left circle has settled, a
+lap still to drive goes on as a left-hand drift for a full left lap (phase LEFT_DRIFT again, ending at c_lr),
+so the run is half a left lap, then (right lap, left lap) x (laps - 1), a right lap and half a left lap.
 """
 
 from __future__ import annotations
@@ -59,14 +63,15 @@ class PlannerEvent:
 
 
 # The planner's state, as the compiled closed loop keeps it: [phase, armed, in the far half (final lap),
-# last c].
-PLAN_PHASE, PLAN_ARMED, PLAN_FAR_HALF, PLAN_LAST_FRACTION = range(4)
-N_PLAN_STATE = 4
+# last c, laps still to start after this one].
+PLAN_PHASE, PLAN_ARMED, PLAN_FAR_HALF, PLAN_LAST_FRACTION, PLAN_LAPS_AFTER = range(5)
+N_PLAN_STATE = 5
 
 
-def initial_plan_state() -> np.ndarray:
-    """The start: left-hand drift, armed (the start point is the far point of the left circle)."""
-    return np.array([float(Phase.LEFT_DRIFT), 1.0, 0.0, 0.5])
+def initial_plan_state(laps: int = 1) -> np.ndarray:
+    """The start: left-hand drift, armed (the start point is the far point of the left circle), ``laps`` laps
+    of the 8 to drive."""
+    return np.array([float(Phase.LEFT_DRIFT), 1.0, 0.0, 0.5, float(laps - 1)])
 
 
 @njit(cache=True)
@@ -99,6 +104,9 @@ def advance_phase(plan, trigger_fraction, sideslip_err_rad, c_lr, c_rl, settle_t
     elif phase == 1 or phase == 3:
         if abs(sideslip_err_rad) < settle_tolerance_rad:
             new_phase = phase + 1
+            if phase == 3 and plan[PLAN_LAPS_AFTER] > 0.5:  # another lap: a full left lap to the trigger
+                new_phase = 0
+                plan[PLAN_LAPS_AFTER] -= 1.0
     elif phase == 4:
         # Done at the point opposite P0 again (c = 0.5), approached from c near 1.
         if 0.55 < trigger_fraction < 0.9:
@@ -113,10 +121,10 @@ class InertiaDriftPlanner:
     """Tracks the phase; call :meth:`update` once per control step (the closed loop calls
     :func:`advance_phase` itself)."""
 
-    def __init__(self, triggers: Triggers, settle_tolerance_rad: float = 0.05) -> None:
+    def __init__(self, triggers: Triggers, settle_tolerance_rad: float = 0.05, laps: int = 1) -> None:
         self.triggers = triggers
         self.settle_tolerance_rad = settle_tolerance_rad
-        self.state = initial_plan_state()
+        self.state = initial_plan_state(laps)
         self.events: list[PlannerEvent] = []
 
     @property

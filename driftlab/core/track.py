@@ -25,6 +25,7 @@ from driftlab.core.errors import ConfigError
 TWO_PI = 2.0 * math.pi
 LEFT = 1  # counter-clockwise circle, left-hand drift
 RIGHT = -1  # clockwise circle, right-hand drift
+MAX_LAPS = 8
 
 
 @njit(cache=True)
@@ -120,16 +121,20 @@ class TrackErrors(NamedTuple):
 
 @dataclass(frozen=True)
 class FigureEight:
-    """Two tangent circles of radii ``left_radius_m`` and ``right_radius_m`` meeting at P0 = (0, 0)."""
+    """Two tangent circles of radii ``left_radius_m`` and ``right_radius_m`` meeting at P0 = (0, 0), driven
+    ``laps`` times."""
 
     left_radius_m: float = 44.0
     right_radius_m: float = 44.0
+    laps: int = 1
 
     def __post_init__(self) -> None:
         for name in ("left_radius_m", "right_radius_m"):
             value = getattr(self, name)
             if not (isinstance(value, (int, float)) and 5.0 <= value <= 500.0):
                 raise ConfigError(f"track.{name} must be a number in [5, 500], got {value!r}")
+        if isinstance(self.laps, bool) or not isinstance(self.laps, int) or not 1 <= self.laps <= MAX_LAPS:
+            raise ConfigError(f"track.laps must be an integer in [1, {MAX_LAPS}], got {self.laps!r}")
 
     @property
     def left(self) -> Circle:
@@ -143,9 +148,14 @@ class FigureEight:
         return self.left if direction == LEFT else self.right
 
     @property
-    def scenario_length_m(self) -> float:
-        """Half a left lap, a full right lap, half a left lap."""
+    def lap_length_m(self) -> float:
+        """One lap of the 8: half a left lap, a full right lap, half a left lap."""
         return TWO_PI * (self.left_radius_m + self.right_radius_m)
+
+    @property
+    def scenario_length_m(self) -> float:
+        """Every lap (the pattern repeated ``laps`` times)."""
+        return self.lap_length_m * self.laps
 
     def start_pose(self) -> tuple[float, float, float]:
         """(x, y, course) at the point of the left circle opposite P0, driving counter-clockwise."""

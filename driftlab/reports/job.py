@@ -35,7 +35,8 @@ def write_report(*, db_url: str, name: str, out_dir: str, baseline_samples: int 
     out = Path(out_dir)
     out.mkdir(parents=True, exist_ok=True)
     config = spec.config
-    track = FigureEight(config.scenario.left_radius_m, config.scenario.right_radius_m)
+    track = FigureEight(config.scenario.left_radius_m, config.scenario.right_radius_m,
+                        config.scenario.laps)
     shown_seed = best.trajectory_seed or 0
     best_result = run_episode(Theta.from_mapping(best.theta), config, seed=shown_seed)
     plot_episode(best_result, track, str(out / "best_episode.png"),

@@ -5,8 +5,9 @@ import math
 import numpy as np
 import pytest
 
-from driftlab.core.config import PAPER_THETA, EpisodeConfig, Theta, apply_overrides
-from driftlab.core.episode import failure_penalty, run_episode
+from driftlab.core.config import PAPER_THETA, EpisodeConfig, ScenarioConfig, Theta, apply_overrides
+from driftlab.core.episode import COL, failure_penalty, run_episode
+from driftlab.core.errors import ConfigError
 from driftlab.core.planner import Phase
 
 NOMINAL = EpisodeConfig.preset(plant="nominal", controller="paper")
@@ -90,3 +91,26 @@ def test_default_controller_drifts_the_eight_on_the_mismatched_plant(seed):
 def test_paper_controller_fails_on_the_mismatched_plant():
     r = run_episode(DEFAULT_PLANT_THETA, EpisodeConfig.preset(controller="paper"))
     assert r.status != "completed"
+
+
+def test_three_laps_repeat_the_pattern_and_stay_on_the_path():
+    one = run_episode(Theta(), EpisodeConfig(), seed=1)
+    three = run_episode(Theta(), apply_overrides(EpisodeConfig(), {"scenario.laps": 3}), seed=1)
+    assert three.status == "completed" and three.metrics.completed_fraction == 1.0
+    assert [p["phase"] for p in three.trigger_points] == [Phase.INERTIA_LEFT_TO_RIGHT, Phase.INERTIA_RIGHT_TO_LEFT] * 3
+    # the first lap is the one-lap episode's until that one finishes, its final half lap a left drift of the next
+    n = len(one.trajectory) - 1
+    first = one.trajectory[:n].copy()
+    phase = first[:, COL["phase"]]
+    phase[phase == Phase.LEFT_DRIFT_FINAL] = Phase.LEFT_DRIFT
+    np.testing.assert_array_equal(three.trajectory[:n], first)
+    laps = three.metrics.lap_mean_abs_e_m
+    assert len(laps) == 3 and laps[2] <= 1.2 * laps[0]
+    assert three.metrics.duration_s == pytest.approx(3 * one.metrics.duration_s, rel=0.05)
+    assert one.metrics.lap_mean_abs_e_m == [one.metrics.mean_abs_e_m]
+
+
+@pytest.mark.parametrize("laps", [0, 9, 1.5, True])
+def test_laps_out_of_range_is_refused_naming_the_field(laps):
+    with pytest.raises(ConfigError, match=r"scenario\.laps .*\[1, 8\]"):
+        ScenarioConfig(laps=laps)

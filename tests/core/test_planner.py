@@ -43,3 +43,21 @@ def test_finishes_at_the_far_point_of_the_final_left_half():
     phases = _drive(planner, [0.99, 0.8, 0.6, 0.51, 0.49])
     assert phases[-2] == Phase.LEFT_DRIFT_FINAL
     assert phases[-1] == Phase.FINISHED
+
+
+def test_a_second_lap_drives_a_full_left_lap_before_the_next_flick():
+    planner = InertiaDriftPlanner(Triggers(c_lr=0.03, c_rl=0.03), laps=2)
+    _drive(planner, [0.5, 0.02])
+    _drive(planner, [0.01], beta_err=0.0)
+    _drive(planner, [0.99, 0.6, 0.02])
+    phases = _drive(planner, [0.99], beta_err=0.0)  # settled in the left circle: the second lap begins
+    assert phases[-1] == Phase.LEFT_DRIFT
+    phases = _drive(planner, [0.95, 0.6, 0.51, 0.49, 0.2, 0.031])  # past the far point: no finish, no flick yet
+    assert set(phases) == {Phase.LEFT_DRIFT}
+    assert _drive(planner, [0.029])[-1] == Phase.INERTIA_LEFT_TO_RIGHT
+    _drive(planner, [0.01], beta_err=0.0)
+    _drive(planner, [0.99, 0.6, 0.02])
+    _drive(planner, [0.99], beta_err=0.0)
+    phases = _drive(planner, [0.8, 0.6, 0.49])
+    assert phases[-2:] == [Phase.LEFT_DRIFT_FINAL, Phase.FINISHED]
+    assert len(planner.trigger_events) == 4

@@ -41,6 +41,9 @@ def build_parser() -> argparse.ArgumentParser:
     eq.add_argument("--plant", choices=PLANT_CHOICES, help="also solve this plant's own equilibrium (for a CommonRoad "
                     "plant its drift family: every steady drift, and whether the main one countersteers)")
     eq.add_argument("--set", action="append", metavar="KEY=VALUE", help="config override, e.g. plant.cg_height_m=0.3")
+    eq.add_argument("--window", action="store_true", help="instead: the drift window, the sideslips at which the "
+                    "plant (default: DriftLab's) and the controller's model both drift a circle of --radius (and of "
+                    "the scenario's radii), as the drivability check decides")
     eq.set_defaults(func=cmd_equilibrium)
     ep = sub.add_parser("episode", help="run one 30 s figure-8 episode and print its metrics as JSON")
     ep.add_argument("--theta", help="c_lr=..,c_rl=..,dV=..,k=..,model_mu_scale=..,model_c_scale=.. (any subset; "

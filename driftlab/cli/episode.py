@@ -10,7 +10,7 @@ from typing import Any
 
 from driftlab.cli.options import PLOT_SUFFIXES, check_output_file, episode_config, finite, key_values
 from driftlab.core.config import Theta, config_to_dict
-from driftlab.core.drivability import check_drivable
+from driftlab.core.drivability import check_drivable, drift_window
 from driftlab.core.equilibrium import drift_equilibrium
 from driftlab.core.errors import ConfigError, NoEquilibriumError
 from driftlab.core.vehicle import pack_params
@@ -18,6 +18,11 @@ from driftlab.core.vehicle import pack_params
 
 def cmd_equilibrium(args: argparse.Namespace) -> int:
     config = episode_config(args)
+    if args.window:
+        scenario = config.scenario
+        radii = sorted({args.radius, scenario.left_radius_m, scenario.right_radius_m})
+        print(json.dumps({"window": [drift_window(config, radius).as_dict() for radius in radii]}))
+        return 0
     try:
         eq = drift_equilibrium(args.radius, args.beta, pack_params(config.vehicle))
     except NoEquilibriumError as exc:

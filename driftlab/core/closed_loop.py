@@ -40,7 +40,7 @@ from driftlab.core.mpc import (
     unconstrained_increments,
     update_estimate,
 )
-from driftlab.core.planner import PLAN_PHASE, Phase, advance_phase, phase_direction
+from driftlab.core.planner import PLAN_LAST_FRACTION, PLAN_PHASE, Phase, advance_phase, phase_direction
 from driftlab.core.plant import (
     DRIVE,
     HEADING,
@@ -54,7 +54,7 @@ from driftlab.core.plant import (
     YAW_RATE,
     plant_step,
 )
-from driftlab.core.track import LEFT, circle_errors
+from driftlab.core.track import LEFT, TWO_PI, circle_errors
 from driftlab.core.variation import (
     NOISE_HEADING,
     NOISE_SIDESLIP,
@@ -97,7 +97,9 @@ class LoopSettings(NamedTuple):
 
     dt_s: float
     n_steps: int
-    speed_offset_mps: float
+    speed_offset_left_mps: float  # dV on each circle (scaled by its drift speed where the radii differ)
+    speed_offset_right_mps: float
+    speed_change_accel_mps2: float  # > 0: the planned speed change before a flick (see _approach_offset_mps)
     feedback_gain_radpm: float
     lookahead_m: float
     steer_limit_rad: float
@@ -191,8 +193,43 @@ def _failure(cfg, st, t_s, s, lateral_error_m, beta_ref_rad):
 
 
 @njit(cache=True)
-def _reference(cfg, qa, st, direction):
-    return drift_reference(qa, st.estimate, direction, cfg.speed_offset_mps, cfg.disturbance_gain > 0.0)
+def _sides(qa_left, qa_right, direction):
+    """(this side's QP constants, the other side's)."""
+    return (qa_left, qa_right) if direction == LEFT else (qa_right, qa_left)
+
+
+@njit(cache=True)
+def _reference(cfg, qa, qa_next, st, direction):
+    """The reference of the side driven (:func:`drift_reference`), its speed moved toward the next circle's
+    drift speed as the trigger nears."""
+    offset = cfg.speed_offset_left_mps if direction == LEFT else cfg.speed_offset_right_mps
+    if cfg.speed_change_accel_mps2 > 0.0:
+        offset += _approach_offset_mps(cfg, st, direction, qa.z_eq[0], qa_next.z_eq[0])
+    return drift_reference(qa, st.estimate, direction, offset, cfg.disturbance_gain > 0.0)
+
+
+@njit(cache=True)
+def _approach_offset_mps(cfg, st, direction, speed_mps, next_speed_mps):
+    """The planned speed change between circles of different drift speeds: in a sustained drift that ends in a
+    flick, the reference speed follows V^2 = V_next^2 +- 2 a s, s the arc left to the trigger point, so that it
+    reaches the next circle's drift speed at the trigger; the flick itself cannot shed (or gain) the difference
+    (at 25/44 m 4.7 m/s: the car entered the small circle too fast and ran wide). 0 elsewhere."""
+    phase = int(st.plan[PLAN_PHASE])
+    if phase != 0 and phase != 2:
+        return 0.0
+    circle = cfg.left_circle if direction == LEFT else cfg.right_circle
+    fraction = st.plan[PLAN_LAST_FRACTION]  # c of this circle at the last step
+    trigger = cfg.c_lr if phase == 0 else cfg.c_rl
+    if fraction > 0.75:  # just past P0 (c jumps to ~1 there): the circle has only begun
+        return 0.0
+    if fraction < trigger:  # at the trigger: the flick is due
+        return next_speed_mps - speed_mps
+    arc_m = (fraction - trigger) * TWO_PI * circle[2]
+    accel = cfg.speed_change_accel_mps2 if next_speed_mps < speed_mps else -cfg.speed_change_accel_mps2
+    planned_sq = next_speed_mps * next_speed_mps + 2.0 * accel * arc_m
+    planned = np.sqrt(max(planned_sq, 0.0))
+    low, high = min(speed_mps, next_speed_mps), max(speed_mps, next_speed_mps)
+    return min(max(planned, low), high) - speed_mps
 
 
 @njit(cache=True)
@@ -243,7 +280,7 @@ def run_until_constrained(cfg, st, qa_left, qa_right, model_params, plant_params
         phase = int(st.plan[PLAN_PHASE])
         direction = phase_direction(phase)
         seen = _errors(cfg, direction, sensed[X_POS], sensed[Y_POS], sensed[HEADING] + sensed[SIDESLIP])
-        ref = _reference(cfg, qa_left if direction == LEFT else qa_right, st, direction)
+        ref = _reference(cfg, *_sides(qa_left, qa_right, direction), st, direction)
         phase, changed = advance_phase(st.plan, seen[3], sensed[SIDESLIP] - ref[1], cfg.c_lr, cfg.c_rl,
                                        cfg.settle_tolerance_rad)
         if changed and ints[I_EVENTS] < MAX_EVENTS:
@@ -253,7 +290,7 @@ def run_until_constrained(cfg, st, qa_left, qa_right, model_params, plant_params
         if phase != PHASE_FINISHED and phase_direction(phase) != direction:
             direction = phase_direction(phase)
             seen = _errors(cfg, direction, sensed[X_POS], sensed[Y_POS], sensed[HEADING] + sensed[SIDESLIP])
-            ref = _reference(cfg, qa_left if direction == LEFT else qa_right, st, direction)
+            ref = _reference(cfg, *_sides(qa_left, qa_right, direction), st, direction)
             floats[F_LAST_TRIGGER_S] = t
         errors = _errors(cfg, direction, s[X_POS], s[Y_POS], s[HEADING] + s[SIDESLIP]) if cfg.noisy else seen
         row = st.rows[ints[I_ROWS]]
@@ -287,7 +324,7 @@ def run_until_constrained(cfg, st, qa_left, qa_right, model_params, plant_params
         z_now = pack_state(qa.path_states, qa.models_lag, measured, np.array([seen[0], seen[1]]),
                            np.array([actuators[0], actuators[1] * KN]),
                            np.array([st.last_mpc[0], st.last_mpc[1] * KN]))
-        z_ref = _reference(cfg, qa, st, direction)
+        z_ref = _reference(cfg, *_sides(qa_left, qa_right, direction), st, direction)
         if st.ref_valid[side] == 0 or np.any(st.ref_key[side] != z_ref):  # the reference changes rarely
             st.ref_gain[side], st.ref_linear[side] = reference_terms(qa, z_ref)
             st.ref_key[side] = z_ref

@@ -103,6 +103,9 @@ class ScenarioConfig:
         lookahead_m: look-ahead distance x_la of the steering feedback [m].
         max_time_s: the episode stops here if not finished [s].
         settle_tolerance_rad: |beta - beta_ref| that ends an inertia phase [rad].
+        speed_change_accel_mps2: where the circles' drift speeds differ, the reference speed of a sustained
+            drift moves to the next circle's at this rate so as to reach it at the trigger point [m/s^2]
+            (0: it steps at the flick, which the car cannot follow from a 44 m into a 25 m circle).
         laps: laps of the 8 in one episode: the paper's pattern repeated, J over the whole run; ``max_time_s``
             is per lap.
     """
@@ -113,13 +116,14 @@ class ScenarioConfig:
     lookahead_m: float = 7.0
     max_time_s: float = 40.0
     settle_tolerance_rad: float = 0.05
+    speed_change_accel_mps2: float = 5.5
     laps: int = 1
 
     def __post_init__(self) -> None:
         check_ranges(self, "scenario", {
             "left_radius_m": (5.0, 500.0), "right_radius_m": (5.0, 500.0), "sideslip_rad": (0.05, 1.0),
             "lookahead_m": (0.0, 50.0), "max_time_s": (1.0, 300.0), "settle_tolerance_rad": (0.001, 0.5),
-            "laps": (1, MAX_LAPS)})
+            "speed_change_accel_mps2": (0.0, 20.0), "laps": (1, MAX_LAPS)})
         if not isinstance(self.laps, int):
             raise ConfigError(f"scenario.laps must be an integer in [1, {MAX_LAPS}], got {self.laps!r}")
 

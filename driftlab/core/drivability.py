@@ -9,7 +9,10 @@ controller's own model (it has nothing to linearize about).
 
 from __future__ import annotations
 
+from dataclasses import dataclass
 from functools import lru_cache
+
+import numpy as np
 
 from driftlab.core.config import EpisodeConfig
 from driftlab.core.equilibrium import drift_equilibrium
@@ -86,3 +89,38 @@ def _commonroad_reason(plant: PlantConfig, left_radius_m: float, right_radius_m:
                     f"{abs(sideslip_rad):g} rad): {why}; try another scenario.sideslip_rad (`driftlab equilibrium "
                     f"--plant {plant.model}` prints where the car countersteers)")
     return None
+
+
+@dataclass(frozen=True)
+class DriftWindow:
+    """The sideslips [rad] at which a configuration drifts a circle of one radius (plant and model both have a
+    countersteer drift there), scanned on a grid."""
+
+    radius_m: float
+    sideslips_rad: tuple[float, ...]
+
+    @property
+    def ranges_rad(self) -> list[tuple[float, float]]:
+        """The drivable sideslips as [low, high] runs of the grid."""
+        runs: list[tuple[float, float]] = []
+        for beta in self.sideslips_rad:
+            if runs and beta - runs[-1][1] <= WINDOW_STEP_RAD * 1.5:
+                runs[-1] = (runs[-1][0], beta)
+            else:
+                runs.append((beta, beta))
+        return runs
+
+    def as_dict(self) -> dict:
+        return {"radius_m": self.radius_m, "sideslip_ranges_rad": [list(r) for r in self.ranges_rad]}
+
+
+WINDOW_STEP_RAD = 0.01
+
+
+def drift_window(config: EpisodeConfig, radius_m: float, low_rad: float = 0.05, high_rad: float = 1.0) -> DriftWindow:
+    """Where ``config`` (its plant and controller's model) drifts a circle of ``radius_m``: the sideslips of a
+    WINDOW_STEP_RAD grid over [low, high] that the drivability check accepts (the same decision, per radius)."""
+    grid = np.round(np.arange(low_rad, high_rad + 1e-9, WINDOW_STEP_RAD), 4)
+    ok = tuple(float(b) for b in grid
+               if _reason(config.vehicle, config.plant, radius_m, radius_m, float(b)) is None)
+    return DriftWindow(float(radius_m), ok)

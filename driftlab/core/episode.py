@@ -29,7 +29,7 @@ from driftlab.core.closed_loop import (
     run_until_constrained,
 )
 from driftlab.core.config import EpisodeConfig, Theta
-from driftlab.core.controller import build_controller_model
+from driftlab.core.controller import ControllerModel, build_controller_model
 from driftlab.core.errors import ConfigError, NoEquilibriumError
 from driftlab.core.metrics import EpisodeMetrics, compute_metrics
 from driftlab.core.mpc import QpSession
@@ -130,7 +130,7 @@ def run_episode(theta: Theta, config: EpisodeConfig, *, seed: int = 0) -> Episod
     state = plant.start_state(initial_plant_state(
         config, track, start.speed_mps + theta.dV + offset[0], start.sideslip_rad + offset[1],
         start.yaw_rate_radps + offset[2], start.steer_rad, start.drive_force_n))
-    settings = _loop_settings(config, theta, track, n_steps, variation.noisy, plant.kind)
+    settings = _loop_settings(config, theta, track, n_steps, variation.noisy, plant.kind, model)
     loop = new_loop_state(state, initial_plan_state(scenario.laps), start.inputs, n_steps,
                           len(model.left_qp.step_limit))
     # OSQP runs here, between stretches of the compiled loop; its warm start lives and dies with the episode.
@@ -168,11 +168,18 @@ def run_episode(theta: Theta, config: EpisodeConfig, *, seed: int = 0) -> Episod
 
 
 def _loop_settings(config: EpisodeConfig, theta: Theta, track: FigureEight, n_steps: int,
-                   noisy: bool, plant_kind: int) -> LoopSettings:
+                   noisy: bool, plant_kind: int, model: ControllerModel) -> LoopSettings:
     mpc, scenario, failure = config.mpc, config.scenario, config.failure
     left, right = track.left, track.right
+    # Where the circles differ: dV scaled by each circle's drift speed (a relative correction, as a mismatch in
+    # grip moves both drift speeds by about the same share), and the planned speed change before each flick.
+    # Equal radii keep dV as it is and no speed change (the stored episodes' bits).
+    differ = left.radius_m != right.radius_m
+    right_scale = model.right.speed_mps / model.left.speed_mps if differ else 1.0
     return LoopSettings(
-        dt_s=float(mpc.dt_s), n_steps=n_steps, speed_offset_mps=float(theta.dV),
+        dt_s=float(mpc.dt_s), n_steps=n_steps, speed_offset_left_mps=float(theta.dV),
+        speed_offset_right_mps=float(theta.dV) * right_scale,
+        speed_change_accel_mps2=float(scenario.speed_change_accel_mps2) if differ else 0.0,
         feedback_gain_radpm=float(theta.k), lookahead_m=float(scenario.lookahead_m),
         steer_limit_rad=float(mpc.steer_limit_rad), disturbance_gain=float(mpc.disturbance_gain),
         disturbance_start_gain=float(mpc.disturbance_start_gain),

@@ -72,6 +72,17 @@ def test_episode_json_has_the_documented_keys(tmp_path):
     assert lines[1].startswith("t_s,x_m,y_m") and len(lines) > 500
     phase = lines[1].split(",").index("phase")
     assert all(row.split(",")[phase] in {"0", "1", "2", "3", "4", "5"} for row in lines[2:])
+    assert lines[1].endswith(",lap") and {row.rsplit(",", 1)[1] for row in lines[2:]} == {"1"}
+
+
+def test_a_two_lap_episode_numbers_its_laps_in_the_csv(tmp_path):
+    csv_file = tmp_path / "laps.csv"
+    out = _run("episode", "--set", "scenario.laps=2", "--seed", "1", "--csv", str(csv_file))
+    assert out.returncode == 0, out.stderr
+    data = json.loads(out.stdout)
+    assert data["status"] == "completed" and len(data["lap_mean_abs_e_m"]) == 2
+    laps = [int(row.rsplit(",", 1)[1]) for row in csv_file.read_text().splitlines()[2:]]
+    assert laps[0] == 1 and laps[-1] == 2 and laps == sorted(laps)
 
 
 @pytest.mark.parametrize("args, field", [

@@ -64,12 +64,13 @@ def cmd_episode(args: argparse.Namespace) -> int:
     result = run_episode(theta, config, seed=args.seed)
     print(json.dumps(finite(result.summary())))
     if args.csv:
-        from driftlab.reports.export import trajectory_csv
+        from driftlab.reports.export import trajectory_csv, with_lap_column
 
         metadata = {"theta": theta.as_dict(), "seed": args.seed, "J_episode": result.J, "episode_status": result.status,
                     "J": result.J, "status": result.status, "n_seeds": 1, "config": config_to_dict(config)}
         with open(args.csv, "w", newline="") as handle:
-            handle.write(trajectory_csv(list(COLUMNS), result.trajectory, metadata))
+            track = FigureEight(config.scenario.left_radius_m, config.scenario.right_radius_m, config.scenario.laps)
+            handle.write(trajectory_csv(*with_lap_column(list(COLUMNS), result.trajectory, track), metadata))
     if args.plot:
         from driftlab.reports.plotting import plot_episode
 

@@ -67,9 +67,14 @@ def _cumulative_progress_m(x_m, y_m, phase, left_center_y_m, left_radius_m, righ
     return cumulative
 
 
+def lap_of_steps(cumulative_m: np.ndarray, track: FigureEight) -> np.ndarray:
+    """The lap (0, 1, ...) each step is on, cut by the arc length driven (one lap = ``track.lap_length_m``)."""
+    return np.minimum((np.maximum(cumulative_m, 0.0) // track.lap_length_m).astype(int), track.laps - 1)
+
+
 def lap_mean_abs_e_m(e_m: np.ndarray, cumulative_m: np.ndarray, track: FigureEight) -> list[float]:
-    """Mean |e| over each lap of the 8 driven, laps cut by arc length (one lap = ``track.lap_length_m``)."""
-    lap = np.minimum((np.maximum(cumulative_m, 0.0) // track.lap_length_m).astype(int), track.laps - 1)
+    """Mean |e| over each lap of the 8 driven."""
+    lap = lap_of_steps(cumulative_m, track)
     return [float(np.mean(np.abs(e_m[lap == i]))) for i in range(int(lap.max()) + 1) if np.any(lap == i)]
 
 

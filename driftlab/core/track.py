@@ -147,6 +147,11 @@ class FigureEight:
     def circle(self, direction: int) -> Circle:
         return self.left if direction == LEFT else self.right
 
+    @classmethod
+    def of_scenario(cls, scenario: dict) -> FigureEight:
+        """The track of a stored scenario section (a config document's ``scenario``; absent keys: defaults)."""
+        return cls(scenario.get("left_radius_m", 44.0), scenario.get("right_radius_m", 44.0), scenario.get("laps", 1))
+
     @property
     def lap_length_m(self) -> float:
         """One lap of the 8: half a left lap, a full right lap, half a left lap."""

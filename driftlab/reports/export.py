@@ -16,8 +16,19 @@ from typing import Any
 
 import numpy as np
 
-# Columns whose values are integers (the planner's phase, the solver flag); the rest are SI floats.
-INTEGER_COLUMNS = frozenset({"phase", "osqp"})
+from driftlab.core.metrics import cumulative_progress_m, lap_of_steps
+from driftlab.core.track import FigureEight
+
+# Columns whose values are integers (the planner's phase, the solver flag, the lap); the rest are SI floats.
+INTEGER_COLUMNS = frozenset({"phase", "osqp", "lap"})
+
+
+def with_lap_column(columns: list[str], rows: np.ndarray, track: FigureEight) -> tuple[list[str], np.ndarray]:
+    """The trajectory with a last column ``lap``: the lap of the 8 each step is on (1, 2, ...; by the arc length
+    driven, as the per-lap metrics cut them)."""
+    col = {name: i for i, name in enumerate(columns)}
+    lap = lap_of_steps(cumulative_progress_m(rows, track, col), track) + 1 if len(rows) else np.zeros(0)
+    return [*columns, "lap"], np.column_stack([rows, lap]) if len(rows) else np.zeros((0, len(columns) + 1))
 
 
 def _typed_rows(columns: list[str], rows: np.ndarray) -> list[list[Any]]:

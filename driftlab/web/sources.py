@@ -45,9 +45,7 @@ def car_geometry_of_spec(spec: dict[str, Any]) -> tuple[float, float]:
 
 
 def track_of_spec(spec: dict[str, Any]) -> FigureEight:
-    scenario = spec.get("config", {}).get("scenario", {})
-    return FigureEight(scenario.get("left_radius_m", 44.0), scenario.get("right_radius_m", 44.0),
-                       scenario.get("laps", 1))
+    return FigureEight.of_scenario(spec.get("config", {}).get("scenario", {}))
 
 
 @dataclass

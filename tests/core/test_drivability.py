@@ -3,7 +3,7 @@
 import pytest
 
 from driftlab.core.config import EpisodeConfig, apply_overrides
-from driftlab.core.drivability import NotDrivableError, check_drivable, drivable_reason
+from driftlab.core.drivability import NotDrivableError, check_drivable, drift_window, drivable_reason
 from driftlab.core.equilibrium import drift_equilibrium
 from driftlab.core.errors import ConfigError, NoEquilibriumError
 from driftlab.core.vehicle import pack_params
@@ -35,3 +35,16 @@ def test_each_circle_of_unequal_radii_is_checked():
     nominal = apply_overrides(EpisodeConfig.preset("nominal"), {"scenario.left_radius_m": 30.0,
                                                                  "scenario.right_radius_m": 60.0})
     assert drivable_reason(nominal) is None
+
+
+def test_the_drift_window_is_where_the_drivability_check_accepts_a_sideslip():
+    config = EpisodeConfig()
+    at_44 = drift_window(config, 44.0, 0.25, 0.55)
+    (low, high), = at_44.ranges_rad  # one run of drivable sideslips
+    assert 0.3 < low < 0.4 < high < 0.5
+    for beta, inside in ((low, True), (high, True), (round(low - 0.01, 2), False), (round(high + 0.01, 2), False)):
+        scenario = {"scenario.sideslip_rad": beta}
+        assert (drivable_reason(apply_overrides(config, scenario)) is None) is inside
+    (low_25, high_25), = drift_window(config, 25.0, 0.2, 0.6).ranges_rad
+    assert low_25 < low and high_25 > high  # a tighter circle drifts over a wider range of sideslips
+    assert drift_window(config, 60.0, 0.3, 0.5).ranges_rad == []

@@ -99,3 +99,19 @@ def test_unequal_radii_drift_each_circle_at_its_own_equilibrium():
         settled = rows[t[rows] > t[rows][0] + 2.0]  # past the flick's aftermath
         off_path = np.abs(np.hypot(x[settled], y[settled] - centre_y) - radius)
         assert np.all(off_path < 0.5)  # the speed changed before the flick: no running wide after it
+
+
+def test_unequal_radii_scale_dv_by_each_circles_drift_speed():
+    """dV is a correction at the left circle's drift speed; the right circle's moves by the same share."""
+    config = apply_overrides(EpisodeConfig.preset(plant="nominal"), {"scenario.left_radius_m": 30.0,
+                                                                       "scenario.right_radius_m": 44.0})
+    r = run_episode(Theta(dV=0.5), config)
+    assert r.status == "completed"
+    params = pack_params(config.vehicle)
+    left_eq, right_eq = drift_equilibrium(30.0, -0.4, params), drift_equilibrium(44.0, -0.4, params)
+    phase, speed_ref = r.column("phase"), r.column("V_ref_mps")
+    for drift, eq, offset in ((Phase.LEFT_DRIFT, left_eq, 0.5),
+                              (Phase.RIGHT_DRIFT, right_eq, 0.5 * right_eq.speed_mps / left_eq.speed_mps)):
+        rows = np.flatnonzero(phase == drift)
+        middle = rows[len(rows) // 3: len(rows) // 2]
+        np.testing.assert_allclose(speed_ref[middle], eq.speed_mps + offset, atol=0.03)

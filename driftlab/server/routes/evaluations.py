@@ -7,8 +7,9 @@ from typing import Annotated, Any
 from fastapi import APIRouter, Depends, Query, Response
 from sqlalchemy.orm import Session, sessionmaker
 
+from driftlab.core.track import FigureEight
 from driftlab.db import storage
-from driftlab.reports.export import trajectory_csv, trajectory_json
+from driftlab.reports.export import trajectory_csv, trajectory_json, with_lap_column
 from driftlab.server.responses import Evaluation, TrajectoryDocument, errors, media
 from driftlab.server.routes.deps import factory
 from driftlab.server.schemas import EvaluationId
@@ -34,7 +35,10 @@ def trajectory(evaluation_id: EvaluationId, db: Factory,
     with storage.snapshot(db) as session:
         columns, data = storage.trajectory_array(session, evaluation_id=evaluation_id)
         e = storage.get_evaluation(session, evaluation_id=evaluation_id)
-        metadata = trajectory_metadata(e, storage.get_job(session, job_id=e.job_id))
+        job = storage.get_job(session, job_id=e.job_id)
+        metadata = trajectory_metadata(e, job)
+    track = FigureEight.of_scenario(job.spec.get("config", {}).get("scenario", {}))
+    columns, data = with_lap_column(columns, data, track)
     headers = {"Content-Disposition": f'attachment; filename="evaluation-{evaluation_id}.{format}"'}
     if format == "json":
         return Response(trajectory_json(columns, data, metadata), media_type="application/json", headers=headers)

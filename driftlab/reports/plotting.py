@@ -13,7 +13,8 @@ import numpy as np  # noqa: E402
 from matplotlib.colors import ListedColormap  # noqa: E402
 
 from driftlab.core.convergence import best_so_far
-from driftlab.core.episode import EpisodeResult  # noqa: E402
+from driftlab.core.episode import COL, EpisodeResult  # noqa: E402
+from driftlab.core.metrics import cumulative_progress_m, lap_of_steps  # noqa: E402
 from driftlab.core.track import FigureEight  # noqa: E402
 
 
@@ -31,7 +32,17 @@ def plot_episode(result: EpisodeResult, track: FigureEight, path: str | Path, ti
     grid = fig.add_gridspec(4, 2, width_ratios=[1.1, 1.4])
     ax_xy = fig.add_subplot(grid[:, 0])
     _draw_track(ax_xy, track)
-    ax_xy.plot(result.column("x_m"), result.column("y_m"), color="tab:red", lw=1.5, label="path")
+    x, y = result.column("x_m"), result.column("y_m")
+    if track.laps == 1:
+        ax_xy.plot(x, y, color="tab:red", lw=1.5, label="path")
+    else:  # one colour a lap: whether the drift stays where it was or wanders off
+        lap = lap_of_steps(cumulative_progress_m(result.trajectory, track, COL), track)
+        errors = result.metrics.lap_mean_abs_e_m
+        for i, colour in zip(range(track.laps), plt.cm.autumn(np.linspace(0.0, 0.7, track.laps)), strict=True):
+            on_lap = lap == i
+            if on_lap.any():
+                mean_e = f", mean |e| {errors[i]:.2f} m" if i < len(errors) else ""
+                ax_xy.plot(x[on_lap], y[on_lap], color=colour, lw=1.2, label=f"lap {i + 1}{mean_e}")
     for i, trig in enumerate(result.trigger_points):
         ax_xy.plot(trig["x_m"], trig["y_m"], "o", color="tab:orange", ms=8, label="trigger" if i == 0 else None)
     ax_xy.set_aspect("equal")

@@ -77,5 +77,6 @@ def cmd_episode(args: argparse.Namespace) -> int:
         scenario = config.scenario
         plot_episode(result, FigureEight(scenario.left_radius_m, scenario.right_radius_m, scenario.laps), args.plot,
                      title=f"{args.plant} plant, {args.controller} controller, seed {args.seed}\n"
-                           f"theta {theta.as_dict()}\n{result.status}, J = {result.J:.3f}")
+                           f"theta {', '.join(f'{k} {v:.4g}' for k, v in theta.as_dict().items())}\n"
+                           f"{result.status}, J = {result.J:.3f}")
     return 0

@@ -12,7 +12,8 @@ Optuna is a benchmark-only extra (``pip install optuna torch``; its GPSampler ne
 dependency.
 
 Run: OMP_NUM_THREADS=1 python benchmarks/peers.py [--seeds 6] [--evaluations 100] [--methods driftlab,tpe,gp,random]
-     (``driftlab-sN``: DriftLab with N space-filling points, e.g. driftlab-s20 for the paper's 20; a ``+mc``
+     (``driftlab-s=N``: DriftLab with N space-filling points, e.g. driftlab-s=20 for the paper's 20, ``-l=N``
+     of them local around the untuned theta, ``-r=R`` the local box's half-width in unit widths; a ``+mc``
      suffix, e.g. ``driftlab+mc,tpe+mc``: the job's default box with the model corrections, six dimensions)
 """
 
@@ -65,9 +66,11 @@ def _run(args: tuple[str, int, int, int]) -> tuple[str, int, list[float], float]
         from driftlab.core.optimizer import BayesianOptimizer
 
         # "driftlab": the job default; "driftlab-sN": N space-filling points first
-        seed_points = int(method.split("-s")[1]) if "-s" in method else TuningSpec().seed_points
+        options = dict(part.split("=") for part in method.split("-")[1:])  # e.g. driftlab-s=12-l=5-r=0.15
+        seed_points = int(options.get("s", TuningSpec().seed_points))
         initial = TuningSpec().initial_points if six else []  # as a job with the model corrections starts
-        opt = BayesianOptimizer(bounds, seed_points=seed_points, active_set=400, seed=bo_seed, initial_points=initial)
+        opt = BayesianOptimizer(bounds, seed_points=seed_points, active_set=400, seed=bo_seed, initial_points=initial,
+                                local_points=int(options.get("l", 0)), local_radius=float(options.get("r", 0.15)))
         for _ in range(evaluations):
             theta = opt.ask()
             value, _ = evaluate(theta)

@@ -99,15 +99,19 @@ class BayesianOptimizer:
 
     Args:
         bounds: name -> (lo, hi), lo < hi; proposals are dicts with these names.
-        seed_points: proposals before the GP takes over: ``initial_points`` first, then a Latin hypercube.
+        seed_points: proposals before the GP takes over: ``initial_points`` first, then ``local_points`` of them
+            around the first initial point, then a Latin hypercube of the box.
         initial_points: points to ask first (e.g. the configuration known to work); each inside the box.
+        local_points: of the seed points, how many a Latin hypercube spreads over a box of half-width
+            ``local_radius`` (unit-cube widths) around the first initial point (none without one).
         active_set: most successful observations the GP is fit on.
         seed: random seed (Latin hypercube, candidate sets).
         refit_every: hyperparameter refit period in observations.
     """
 
     def __init__(self, bounds: Mapping[str, tuple[float, float]], *, seed_points: int = 20, active_set: int = 400,
-                 seed: int = 0, refit_every: int = 10, initial_points: Sequence[Mapping[str, float]] = ()) -> None:
+                 seed: int = 0, refit_every: int = 10, initial_points: Sequence[Mapping[str, float]] = (),
+                 local_points: int = 0, local_radius: float = 0.15) -> None:
         if not bounds:
             raise ConfigError("bounds must name at least one parameter")
         for name, pair in bounds.items():
@@ -127,7 +131,12 @@ class BayesianOptimizer:
         initial = [self._to_unit(p, clip=False) for p in initial_points][:seed_points]
         if any(((u < 0.0) | (u > 1.0)).any() for u in initial):
             raise ConfigError("initial_points must lie inside the bounds")
-        design = qmc.LatinHypercube(d=self.dim, seed=seed).random(seed_points - len(initial))
+        check_int("local_points", local_points, 0, seed_points)
+        local = min(local_points, seed_points - len(initial)) if initial else 0
+        design = qmc.LatinHypercube(d=self.dim, seed=seed).random(seed_points - len(initial) - local)
+        if local:  # its own stream: the global design stays what it was without a local phase
+            around = qmc.LatinHypercube(d=self.dim, seed=np.random.default_rng([seed, 1])).random(local)
+            design = np.vstack([np.clip(initial[0] + local_radius * (2.0 * around - 1.0), 0.0, 1.0), design])
         self._seed_design = np.vstack([*initial, design]) if initial else design
         self.x: list[np.ndarray] = []  # unit-cube inputs, told
         self.y: list[float | None] = []  # None: failed evaluation

@@ -195,3 +195,21 @@ def test_with_no_success_yet_it_searches_near_the_failure_that_got_furthest():
 
     assert run(use_scores=True) < 30  # finds the island from its closest failure
     assert run(use_scores=True) < run(use_scores=False)
+
+
+def test_a_local_phase_spreads_its_points_around_the_first_initial_point_then_the_box():
+    bounds = {"a": (0.0, 10.0), "b": (-1.0, 1.0), "c": (0.0, 1.0)}
+    start = {"a": 9.0, "b": 0.0, "c": 0.5}
+    opt = BayesianOptimizer(bounds, seed_points=10, seed=3, initial_points=[start], local_points=4,
+                            local_radius=0.1)
+    asked = [opt.ask() for _ in range(10)]
+    assert asked[0] == start
+    for theta in asked[1:5]:  # within 0.1 of each width around the start (clipped at the box)
+        assert 8.0 <= theta["a"] <= 10.0 and -0.2 <= theta["b"] <= 0.2 and 0.4 <= theta["c"] <= 0.6
+    spread = np.array([[t["a"], t["b"], t["c"]] for t in asked[5:]])
+    assert np.ptp(spread[:, 0]) > 4.0  # the rest covers the box
+    again = BayesianOptimizer(bounds, seed_points=10, seed=3, initial_points=[start], local_points=4,
+                              local_radius=0.1)
+    assert [again.ask() for _ in range(10)] == asked
+    with pytest.raises(ConfigError, match=r"local_points must be an integer in \[0, 10\]"):
+        BayesianOptimizer(bounds, seed_points=10, local_points=11)

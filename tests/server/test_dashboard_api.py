@@ -97,3 +97,24 @@ class _InThread:
 
     def shutdown(self):
         pass
+
+
+def test_the_config_diff_names_each_setting_that_differs(api):
+    a = api.post("/api/jobs", json={"name": "a", "iterations": 5}).json()
+    b = api.post("/api/jobs", json={"name": "b", "iterations": 7, "bounds": {"k": [0.0, 0.05]},
+                                    "config": {"plant.steer_lag_s": 0.05}}).json()
+    body = api.get("/api/compare/config", params={"jobs": f"{a['id']},{b['id']}"}).json()
+    diff = {d["key"]: d["values"] for d in body["differences"]}
+    assert diff == {"iterations": [5, 7], "bounds.k": [[0.0, 0.12], [0.0, 0.05]],
+                    "config.plant.steer_lag_s": [0.03, 0.05]}
+    assert [j["name"] for j in body["jobs"]] == ["a", "b"]
+
+
+def test_the_job_form_turns_each_plant_preset_into_config_keys(api):
+    form = api.get("/api/config/job-form").json()
+    nominal = form["plant_presets"]["nominal"]
+    assert nominal["plant.friction_circle"] is False and form["plant_presets"]["default"] == {}
+    job = api.post("/api/jobs", json={"name": "nominal", "iterations": 5, "config": nominal})
+    assert job.status_code == 201, job.text
+    assert job.json()["spec"]["config"]["plant"]["friction_circle"] is False
+    assert form["default_bounds"]["k"] == [0.0, 0.12] and form["limits"]["iterations"] == [1, 5000]

@@ -1,4 +1,5 @@
-"""A job's search space as its models see it, and rescoring its best from the server."""
+"""A job's search space as its models see it, rescoring its best from the server, and what a new-job form
+starts from."""
 
 from __future__ import annotations
 
@@ -13,10 +14,11 @@ from driftlab.db import storage
 from driftlab.server.responses import Rescore, SearchSpace, errors
 from driftlab.server.routes.deps import factory, require_token
 from driftlab.server.schemas import JobId
+from driftlab.services.job_documents import job_form
 from driftlab.services.search_space import search_space
 from driftlab.worker.rescoring import RescoreBusy
 
-router = APIRouter(prefix="/api/jobs", tags=["jobs"])
+router = APIRouter(tags=["jobs"])
 Factory = Annotated[sessionmaker[Session], Depends(factory)]
 MAX_RESCORE_SAMPLES = 1000
 
@@ -28,7 +30,7 @@ class RescoreCreate(BaseModel):
                          description="fresh seeds the best theta runs on")
 
 
-@router.get("/{job_id}/search-space", response_model=SearchSpace, responses=errors(404, 422, 503))
+@router.get("/api/jobs/{job_id}/search-space", response_model=SearchSpace, responses=errors(404, 422, 503))
 def get_search_space(job_id: JobId, db: Factory, request: Request,
                      x: Annotated[str | None, Query(max_length=40, description="parameter along x")] = None,
                      y: Annotated[str | None, Query(max_length=40, description="parameter along y")] = None,
@@ -39,8 +41,8 @@ def get_search_space(job_id: JobId, db: Factory, request: Request,
     return search_space(request.app.state.search_spaces, db, job_id=job_id, x=x, y=y, grid=grid)
 
 
-@router.post("/{job_id}/rescore", status_code=202, dependencies=[Depends(require_token)], response_model=Rescore,
-             responses=errors(404, 409, 422, 503))
+@router.post("/api/jobs/{job_id}/rescore", status_code=202, dependencies=[Depends(require_token)],
+             response_model=Rescore, responses=errors(404, 409, 422, 503))
 def start_rescore(job_id: JobId, body: RescoreCreate, request: Request) -> dict[str, Any]:
     """Run the best theta, exactly as stored, on ``samples`` fresh seeds (in a worker process); follow it with
     GET. 404 without a completed evaluation, 409 while one runs for this job."""
@@ -50,10 +52,17 @@ def start_rescore(job_id: JobId, body: RescoreCreate, request: Request) -> dict[
         raise HTTPException(409, str(exc)) from None
 
 
-@router.get("/{job_id}/rescore", response_model=Rescore, responses=errors(404, 422, 503))
+@router.get("/api/jobs/{job_id}/rescore", response_model=Rescore, responses=errors(404, 422, 503))
 def rescore_status(job_id: JobId, db: Factory, request: Request) -> dict[str, Any]:
     """The job's latest rescore since the server started: running (``done`` of ``samples``), finished
     (``result``), failed (``error``), or none."""
     with storage.snapshot(db) as session:
         storage.get_job(session, job_id=job_id)
     return request.app.state.rescores.status(job_id)
+
+
+@router.get("/api/config/job-form", responses=errors(503))
+def get_job_form() -> dict[str, Any]:
+    """What a new job starts from: each plant preset as ``config`` keys (POST /api/jobs), the default config
+    (dotted keys), the default bounds of theta and of the model corrections, the settings' limits."""
+    return job_form()

@@ -95,6 +95,7 @@ def create_app(db_url: str, *, workers: int | None = 2, start_worker: bool = Tru
     app.state.search_spaces = SearchSpaceCache()
     app.state.rescores = RescoreRunner(factory)
     app.include_router(pages.router)
+    pages.mount_static(app)
     app.include_router(jobs.router)
     app.include_router(analysis.router)
     app.include_router(evaluations.router)

@@ -25,7 +25,10 @@ async function api(method, path, body) {
   const r = await fetch(path, { method, headers, body: body === undefined ? undefined : JSON.stringify(body) });
   if (r.status === 204) return null;
   const data = parseJson(await r.text()) ?? { detail: `${r.status} ${r.statusText}` };
-  if (!r.ok) throw new Error(`${method} ${path}: ${data.detail || r.status}`);
+  if (!r.ok) {
+    const hint = r.status === 401 ? " (open this page as /dashboard/?token=<DRIFTLAB_TOKEN>)" : "";
+    throw new Error(`${method} ${path}: ${r.status} ${data.detail || r.statusText}${hint}`);
+  }
   return data;
 }
 
@@ -421,6 +424,7 @@ async function start() {
   $("job-form").elements.plant_preset.replaceChildren(
     ...Object.keys(state.form.plant_presets).map((n) => new Option(n, n)));
   wireActions();
+  $("new-job").disabled = false; // enabled once the form can be filled
   const wanted = Number(params.get("job"));
   if (wanted) state.selected = wanted;
   loop();

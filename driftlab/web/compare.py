@@ -204,13 +204,13 @@ class ComparePanel:
         lines = []
         if study is not None:
             final = study.get("final_best_J") or []
-            spread = (f"; final best J from {min(final):.3f} to {max(final):.3f}, median {np.median(final):.3f}"
+            spread = (f"; final best J from {min(final):.4g} to {max(final):.4g}, median {np.median(final):.4g}"
                       if final else "")
             lines.append(f"**{study['name']}** (seeds, {study['status']}){spread}")
         lines += ["| colour | job | seed | done | best J |", "|---|---|---|---|---|"]
         for n, job in enumerate(self.jobs):
             best = job["best"]
-            value = "-" if best is None or not math.isfinite(best["J"]) else f"{best['J']:.3f} ({best['status']})"
+            value = "-" if best is None or not math.isfinite(best["J"]) else f"{best['J']:.4g} ({best['status']})"
             lines.append(f"| {COLOR_NAMES[n % len(COLOR_NAMES)]} | {job['name']} (id {job['id']}) | {job['seed']} | "
                          f"{job['n_done']} / {job['iterations']} | {value} |")
         return "\n".join(lines)
@@ -224,6 +224,6 @@ class ComparePanel:
             # Cars in the order played: the first is the red car, the next the ghosts (the plot's colours when
             # every job has an evaluation).
             captions = [f"{COLOR_NAMES[k]}{' car' if k == 0 else ' ghost'}: {j['name']}, best J "
-                        f"{j['best']['J']:.3f}, evaluation id {j['best']['id']}"
+                        f"{j['best']['J']:.4g}, evaluation id {j['best']['id']}"
                         for k, (_, j) in enumerate(chosen)]
             self.play_together([j["best"]["id"] for _, j in chosen], captions)

@@ -136,7 +136,7 @@ class ClientSession:
                                    "y": {"range": padded_range(j_done)}}
         best_pos = history.best_position()
         best_text = "none completed yet" if best_pos is None else (
-            f"**{history.values[best_pos]:.3f}** (lower is better), evaluation id {history.ids[best_pos]} "
+            f"**{history.values[best_pos]:.4g}** (lower is better), evaluation id {history.ids[best_pos]} "
             f"(index {best_pos})")
         compiling = " (**compiling the simulation**: numba, once after an install)" if (
             history.status == JobStatus.RUNNING and episode_kernels_cached() is False) else ""
@@ -160,6 +160,8 @@ class ClientSession:
         with self.lock:
             if error is not None:
                 self.what_if.show_error(error)
+                self.playback.show_what_if_error(error)
+                self.client.add_notification("What-if not run", error, color="red", auto_close_seconds=12.0)
                 return
             self.playback.play_what_if(frames, ghost=self.what_if.ghost)
             self.what_if.show_result(frames, worker_ms)

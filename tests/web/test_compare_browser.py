@@ -80,7 +80,7 @@ def test_compare_mode_overlays_a_seeds_study_and_plays_its_best_episodes_togethe
     summary = page.get_by_text("three (seeds, finished); final best J from")
     summary.wait_for(timeout=30_000)
     final = seeds["final_best_J"]
-    assert f"from {min(final):.3f} to {max(final):.3f}, median {np.median(final):.3f}" in summary.inner_text()
+    assert f"from {min(final):.4g} to {max(final):.4g}, median {np.median(final):.4g}" in summary.inner_text()
     for job_id in seeds["job_ids"]:  # one row per job, its best J as the API has it
         job = httpx.get(f"{url}/api/jobs/{job_id}").json()
         page.get_by_text(f"{job['name']} (id {job_id})").first.wait_for(timeout=10_000)
@@ -111,7 +111,7 @@ def test_the_heatmap_shows_each_cell_as_stored(server, browser, tmp_path):
     rows = table.locator("tr").all()[2:]  # below the column key's row and the column values' row
     shown = [[td.inner_text() for td in row.locator("td").all()] for row in rows]
     expected = [c["J"] if c["status"] == "completed" else c["status"] for c in grid["cells"]]
-    expected = [f"{v:.3f}" if isinstance(v, float) else v for v in expected]
+    expected = [f"{v:.4g}" if isinstance(v, float) else v for v in expected]
     assert [text for row in shown for text in row] == expected
     assert [row.locator("th").inner_text() for row in rows] == [str(v) for v in GRID["plant.friction_scale"]]
     pixels = _save(page.screenshot(), "heatmap.png", tmp_path)

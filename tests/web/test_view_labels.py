@@ -24,11 +24,11 @@ def _frames():
     return EpisodeFrames(COLUMNS, rows, evaluation_id=1234, index=7, theta=THETA, status="completed", J=-1.2345)
 
 
-def test_caption_names_the_api_id_and_the_index_and_theta_at_full_precision():
+def test_caption_names_the_api_id_and_the_index_and_theta_to_4_significant_digits():
     caption = _frames().caption()
     assert "evaluation id 1234 (index 7 in its job)" in caption and "#" not in caption
-    for value in THETA.values():
-        assert repr(value) in caption
+    assert "c_lr 0.02146, c_rl 0.02115, dV 0.02786, k 0" in caption  # full precision: the downloads and the API
+    assert repr(THETA["c_lr"]) not in caption
     assert "lower is better" in caption
     assert EpisodeFrames(COLUMNS, np.zeros((0, len(COLUMNS)))).name() == "what-if episode"
 
@@ -54,4 +54,15 @@ def test_a_replay_shows_its_j_and_theta():
     finally:
         recorder.stop()
     raw = zstandard.ZstdDecompressor().decompressobj().decompress(data[8:])  # after viser's 8-byte size header
-    assert b"evaluation id 1234" in raw and b"J -1.234" in raw and repr(THETA["c_lr"]).encode() in raw
+    assert b"evaluation id 1234" in raw and b"J -1.234" in raw and b"c_lr 0.02146" in raw
+
+
+def test_two_triggers_by_p0_share_one_label_and_distant_ones_have_their_own():
+    from driftlab.web.scene import trigger_labels
+
+    by_p0 = [{"t_s": 7.0, "x_m": -5.215, "y_m": -0.325}, {"t_s": 21.5, "x_m": -5.555, "y_m": 0.085}]
+    [(position, text)] = trigger_labels(by_p0)
+    assert text == "trigger 1  t 7.00 s · trigger 2  t 21.50 s"
+    assert position == trigger_label_position(-5.215, -0.325)
+    apart = trigger_labels([by_p0[0], {"t_s": 12.0, "x_m": 40.0, "y_m": 44.0}])
+    assert [t for _, t in apart] == ["trigger 1  t 7.00 s", "trigger 2  t 12.00 s"]

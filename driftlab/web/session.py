@@ -44,6 +44,8 @@ class TabData(Protocol):
 
     def compare(self, job_ids: list[int]) -> list[dict[str, Any]]: ...
 
+    def config_diff(self, job_ids: list[int]) -> dict[str, Any]: ...
+
     def request_what_if(self, session: ClientSession, theta: dict[str, float], config_doc: dict[str, Any],
                         plant_overrides: dict[str, float], seed: int) -> None: ...
 
@@ -71,7 +73,8 @@ class ClientSession:
         self.what_if.gui_reset.on_click(lambda _: self.what_if.reset_sliders(self._best()))
         self.playback.build_downloads(gui)
         self.compare = ComparePanel(gui, read_studies=data.studies, read_study=data.study,
-                                    read_compare=data.compare, play_together=self._play_together, lock=self.lock)
+                                    read_compare=data.compare, read_config_diff=data.config_diff,
+                                    play_together=self._play_together, lock=self.lock)
         self._thread = threading.Thread(target=self._run, name=f"driftlab-view-{client.client_id}", daemon=True)
         self._thread.start()
 

@@ -86,6 +86,11 @@ def test_compare_mode_overlays_a_seeds_study_and_plays_its_best_episodes_togethe
         page.get_by_text(f"{job['name']} (id {job_id})").first.wait_for(timeout=10_000)
     plot = page.locator(".uplot", has=page.get_by_text("Compare: best J so far (completed)"))
     plot.wait_for(timeout=10_000)
+    # The config diff: a seeds study's jobs differ in their seed only.
+    diff = page.locator("table", has=page.get_by_text("setting", exact=True))
+    diff.wait_for(timeout=10_000)
+    assert [td.inner_text() for td in diff.locator("tbody tr").first.locator("td").all()] == ["seed", "0", "1", "2"]
+    assert diff.locator("tbody tr").count() == 1
     page.get_by_role("button", name="Play best episodes together").click()
     page.get_by_text("Compare (best episodes together)").wait_for(timeout=30_000)
     for n, name in enumerate(("red car", "blue ghost", "green ghost")):

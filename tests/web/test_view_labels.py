@@ -66,3 +66,30 @@ def test_two_triggers_by_p0_share_one_label_and_distant_ones_have_their_own():
     assert position == trigger_label_position(-5.215, -0.325)
     apart = trigger_labels([by_p0[0], {"t_s": 12.0, "x_m": 40.0, "y_m": 44.0}])
     assert [t for _, t in apart] == ["trigger 1  t 7.00 s", "trigger 2  t 12.00 s"]
+
+
+def test_the_config_diff_table_shows_each_differing_setting_to_4_significant_digits():
+    from driftlab.web.compare import config_diff_markdown
+
+    diff = {"jobs": [{"id": 1, "name": "a"}, {"id": 2, "name": "b"}],
+            "differences": [{"key": "bounds.k", "values": [[0.0, 0.12], [0.0, 0.123456]]},
+                            {"key": "config.plant.steer_lag_s", "values": [0.03, None]}]}
+    table = config_diff_markdown(diff)
+    assert "| setting | a (id 1) | b (id 2) |" in table
+    assert "| bounds.k | [0, 0.12] | [0, 0.1235] |" in table and "| config.plant.steer_lag_s | 0.03 | - |" in table
+    assert config_diff_markdown({"jobs": [{"id": 1, "name": "a"}], "differences": []}) == ""
+
+
+def test_the_html_replay_has_a_caption_panel_and_the_state_plots_beside_the_view():
+    recorder = EpisodeRecorder()
+    try:
+        page = recorder.html(_frames(), FigureEight())
+    finally:
+        recorder.stop()
+    panel = page[page.index('<aside id="driftlab-panel">'):page.index("</aside>")]
+    assert "evaluation id 1234 (index 7 in its job)" in panel and "J -1.234" in panel
+    assert "<td>c_lr</td><td>0.02146</td>" in panel and repr(THETA["c_lr"]) not in panel
+    assert panel.count("<svg") == 4 and all(label in panel for label in ("V [m/s]", "beta [rad]", "r [rad/s]",
+                                                                          "delta [rad]"))
+    assert page.index("</aside>") < page.index('<div id="root">')  # the 3D player beside it, in the same page
+    assert "__VISER_EMBED_DATA__" in page

@@ -15,7 +15,7 @@ from driftlab.core.track import FigureEight
 from driftlab.web.frames import EpisodeFrames
 from driftlab.web.player import EpisodePlayer
 from driftlab.web.replay_page import with_panel
-from driftlab.web.scene import set_overview_camera
+from driftlab.web.scene import set_replay_camera
 from driftlab.web.viser_server import quiet_viser_server
 
 RECORDING_FPS = 30.0
@@ -30,7 +30,7 @@ class EpisodeRecorder:
     def _fresh_scene(self) -> viser.SceneApi:
         if self._server is None:
             self._server = quiet_viser_server(host="127.0.0.1", port=0)
-            set_overview_camera(self._server.initial_camera)
+            set_replay_camera(self._server.initial_camera)
         self._server.scene.reset()
         return self._server.scene
 

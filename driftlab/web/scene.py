@@ -47,6 +47,12 @@ def set_overview_camera(camera) -> None:
     camera.look_at = (0.0, -25.0, 0.0)  # aimed right of the 8's centre so the 8 sits left of the control panel
 
 
+def set_replay_camera(camera) -> None:
+    """The whole 8 in the middle of the view (a recording has no control panel beside it)."""
+    camera.position = (-118.0, 0.0, 95.0)
+    camera.look_at = (0.0, 0.0, 0.0)
+
+
 def set_chase_camera(camera, x_m: float, y_m: float, course_rad: float, *, behind_m: float = 16.0,
                      height_m: float = 8.0) -> None:
     """Behind the car along its direction of travel: the body's angle to the path is the sideslip."""
@@ -239,8 +245,10 @@ class TriggerMarkers:
             self.clear()
         for k in range(len(self._posts), len(points)):
             p = points[k]
-            self._posts.append(self.scene.add_cylinder(f"/{self.name}/{k}/post", radius=0.35, height=4.0,
-                                                       color=(255, 190, 0), position=(p["x_m"], p["y_m"], 2.0)))
+            # Thin and translucent: the chase camera, 16 m behind the car, looks past it in the second after a flick.
+            self._posts.append(self.scene.add_cylinder(f"/{self.name}/{k}/post", radius=0.2, height=4.0,
+                                                       color=(255, 190, 0), opacity=0.6,
+                                                       position=(p["x_m"], p["y_m"], 2.0)))
         for k, (position, text) in enumerate(trigger_labels(points)):
             if k == len(self._labels):
                 self._labels.append(self.scene.add_label(f"/{self.name}/label{k}", text, position=position))

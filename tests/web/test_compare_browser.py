@@ -11,7 +11,7 @@ from matplotlib import image as mpimg
 from playwright.sync_api import sync_playwright
 
 from tests.server_process import free_port, start_server
-from tests.web.test_view_browser import CHROMIUM, CHROMIUM_ARGS, SCREENSHOT_DIR, ConsoleLog
+from tests.web.test_view_browser import CHROMIUM, CHROMIUM_ARGS, SCREENSHOT_DIR, ConsoleLog, _wait_until_played
 
 pytestmark = pytest.mark.e2e  # real processes: servers, browsers, Dask, the CLI
 
@@ -95,7 +95,7 @@ def test_compare_mode_overlays_a_seeds_study_and_plays_its_best_episodes_togethe
     page.get_by_text("Compare (best episodes together)").wait_for(timeout=30_000)
     for n, name in enumerate(("red car", "blue ghost", "green ghost")):
         page.get_by_text(f"{name}: three-seed{n}").wait_for(timeout=10_000)
-    page.wait_for_timeout(2500)  # the cars drive for a moment
+    _wait_until_played(page, 2.0)  # the cars drive for a moment
     pixels = _save(page.screenshot(), "compare.png", tmp_path)
     scene = pixels[:, : int(pixels.shape[1] * 0.6)]
     assert scene.std() > 0.05, "the 3D view looks blank"

@@ -152,3 +152,25 @@ def test_with_a_token_the_page_changes_nothing_without_it(tmp_path, browser):
     finally:
         proc.terminate()
         proc.wait(timeout=30)
+
+
+def test_clone_with_changes_starts_from_the_jobs_settings(server, browser):
+    original = httpx.post(f"{server}/api/jobs", json={
+        "name": "original", "iterations": 2, "seed": 7, "robust_samples": 2, "bounds": {"k": [0.0, 0.08]},
+        "config": {"plant.steer_lag_s": 0.05, "scenario.sideslip_rad": 0.42}}).json()
+    page, errors = _page(browser, f"{server}/dashboard/?job={original['id']}")
+    expect(page.locator("#job-title")).to_have_text(f"{original['id']} · original", timeout=WAIT_MS)
+    page.get_by_role("button", name="Clone with changes").click()
+    form = page.locator("#job-form")
+    expect(form.locator("input[name=name]")).to_have_value("original-clone")
+    assert form.locator("input[name=bound-k-hi]").input_value() == "0.08"
+    sets = form.locator("textarea[name=sets]").input_value().splitlines()
+    assert sorted(sets) == ["plant.steer_lag_s=0.05", "scenario.sideslip_rad=0.42"]
+    form.locator("input[name=iterations]").fill("3")
+    page.get_by_role("button", name="Start job").click()
+    expect(page.locator("#job-title")).to_contain_text("original-clone", timeout=WAIT_MS)
+    clone = _job_by_name(server, "original-clone")
+    changed = {k for k in original["spec"] if clone["spec"][k] != original["spec"][k]}
+    assert changed == {"iterations"} and clone["iterations"] == 3  # the config in full, bounds, seed: as cloned
+    assert not errors, errors
+    page.close()

@@ -2,7 +2,9 @@
 // API, and the selected job's convergence and search space, read again every second.
 // With a token set, open the page as /dashboard/?token=<DRIFTLAB_TOKEN>: every change sends it as a bearer token.
 "use strict";
-import { colorbar, el, extent, fmt, frame, heatmap, line, parallel, points, ramp, RAMPS } from "./svgplot.js";
+import { formBody, openForm as fillForm } from "./jobform.js";
+import { renderSpace } from "./searchspace.js";
+import { el, extent, fmt, frame, line, parallel, points, ramp, RAMPS } from "./svgplot.js";
 
 const POLL_MS = 1000;
 const $ = (id) => document.getElementById(id);
@@ -179,75 +181,13 @@ async function maybeFetchSpace() {
     if (id === state.selected) {
       state.space = space;
       state.spaceKey = key;
-      renderSpace();
+      renderSpace(state.space, state.evals);
     }
   } catch (e) {
     say(e.message);
   } finally {
     state.spaceBusy = false;
   }
-}
-
-function fillSelect(select, names, value) {
-  if (select.options.length !== names.length) {
-    select.replaceChildren(...names.map((n) => new Option(n, n)));
-  }
-  select.value = value;
-}
-
-function renderSpace() {
-  const s = state.space;
-  fillSelect($("contour-x"), s.parameters, s.x);
-  fillSelect($("contour-y"), s.parameters, s.y);
-  $("search-space").dataset.nEvaluations = s.n_evaluations;
-  $("search-space-status").textContent = `(models fitted to ${s.n_evaluations} evaluations)`;
-  $("held-text").textContent = Object.keys(s.held).length
-    ? `others held at the best theta: ${Object.entries(s.held).map(([k, v]) => `${k} ${fmt(v)}`).join(", ")}` : "";
-  renderImportance(s);
-  const box = { width: 315, height: 270, x: s.bounds[s.x], y: s.bounds[s.y], xlabel: s.x, ylabel: s.y,
-                margin: { r: 64, l: 46 } };
-  const ev = state.evals;
-  const overlay = (f) => {
-    points(f, ev.map((e) => e.theta[s.x]), ev.map((e) => (e.completed ? e.theta[s.y] : NaN)),
-      { color: "#111", r: 2 });
-    points(f, ev.map((e) => e.theta[s.x]), ev.map((e) => (e.completed ? NaN : e.theta[s.y])),
-      { color: "#c92a2a", shape: "x", r: 3 });
-    if (s.best_theta) points(f, [s.best_theta[s.x]], [s.best_theta[s.y]], { color: "#ffd43b", shape: "star", r: 7 });
-  };
-  const panels = [["contour-mean", "mean_J", "GP mean of J", RAMPS.viridis, true],
-    ["contour-std", "std_J", "GP std of J", RAMPS.greys, false],
-    ["contour-fail", "p_failure", "P(failure)", RAMPS.reds, false]];
-  for (const [id, field, title, stops, reverse] of panels) {
-    const f = frame($(id), { ...box, title });
-    if (s[field]) {
-      const range = field === "p_failure" ? [0, 1] : null;
-      const [lo, hi] = heatmap(f, s.x_values, s.y_values, s[field], { stops, reverse, range });
-      colorbar(f, lo, hi, { stops, reverse });
-    } else {
-      el("text", { x: f.m.l + 10, y: f.m.t + 20 }, f.g,
-        field === "p_failure" ? "no failure model: no failed (or no completed) evaluation" : "needs 2 completed evaluations");
-    }
-    overlay(f);
-  }
-}
-
-function renderImportance(s) {
-  const names = s.parameters;
-  const imp = s.importance || {};
-  const f = frame($("importance"), { width: 330, height: 30 + 26 * names.length, x: [0, 1], y: [0, names.length],
-    title: "Importance (GP ARD relevance)", margin: { l: 110, b: 22 } });
-  f.g.parentNode.querySelectorAll(".axes text").forEach((t) => {
-    if (Number(t.getAttribute("x")) < f.m.l) t.remove(); // no numeric y ticks: the rows are parameters
-  });
-  names.forEach((n, i) => {
-    const y = f.sy(names.length - i - 0.5);
-    el("text", { x: f.m.l - 6, y: y + 4, "text-anchor": "end" }, f.g, n);
-    const v = imp[n] ?? 0;
-    el("rect", { x: f.sx(0), y: y - 8, width: f.sx(v) - f.sx(0), height: 16, fill: "#2a6fdb" }, f.g);
-    el("text", { x: f.sx(v) + 4, y: y + 4 }, f.g, s.importance ? `${fmt(100 * v)} %` : "–");
-  });
-  $("importance-caption").textContent = `Parameter importance: ${s.importance_method}. Length scales: ` +
-    (s.length_scales ? Object.entries(s.length_scales).map(([k, v]) => `${k} ${fmt(v)}`).join(", ") : "none yet");
 }
 
 // ----- actions ------------------------------------------------------------------------------------------------
@@ -298,8 +238,8 @@ function wireActions() {
     state.rescoring = true;
     await pollRescore();
   });
-  $("clone").onclick = () => openForm(state.job);
-  $("new-job").onclick = () => openForm(null);
+  $("clone").onclick = () => fillForm(state.form, state.job);
+  $("new-job").onclick = () => fillForm(state.form, null);
   $("cancel-form").onclick = () => { $("job-form").hidden = true; };
   $("job-form").onsubmit = (event) => { event.preventDefault(); act(submitForm); };
   for (const id of ["contour-x", "contour-y"]) {
@@ -326,76 +266,9 @@ async function pollRescore() {
   }
 }
 
-// ----- the new-job form (also "clone with changes") -----------------------------------------------------------
-function boundsRows(bounds, modelCorrection) {
-  const table = $("bounds-table");
-  table.replaceChildren();
-  const all = { ...state.form.default_bounds, ...(modelCorrection ? state.form.model_bounds : {}), ...bounds };
-  for (const [name, [lo, hi]] of Object.entries(all)) {
-    if (!modelCorrection && name in state.form.model_bounds) continue;
-    const tr = table.insertRow();
-    tr.insertCell().textContent = name;
-    for (const [side, v] of [["lo", lo], ["hi", hi]]) {
-      const input = document.createElement("input");
-      Object.assign(input, { type: "number", step: "any", value: v, name: `bound-${name}-${side}` });
-      tr.insertCell().appendChild(input);
-    }
-  }
-}
-
-function differingSets(spec) {
-  const dotted = {};
-  for (const [section, values] of Object.entries(spec.config || {})) {
-    for (const [k, v] of Object.entries(values)) dotted[`${section}.${k}`] = v;
-  }
-  return Object.entries(dotted).filter(([k, v]) => JSON.stringify(state.form.default_config[k]) !== JSON.stringify(v))
-    .map(([k, v]) => `${k}=${typeof v === "string" ? v : JSON.stringify(v)}`).join("\n");
-}
-
-function openForm(job) {
-  const f = $("job-form");
-  f.hidden = false;
-  const spec = job ? job.spec : state.form.defaults;
-  $("form-title").textContent = job ? `Clone job ${job.id} (${job.name}) with changes` : "New job";
-  f.elements.name.value = job ? `${job.name}-clone` : "";
-  for (const k of ["iterations", "seed_points", "robust_samples", "confirm_samples", "seed"]) {
-    f.elements[k].value = k === "iterations" && !job ? 60 : spec[k];
-  }
-  f.elements.model_correction.checked = spec.model_correction;
-  f.elements.deterministic.checked = spec.deterministic;
-  f.elements.sets.value = job ? differingSets(job.spec) : "";
-  f.elements.plant_preset.value = "default";
-  boundsRows(job ? job.spec.bounds : {}, spec.model_correction);
-  f.elements.model_correction.onchange = () => boundsRows({}, f.elements.model_correction.checked);
-  f.elements.name.focus();
-}
-
-function parseSets(text) {
-  const out = {};
-  text.split("\n").map((l) => l.trim()).filter(Boolean).forEach((lineText, i) => {
-    const at = lineText.indexOf("=");
-    if (at < 1) throw new Error(`sets, line ${i + 1}: expected key=value, got ${JSON.stringify(lineText)}`);
-    const raw = lineText.slice(at + 1).trim();
-    let value;
-    try { value = JSON.parse(raw); } catch { value = raw; } // text values (plant.model=commonroad_std)
-    out[lineText.slice(0, at).trim()] = value;
-  });
-  return out;
-}
-
+// ----- the new-job form (also "clone with changes", driftlab/server/static/jobform.js) --------------------------
 async function submitForm() {
-  const f = $("job-form").elements;
-  const body = { iterations: Number(f.iterations.value), seed_points: Number(f.seed_points.value),
-    robust_samples: Number(f.robust_samples.value), confirm_samples: Number(f.confirm_samples.value),
-    seed: Number(f.seed.value), model_correction: f.model_correction.checked, deterministic: f.deterministic.checked,
-    config: { ...state.form.plant_presets[f.plant_preset.value], ...parseSets(f.sets.value) }, bounds: {} };
-  if (f.name.value.trim()) body.name = f.name.value.trim();
-  for (const input of $("bounds-table").querySelectorAll("input")) {
-    const [, name, side] = input.name.match(/^bound-(.+)-(lo|hi)$/);
-    body.bounds[name] = body.bounds[name] || [0, 0];
-    body.bounds[name][side === "lo" ? 0 : 1] = Number(input.value);
-  }
-  const job = await api("POST", "/api/jobs", body);
+  const job = await api("POST", "/api/jobs", formBody(state.form));
   $("job-form").hidden = true;
   say(`job ${job.id} (${job.name}) queued`, true);
   await poll();

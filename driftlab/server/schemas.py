@@ -86,7 +86,7 @@ class JobPatch(BaseModel):
     """A new budget (at least the evaluations stored; a finished job with a larger budget is queued again), new
     notes, or both; at least one of them."""
 
-    model_config = ConfigDict(extra="forbid")
+    model_config = ConfigDict(extra="forbid", json_schema_extra={"minProperties": 1})
 
     iterations: int | None = Field(default=None, ge=JOB_LIMITS["iterations"][0], le=JOB_LIMITS["iterations"][1],
                                    strict=True, description="a new budget: at least the evaluations stored")

@@ -9,6 +9,7 @@ from driftlab.core.config import Theta
 from driftlab.db import storage
 from driftlab.worker.executors import evaluate_episode
 from driftlab.worker.rescoring import RescoreRunner
+from tests.server.conftest import in_process_client
 
 
 def _store(api, job_id, n=14):
@@ -55,9 +56,13 @@ def test_the_search_space_of_a_stored_history(api):
 
 
 def test_bad_search_space_requests_name_the_field(api):
-    job = api.post("/api/jobs", json={"name": "b", "iterations": 5}).json()
+    job = api.post("/api/jobs", json={"name": "b", "iterations": 5, "model_correction": False}).json()
     r = api.get(f"/api/jobs/{job['id']}/search-space", params={"x": "mass"})
-    assert r.status_code == 422 and r.json()["detail"].startswith("x: 'mass' is not a parameter")
+    assert r.status_code == 422 and r.json()["errors"][0]["field"] == "query.x"  # not a theta key at all
+    r = api.get(f"/api/jobs/{job['id']}/search-space", params={"x": "model_mu_scale"})
+    assert r.status_code == 422 and r.json()["detail"].startswith("x: 'model_mu_scale' is not a parameter of this job")
+    r = api.get(f"/api/jobs/{job['id']}/search-space", params={"x": "k", "y": "k"})
+    assert r.status_code == 422 and r.json()["detail"].startswith("y: choose two different parameters")
     r = api.get(f"/api/jobs/{job['id']}/search-space", params={"grid": 500})
     assert r.status_code == 422 and r.json()["errors"][0]["field"] == "query.grid"
     assert api.get("/api/jobs/999/search-space").status_code == 404
@@ -84,6 +89,14 @@ def test_rescore_reports_progress_and_the_result(api):
     assert state["result"]["samples"] == 2 and len(state["result"]["seeds"]) == 2
     assert api.post(f"/api/jobs/{job['id']}/rescore", json={"samples": 0}).json()["errors"][0]["field"] == "samples"
     pool.shutdown()
+
+
+def test_a_rescore_counts_against_the_episodes_per_job_limit(tmp_path):
+    with in_process_client(tmp_path / "quota.db", max_episodes_per_job=10) as client:
+        job = client.post("/api/jobs", json={"name": "q", "iterations": 1, "robust_samples": 1,
+                                             "confirm_samples": 0}).json()
+        r = client.post(f"/api/jobs/{job['id']}/rescore", json={"samples": 11})
+        assert r.status_code == 422 and r.json()["detail"].startswith("samples: 11 episodes exceed the limit of 10")
 
 
 class _InThread:

@@ -3,14 +3,16 @@ starts from."""
 
 from __future__ import annotations
 
-from typing import Annotated, Any
+from typing import Annotated, Any, Literal
 
 from fastapi import APIRouter, Depends, HTTPException, Query, Request
 from pydantic import BaseModel, ConfigDict, Field
 from sqlalchemy.orm import Session, sessionmaker
 
+from driftlab.core.config import THETA_KEYS
 from driftlab.core.search_space import MAX_GRID
 from driftlab.db import storage
+from driftlab.server import quotas
 from driftlab.server.responses import Rescore, SearchSpace, errors
 from driftlab.server.routes.deps import factory, require_token
 from driftlab.server.schemas import JobId
@@ -21,6 +23,7 @@ from driftlab.worker.rescoring import RescoreBusy
 router = APIRouter(tags=["jobs"])
 Factory = Annotated[sessionmaker[Session], Depends(factory)]
 MAX_RESCORE_SAMPLES = 1000
+ThetaKey = Literal[THETA_KEYS]  # type: ignore[valid-type]  # a job learns some of them (its bounds' keys)
 
 
 class RescoreCreate(BaseModel):
@@ -32,8 +35,8 @@ class RescoreCreate(BaseModel):
 
 @router.get("/api/jobs/{job_id}/search-space", response_model=SearchSpace, responses=errors(404, 422, 503))
 def get_search_space(job_id: JobId, db: Factory, request: Request,
-                     x: Annotated[str | None, Query(max_length=40, description="parameter along x")] = None,
-                     y: Annotated[str | None, Query(max_length=40, description="parameter along y")] = None,
+                     x: Annotated[ThetaKey | None, Query(description="parameter along x")] = None,
+                     y: Annotated[ThetaKey | None, Query(description="parameter along y")] = None,
                      grid: Annotated[int, Query(ge=2, le=MAX_GRID, description="points per axis")] = 30
                      ) -> dict[str, Any]:
     """The GP's mean and standard deviation of J and the failure probability over (x, y), the other parameters
@@ -46,6 +49,7 @@ def get_search_space(job_id: JobId, db: Factory, request: Request,
 def start_rescore(job_id: JobId, body: RescoreCreate, request: Request) -> dict[str, Any]:
     """Run the best theta, exactly as stored, on ``samples`` fresh seeds (in a worker process); follow it with
     GET. 404 without a completed evaluation, 409 while one runs for this job."""
+    quotas.check_rescore(request.app.state.settings, body.samples)
     try:
         return request.app.state.rescores.start(job_id, body.samples)
     except RescoreBusy as exc:

@@ -8,7 +8,7 @@ from datetime import UTC, datetime
 from enum import StrEnum
 from typing import Any
 
-from sqlalchemy import JSON, Float, ForeignKey, Integer, LargeBinary, String, UniqueConstraint
+from sqlalchemy import JSON, Float, ForeignKey, Integer, LargeBinary, String, Text, UniqueConstraint
 from sqlalchemy.orm import DeclarativeBase, Mapped, mapped_column, relationship
 
 
@@ -47,6 +47,7 @@ class Job(Base):
     runner_id: Mapped[str | None] = mapped_column(String(100), default=None)
     heartbeat_at: Mapped[datetime | None] = mapped_column(default=None)
     study_id: Mapped[int | None] = mapped_column(Integer, default=None, index=True)  # a seeds study's job
+    notes: Mapped[str] = mapped_column(Text, default="", server_default="")  # a researcher's, free text
 
     evaluations: Mapped[list[Evaluation]] = relationship(back_populates="job", order_by="Evaluation.index")
 

@@ -103,6 +103,12 @@ def get_job_by_name(session: Session, *, name: str) -> Job:
     return job
 
 
+def set_notes(session: Session, *, job_id: int, notes: str) -> Job:
+    job = get_job(session, job_id=job_id)
+    job.notes = notes
+    return job
+
+
 def list_jobs(session: Session) -> list[Job]:
     return list(session.scalars(select(Job).order_by(Job.id)))
 

@@ -25,6 +25,13 @@ def check_job(settings: Settings, spec: dict) -> None:
                                  f"limit of {settings.max_episodes_per_job} a job (DRIFTLAB_MAX_EPISODES_PER_JOB)")
 
 
+def check_rescore(settings: Settings, samples: int) -> None:
+    """A rescore's episodes count against the same limit as a job's."""
+    if samples > settings.max_episodes_per_job:
+        raise HTTPException(422, f"samples: {samples} episodes exceed the limit of {settings.max_episodes_per_job} "
+                                 "a job (DRIFTLAB_MAX_EPISODES_PER_JOB)")
+
+
 def check_queue(settings: Settings, session: Session, adding: int) -> None:
     queued = session.scalar(select(func.count()).select_from(Job).where(Job.status == JobStatus.QUEUED)) or 0
     if queued + adding > settings.max_queued_jobs:

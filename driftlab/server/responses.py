@@ -99,6 +99,7 @@ class Job(BaseModel):
     runner_id: str | None
     study_id: int | None
     spec: dict[str, Any] = Field(description="the validated job document (POST /api/jobs), config in full")
+    notes: str = Field(description="free text kept with the job (PATCH /api/jobs/{id} with notes)")
     created_at: Timestamp
 
 
@@ -188,3 +189,42 @@ class RobustnessStudy(_StudyCommon):
 
 
 Study = Annotated[SeedsStudy | RobustnessStudy, Field(discriminator="kind")]
+
+
+class SearchSpace(BaseModel):
+    """A job's models over two of its parameters (driftlab.core.search_space): rows of the grids follow
+    ``y_values``, columns ``x_values``; the other parameters are held at ``held`` (the best theta)."""
+
+    job_id: int
+    n_evaluations: int = Field(description="evaluations the models were fitted to")
+    parameters: list[str]
+    bounds: dict[str, list[float]]
+    importance: dict[str, float] | None = Field(description="null before 2 completed evaluations")
+    length_scales: dict[str, float] | None = Field(description="the GP's, in each parameter's own units")
+    importance_method: str
+    best_theta: dict[str, float] | None
+    x: str
+    y: str
+    x_values: list[float]
+    y_values: list[float]
+    held: dict[str, float]
+    mean_J: list[list[float]] | None = Field(description="GP posterior mean of J; null before 2 completions")
+    std_J: list[list[float]] | None = Field(description="GP posterior standard deviation of J")
+    p_failure: list[list[float]] | None = Field(description="learned probability that an evaluation fails; null "
+                                                "unless some completed and some failed")
+
+
+class Rescore(BaseModel):
+    """A job's rescore: its best theta on ``samples`` fresh seeds (as ``driftlab rescore``)."""
+
+    job_id: int
+    status: Literal["none", "running", "finished", "failed"]
+    samples: int | None = None
+    done: int | None = Field(default=None, description="episodes finished so far")
+    theta: dict[str, float] | None = None
+    evaluation_id: int | None = None
+    J_stored: float | None = None
+    status_stored: str | None = None
+    result: dict[str, Any] | None = Field(default=None, description="samples, completed, completion_rate, J_mean, "
+                                          "J_std, J_worst, J_mean_completed, mean_abs_e_m, statuses, seeds")
+    error: str | None = None

@@ -6,7 +6,7 @@ from __future__ import annotations
 from typing import Annotated, Any, Literal
 
 from fastapi import Path, Query
-from pydantic import BaseModel, ConfigDict, Field
+from pydantic import BaseModel, ConfigDict, Field, model_validator
 
 from driftlab.core.config import THETA_KEYS, check_json_types
 from driftlab.core.errors import ConfigError
@@ -79,12 +79,26 @@ class JobCreate(BaseModel):
                                           "e.g. {\"plant.steer_lag_s\": 0.02}, or nested sections")
 
 
+MAX_NOTES_CHARS = 10_000
+
+
 class JobPatch(BaseModel):
-    """A new budget: at least the evaluations stored. A finished job with a larger budget is queued again."""
+    """A new budget (at least the evaluations stored; a finished job with a larger budget is queued again), new
+    notes, or both; at least one of them."""
 
-    model_config = ConfigDict(extra="forbid")
+    model_config = ConfigDict(extra="forbid", json_schema_extra={"minProperties": 1})
 
-    iterations: int = _limited("iterations")
+    iterations: int | None = Field(default=None, ge=JOB_LIMITS["iterations"][0], le=JOB_LIMITS["iterations"][1],
+                                   strict=True, description="a new budget: at least the evaluations stored")
+    notes: str | None = Field(default=None, max_length=MAX_NOTES_CHARS,
+                              description=f"free text kept with the job (at most {MAX_NOTES_CHARS} characters); "
+                                          "replaces the notes stored")
+
+    @model_validator(mode="after")
+    def _something(self) -> JobPatch:
+        if self.iterations is None and self.notes is None:
+            raise ValueError("give iterations, notes or both")
+        return self
 
 
 StudyId = Annotated[int, Path(ge=1, le=MAX_ID, description="a study's id")]

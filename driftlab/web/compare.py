@@ -51,6 +51,27 @@ def parse_job_ids(text: str) -> list[int]:
     return ids
 
 
+def _shown(value: Any) -> str:
+    """A setting's value in the diff table: numbers to 4 significant digits (the API has them in full)."""
+    if isinstance(value, float):
+        return f"{value:.4g}"
+    if isinstance(value, list):
+        return "[" + ", ".join(_shown(v) for v in value) + "]"
+    return "-" if value is None else str(value)
+
+
+def config_diff_markdown(diff: dict[str, Any]) -> str:
+    """The settings that differ between the compared jobs, one column per job (GET /api/compare/config)."""
+    jobs = diff["jobs"]
+    if len(jobs) < 2:
+        return ""
+    if not diff["differences"]:
+        return "**Config diff**: the jobs' settings are the same (they differ in seed only, if at all)."
+    header = "| setting | " + " | ".join(f"{j['name']} (id {j['id']})" for j in jobs) + " |"
+    rows = [f"| {d['key']} | " + " | ".join(_shown(v) for v in d["values"]) + " |" for d in diff["differences"]]
+    return "\n".join(["**Config diff** (settings that differ)", "", header, "|---" * (len(jobs) + 1) + "|", *rows])
+
+
 def convergence_data(jobs: list[dict[str, Any]], band: dict[str, list] | None
                      ) -> tuple[tuple[np.ndarray, ...], tuple[dict[str, Any], ...], tuple[dict[str, Any], ...]]:
     """uPlot data, series and bands: x, each job's best J so far, and with a band its median, q75 and q25."""
@@ -88,6 +109,7 @@ class ComparePanel:
         read_studies: (id, name, kind, status) of every study.
         read_study: a study's summary (as GET /api/studies/{id}).
         read_compare: jobs' summaries (as GET /api/compare).
+        read_config_diff: the settings that differ between jobs (as GET /api/compare/config).
         play_together: plays the given evaluations (by id) together, with a caption line each.
         lock: the tab's lock.
     """
@@ -95,9 +117,12 @@ class ComparePanel:
     def __init__(self, gui: viser.GuiApi, *, read_studies: Callable[[], list[tuple[int, str, str, str]]],
                  read_study: Callable[[int], dict[str, Any]],
                  read_compare: Callable[[list[int]], list[dict[str, Any]]],
+                 read_config_diff: Callable[[list[int]], dict[str, Any]],
                  play_together: Callable[[list[int], list[str]], None], lock: threading.RLock) -> None:
         self.gui = gui
         self.read_studies, self.read_study, self.read_compare = read_studies, read_study, read_compare
+        self.read_config_diff = read_config_diff
+        self.diff: dict[str, Any] = {"jobs": [], "differences": []}
         self.play_together = play_together
         self.lock = lock
         self.active = False
@@ -116,6 +141,7 @@ class ComparePanel:
             self._plot_layout: tuple = ()
             self.gui_play = gui.add_button("Play best episodes together", icon=viser.Icon.CAR, visible=False)
             self.heatmap = gui.add_html("", visible=False)
+            self.config_diff = gui.add_markdown("")
         self.gui_compare.on_click(lambda _: self.compare())
         self.gui_play.on_click(lambda _: self.play())
 
@@ -163,6 +189,7 @@ class ComparePanel:
             self.study = None
             ids = parse_job_ids(self.gui_jobs.value)
         self.jobs = self.read_compare(ids) if ids else []
+        self.diff = self.read_config_diff(ids) if len(ids) > 1 else {"jobs": [], "differences": []}
 
     def _show(self) -> None:
         study = self.study
@@ -174,12 +201,16 @@ class ComparePanel:
             self.gui_play.visible = False
             self.text.content = (f"**{study['name']}** (robustness, {study['status']}): {study['n_done']} of "
                                  f"{study['n_cells']} cells run")
+            self.config_diff.content = ""
             return
         if self.heatmap.visible:
             self.heatmap.visible = False
         self._replace_plot(*convergence_data(self.jobs, study["band"] if study is not None else None))
         self.gui_play.visible = bool(self.jobs)
         self.text.content = self._jobs_table(study)
+        diff = config_diff_markdown(self.diff)
+        if self.config_diff.content != diff:
+            self.config_diff.content = diff
 
     def _replace_plot(self, data, styles, bands) -> None:
         """New data for the plot; a new uPlot in the old one's place when the series change (other jobs)."""
@@ -204,13 +235,13 @@ class ComparePanel:
         lines = []
         if study is not None:
             final = study.get("final_best_J") or []
-            spread = (f"; final best J from {min(final):.3f} to {max(final):.3f}, median {np.median(final):.3f}"
+            spread = (f"; final best J from {min(final):.4g} to {max(final):.4g}, median {np.median(final):.4g}"
                       if final else "")
             lines.append(f"**{study['name']}** (seeds, {study['status']}){spread}")
         lines += ["| colour | job | seed | done | best J |", "|---|---|---|---|---|"]
         for n, job in enumerate(self.jobs):
             best = job["best"]
-            value = "-" if best is None or not math.isfinite(best["J"]) else f"{best['J']:.3f} ({best['status']})"
+            value = "-" if best is None or not math.isfinite(best["J"]) else f"{best['J']:.4g} ({best['status']})"
             lines.append(f"| {COLOR_NAMES[n % len(COLOR_NAMES)]} | {job['name']} (id {job['id']}) | {job['seed']} | "
                          f"{job['n_done']} / {job['iterations']} | {value} |")
         return "\n".join(lines)
@@ -224,6 +255,6 @@ class ComparePanel:
             # Cars in the order played: the first is the red car, the next the ghosts (the plot's colours when
             # every job has an evaluation).
             captions = [f"{COLOR_NAMES[k]}{' car' if k == 0 else ' ghost'}: {j['name']}, best J "
-                        f"{j['best']['J']:.3f}, evaluation id {j['best']['id']}"
+                        f"{j['best']['J']:.4g}, evaluation id {j['best']['id']}"
                         for k, (_, j) in enumerate(chosen)]
             self.play_together([j["best"]["id"] for _, j in chosen], captions)

@@ -29,6 +29,7 @@ from driftlab.web.sources import (
     frames_of_evaluation,
     frames_of_outcome,
     read_compare,
+    read_config_diff,
     read_studies,
     read_study,
 )
@@ -201,6 +202,9 @@ class Dashboard:
 
     def compare(self, job_ids: list[int]) -> list[dict[str, Any]]:
         return read_compare(self.factory, job_ids)
+
+    def config_diff(self, job_ids: list[int]) -> dict[str, Any]:
+        return read_config_diff(self.factory, job_ids)
 
     def request_what_if(self, session: ClientSession, theta: dict[str, float], config_doc: dict[str, Any],
                         plant_overrides: dict[str, float], seed: int) -> None:

@@ -96,6 +96,6 @@ class EpisodeFrames:
                 f"J {self.episode_J:.4g}")
 
     def caption(self) -> str:
-        theta = ", ".join(f"{k} {v!r}" for k, v in self.theta.items())  # full precision: copied, it reproduces
+        theta = ", ".join(f"{k} {v:.4g}" for k, v in self.theta.items())  # full precision: the downloads and the API
         plant = " | plant: " + ", ".join(f"{k} {v:.4g}" for k, v in self.plant.items()) if self.plant else ""
         return f"{self.name()}: {self.status}, {self.j_text()} | {theta}{plant}"

@@ -30,10 +30,10 @@ def _cell(status: str, value: float, lo: float, hi: float) -> str:
     if status == "pending":
         return f'<td style="background:{PENDING_COLOR};color:#888">…</td>'
     if status != "completed":
-        title = "" if math.isnan(value) else f' title="J {value:.3f}"'
+        title = "" if math.isnan(value) else f' title="J {value:.4g}"'
         return f'<td style="background:{FAILED_COLOR};color:#a61e1e"{title}>{html.escape(status)}</td>'
     text_color = "#000" if value <= 0.5 * (lo + hi) else "#fff"
-    return f'<td style="background:{j_color(value, lo, hi)};color:{text_color}">{value:.3f}</td>'
+    return f'<td style="background:{j_color(value, lo, hi)};color:{text_color}">{value:.4g}</td>'
 
 
 def heatmap_html(table: GridTable, title: str = "") -> str:
@@ -48,7 +48,7 @@ def heatmap_html(table: GridTable, title: str = "") -> str:
         cells = "".join(_cell(s, v, lo, hi) for v, s in zip(j_row, s_row, strict=True))
         rows.append(f"<tr><th>{html.escape(str(value))}</th>{cells}</tr>")
     n_failed = sum(s not in ("completed", "pending") for row in table.status for s in row)
-    legend = (f"J of completed cells from {lo:.3f} (yellow, best) to {hi:.3f} (purple); {n_failed} failed (red)"
+    legend = (f"J of completed cells from {lo:.4g} (yellow, best) to {hi:.4g} (purple); {n_failed} failed (red)"
               if completed else f"no completed cell yet; {n_failed} failed (red)")
     columns = (f'<tr><th></th><th colspan="{len(table.column_labels)}">{html.escape(table.column_key)} →</th></tr>'
                if table.column_key else "")

@@ -52,6 +52,7 @@ class Playback:
         self.playing = True
         self.speed = 1.0
         self.compare_captions: list[str] = []
+        self.stale: str | None = None  # why the episode shown is not the one last asked for (a what-if refused)
         self.player = EpisodePlayer(client.scene)
         self._build_gui(client.gui)
 
@@ -154,8 +155,17 @@ class Playback:
         self.compare_captions = captions
         self.load(episodes[0], ghost=episodes[1] if len(episodes) > 1 else None, more_ghosts=tuple(episodes[2:]))
 
+    def show_what_if_error(self, error: str) -> None:
+        """A what-if that could not run (an undrivable plant, a dead worker): the previous episode stops where it
+        is and is marked stale, with the reason on top of the HUD."""
+        self.stale = error
+        self.playing = False
+        self._show_play_button()
+        self.show_hud()
+
     def load(self, frames: EpisodeFrames, ghost: EpisodeFrames | None = None,
              more_ghosts: tuple[EpisodeFrames, ...] = ()) -> None:
+        self.stale = None
         self.player.load(frames, ghost, more_ghosts)
         self.gui_time.max = max(self.player.duration_s, 0.1)
         self._show_states(frames)
@@ -191,6 +201,7 @@ class Playback:
             self.player.seek(0.0)
         self.playing = not self.playing
         self._show_play_button()
+        self._follow_with_camera()  # paused: the camera stays behind the car where it stopped
 
     def _show_play_button(self) -> None:
         self.gui_play.label = "Pause" if self.playing else "Play"
@@ -201,14 +212,20 @@ class Playback:
             self.speed = float(self.gui_speed.value)
 
     def _on_chase(self, event: viser.GuiEvent) -> None:
-        if event.client is not None and not self.gui_chase.value:
-            set_overview_camera(self.client.camera)
+        if event.client is None:
+            return
+        with self.lock:
+            if self.gui_chase.value:
+                self._follow_with_camera()  # at once, playing or paused
+            else:
+                set_overview_camera(self.client.camera)
 
     def _on_scrub(self, event: viser.GuiEvent) -> None:
         if event.client is None:  # our own 5 Hz update of the slider
             return
         with self.lock:
             self.player.seek(float(self.gui_time.value))
+            self._follow_with_camera()  # scrubbing moves the car: the chase camera goes with it
             self.show_hud()
 
     def _follow_with_camera(self) -> None:
@@ -225,7 +242,15 @@ class Playback:
             name = f" of job **{history.name}**" if history is not None else ""
             self.hud.content = f"Waiting for the first evaluation{name}..."
             return
-        lines = [f"**{MODE_TITLES[self.mode]}** · t {self.player.t_s:5.1f} / {frames.duration_s:.1f} s"]
+        # The player runs to the longest episode shown (a ghost may outlast the car's): the car's clock stops at
+        # its own end, and the HUD says so rather than print a time past it.
+        t_s = min(self.player.t_s, frames.duration_s)
+        lines = [f"**{MODE_TITLES[self.mode]}** · t {t_s:5.1f} / {frames.duration_s:.1f} s"]
+        if self.player.t_s > frames.duration_s + 1e-9:
+            lines[0] += f" (ended; the others play on to {self.player.duration_s:.1f} s)"
+        if self.stale is not None:
+            lines.insert(0, f"**What-if not run**: {self.stale}. The episode below is the previous one (stale), "
+                            "paused.")
         if self.mode == "compare":
             lines += self.compare_captions
         else:

@@ -1,4 +1,5 @@
-"""Episodes as viser recordings: a ``.viser`` file for ``/viser/?playbackPath=`` and a standalone HTML replay.
+"""Episodes as viser recordings: a ``.viser`` file for ``/viser/?playbackPath=`` and a standalone HTML replay
+(with a panel of the caption and the state plots, driftlab.web.replay_page).
 
 Recorded on a private viser server (port 0, loopback) so that live viewers never see a recording being
 made. A 30 s episode at 30 frames per second records in a fraction of a second.
@@ -13,7 +14,8 @@ import viser
 from driftlab.core.track import FigureEight
 from driftlab.web.frames import EpisodeFrames
 from driftlab.web.player import EpisodePlayer
-from driftlab.web.scene import set_overview_camera
+from driftlab.web.replay_page import with_panel
+from driftlab.web.scene import set_replay_camera
 from driftlab.web.viser_server import quiet_viser_server
 
 RECORDING_FPS = 30.0
@@ -28,17 +30,19 @@ class EpisodeRecorder:
     def _fresh_scene(self) -> viser.SceneApi:
         if self._server is None:
             self._server = quiet_viser_server(host="127.0.0.1", port=0)
-            set_overview_camera(self._server.initial_camera)
+            set_replay_camera(self._server.initial_camera)
         self._server.scene.reset()
         return self._server.scene
 
-    def _record(self, frames: EpisodeFrames, track: FigureEight) -> viser.infra.StateSerializer:
+    def _record(self, frames: EpisodeFrames, track: FigureEight, *, caption_label: bool = True
+                ) -> viser.infra.StateSerializer:
         scene = self._fresh_scene()
         scene.set_up_direction("+z")
         player = EpisodePlayer(scene, track)
         serializer = self._server.get_scene_serializer()
         player.load(frames)
-        player.show_caption(frames.caption())
+        if caption_label:  # the .viser file has no page around it: the caption is a label in the scene
+            player.show_caption(frames.caption())
         step_s = 1.0 / self.fps
         n_steps = int(frames.duration_s * self.fps) + 1
         for k in range(n_steps + 1):
@@ -52,7 +56,8 @@ class EpisodeRecorder:
 
     def html(self, frames: EpisodeFrames, track: FigureEight) -> str:
         with self._lock:
-            return self._record(frames, track).as_html()
+            # The HTML replay shows the caption and the state plots in a panel beside the 3D view.
+            return with_panel(self._record(frames, track, caption_label=False).as_html(), frames)
 
     def stop(self) -> None:
         if self._server is not None:

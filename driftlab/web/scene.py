@@ -47,6 +47,12 @@ def set_overview_camera(camera) -> None:
     camera.look_at = (0.0, -25.0, 0.0)  # aimed right of the 8's centre so the 8 sits left of the control panel
 
 
+def set_replay_camera(camera) -> None:
+    """The whole 8 in the middle of the view (a recording has no control panel beside it)."""
+    camera.position = (-118.0, 0.0, 95.0)
+    camera.look_at = (0.0, 0.0, 0.0)
+
+
 def set_chase_camera(camera, x_m: float, y_m: float, course_rad: float, *, behind_m: float = 16.0,
                      height_m: float = 8.0) -> None:
     """Behind the car along its direction of travel: the body's angle to the path is the sideslip."""
@@ -78,11 +84,26 @@ def draw_track(scene: viser.SceneApi, track: FigureEight) -> dict[int, viser.Lin
     return highlights
 
 
-HALO_RADIUS_M = 4.0
+# The car's heading drawn large on the ground: from the overview camera the 4.3 m car is ~15 px, too small to see
+# which way it points; an arrow three car lengths long along the body axis, beside the trail (the direction of
+# travel), shows the sideslip angle between them.
+HEADING_ARROW_M = (-6.0, 2.5, 7.0)  # tail, start of the head, tip along the body axis [m from the CG]
+HEADING_ARROW_HALF_WIDTH_M = (0.9, 2.6)  # shaft, head
+
+
+def heading_arrow_mesh(z_m: float = 0.06) -> tuple[np.ndarray, np.ndarray]:
+    """(vertices, faces) of a flat arrow along +x (the car's forward axis), counter-clockwise seen from above."""
+    tail, neck, tip = HEADING_ARROW_M
+    shaft, head = HEADING_ARROW_HALF_WIDTH_M
+    xy = [(tail, -shaft), (neck, -shaft), (neck, shaft), (tail, shaft), (neck, -head), (tip, 0.0), (neck, head)]
+    vertices = np.array([(x, y, z_m) for x, y in xy], dtype=np.float32)
+    faces = np.array([(0, 1, 2), (0, 2, 3), (4, 5, 6)], dtype=np.uint32)
+    return vertices, faces
 
 
 class CarModel:
-    """A body and four wheels; the front wheels turn with the applied steering angle."""
+    """A body with a marked front (a light nose stripe and headlights), four wheels (the front ones turn with the
+    applied steering angle), and its heading as a large arrow on the ground."""
 
     WHEEL_RADIUS_M = 0.33
     TRACK_HALF_WIDTH_M = 0.80
@@ -93,13 +114,19 @@ class CarModel:
         self.root = scene.add_frame(f"/{name}", show_axes=False)
         length = cg_to_front_m + cg_to_rear_m + 1.9  # overhangs of a saloon
         body_centre_x = 0.5 * (cg_to_front_m - cg_to_rear_m)
+        front_x = body_centre_x + 0.5 * length
         scene.add_box(f"/{name}/body", color=color, dimensions=(length, 1.8, 0.6), opacity=opacity,
                       position=(body_centre_x, 0.0, 0.6))
         scene.add_box(f"/{name}/cabin", color=(40, 40, 50), dimensions=(0.5 * length, 1.55, 0.5), opacity=opacity,
                       position=(body_centre_x - 0.2, 0.0, 1.1))
-        # A flat disc around the car: from the overview camera a 4.3 m car is ~15 px; the disc marks it.
-        scene.add_cylinder(f"/{name}/halo", radius=HALO_RADIUS_M, height=0.02, color=color,
-                           opacity=0.35 if opacity is None else 0.5 * opacity, position=(0.0, 0.0, 0.03))
+        scene.add_box(f"/{name}/nose", color=(250, 250, 235), dimensions=(0.7, 1.82, 0.08), opacity=opacity,
+                      position=(front_x - 0.4, 0.0, 0.93))
+        for side in (-1.0, 1.0):
+            scene.add_box(f"/{name}/headlight_{'l' if side > 0 else 'r'}", color=(255, 240, 150),
+                          dimensions=(0.06, 0.4, 0.18), opacity=opacity, position=(front_x + 0.02, 0.6 * side, 0.62))
+        vertices, faces = heading_arrow_mesh()
+        scene.add_mesh_simple(f"/{name}/heading", vertices, faces, color=color, side="double", cast_shadow=False,
+                              receive_shadow=False, opacity=0.55 if opacity is None else 0.6 * opacity)
         axle_turn = (math.cos(math.pi / 4), math.sin(math.pi / 4), 0.0, 0.0)  # cylinder axis z -> car's y
         self.front_wheels = []
         for label, x_m, y_m in (("fl", cg_to_front_m, self.TRACK_HALF_WIDTH_M),
@@ -179,30 +206,51 @@ def trigger_label_position(x_m: float, y_m: float) -> tuple[float, float, float]
     return (x_m + TRIGGER_LABEL_OFFSET_M * ux, y_m + TRIGGER_LABEL_OFFSET_M * uy, TRIGGER_LABEL_Z_M)
 
 
+LABEL_MERGE_M = 10.0  # triggers closer than this share one label: two labels there would print over each other
+
+
+def trigger_labels(points: Iterable[dict]) -> list[tuple[tuple[float, float, float], str]]:
+    """(position, text) of each label: a trigger within ``LABEL_MERGE_M`` of an earlier label's trigger joins that
+    label (the flick and the flick back both fire a few metres before P0), so labels never overlap there."""
+    groups: list[tuple[float, float, list[str]]] = []
+    for k, p in enumerate(points):
+        text = f"trigger {k + 1}  t {p['t_s']:.2f} s"
+        near = next((g for g in groups if math.hypot(p["x_m"] - g[0], p["y_m"] - g[1]) < LABEL_MERGE_M), None)
+        if near is None:
+            groups.append((p["x_m"], p["y_m"], [text]))
+        else:
+            near[2].append(text)
+    return [(trigger_label_position(x, y), " · ".join(texts)) for x, y, texts in groups]
+
+
 class TriggerMarkers:
-    """A post and a label where the planner switched sides, added as playback passes them."""
+    """A post where the planner switched sides and a label beside it, added as playback passes them."""
 
     def __init__(self, scene: viser.SceneApi, name: str = "triggers") -> None:
         self.scene = scene
         self.name = name
-        self._shown: list[tuple[viser.SceneNodeHandle, ...]] = []
+        self._posts: list[viser.SceneNodeHandle] = []
+        self._labels: list[viser.LabelHandle] = []
 
     def clear(self) -> None:
-        for handles in self._shown:
-            for handle in handles:
-                handle.remove()
-        self._shown.clear()
+        for handle in (*self._posts, *self._labels):
+            handle.remove()
+        self._posts.clear()
+        self._labels.clear()
 
     def show(self, points: Iterable[dict]) -> None:
-        """Show ``points`` (the trigger events passed so far, in order); only new ones are sent."""
+        """Show ``points`` (the trigger events passed so far, in order); only what changed is sent."""
         points = list(points)
-        if len(points) < len(self._shown):
+        if len(points) < len(self._posts):
             self.clear()
-        for k in range(len(self._shown), len(points)):
+        for k in range(len(self._posts), len(points)):
             p = points[k]
-            base = f"/{self.name}/{k}"
-            post = self.scene.add_cylinder(f"{base}/post", radius=0.35, height=4.0, color=(255, 190, 0),
-                                           position=(p["x_m"], p["y_m"], 2.0))
-            label = self.scene.add_label(f"{base}/label", f"trigger {k + 1}  t {p['t_s']:.2f} s",
-                                         position=trigger_label_position(p["x_m"], p["y_m"]))
-            self._shown.append((post, label))
+            # Thin and translucent: the chase camera, 16 m behind the car, looks past it in the second after a flick.
+            self._posts.append(self.scene.add_cylinder(f"/{self.name}/{k}/post", radius=0.2, height=4.0,
+                                                       color=(255, 190, 0), opacity=0.6,
+                                                       position=(p["x_m"], p["y_m"], 2.0)))
+        for k, (position, text) in enumerate(trigger_labels(points)):
+            if k == len(self._labels):
+                self._labels.append(self.scene.add_label(f"/{self.name}/label{k}", text, position=position))
+            elif self._labels[k].text != text:
+                self._labels[k].text = text

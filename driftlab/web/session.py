@@ -44,6 +44,8 @@ class TabData(Protocol):
 
     def compare(self, job_ids: list[int]) -> list[dict[str, Any]]: ...
 
+    def config_diff(self, job_ids: list[int]) -> dict[str, Any]: ...
+
     def request_what_if(self, session: ClientSession, theta: dict[str, float], config_doc: dict[str, Any],
                         plant_overrides: dict[str, float], seed: int) -> None: ...
 
@@ -71,7 +73,8 @@ class ClientSession:
         self.what_if.gui_reset.on_click(lambda _: self.what_if.reset_sliders(self._best()))
         self.playback.build_downloads(gui)
         self.compare = ComparePanel(gui, read_studies=data.studies, read_study=data.study,
-                                    read_compare=data.compare, play_together=self._play_together, lock=self.lock)
+                                    read_compare=data.compare, read_config_diff=data.config_diff,
+                                    play_together=self._play_together, lock=self.lock)
         self._thread = threading.Thread(target=self._run, name=f"driftlab-view-{client.client_id}", daemon=True)
         self._thread.start()
 
@@ -136,7 +139,7 @@ class ClientSession:
                                    "y": {"range": padded_range(j_done)}}
         best_pos = history.best_position()
         best_text = "none completed yet" if best_pos is None else (
-            f"**{history.values[best_pos]:.3f}** (lower is better), evaluation id {history.ids[best_pos]} "
+            f"**{history.values[best_pos]:.4g}** (lower is better), evaluation id {history.ids[best_pos]} "
             f"(index {best_pos})")
         compiling = " (**compiling the simulation**: numba, once after an install)" if (
             history.status == JobStatus.RUNNING and episode_kernels_cached() is False) else ""
@@ -160,6 +163,8 @@ class ClientSession:
         with self.lock:
             if error is not None:
                 self.what_if.show_error(error)
+                self.playback.show_what_if_error(error)
+                self.client.add_notification("What-if not run", error, color="red", auto_close_seconds=12.0)
                 return
             self.playback.play_what_if(frames, ghost=self.what_if.ghost)
             self.what_if.show_result(frames, worker_ms)

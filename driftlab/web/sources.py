@@ -14,6 +14,7 @@ from driftlab.core.track import FigureEight
 from driftlab.db import storage, studies
 from driftlab.db.models import Evaluation
 from driftlab.services import studies as study_views
+from driftlab.services.job_documents import spec_diff
 from driftlab.web.frames import EpisodeFrames
 
 
@@ -120,3 +121,10 @@ def read_compare(factory: sessionmaker[Session], job_ids: list[int]) -> list[dic
     """Each job's best, n_done and convergence, as GET /api/compare shows them (raises storage.NotFound)."""
     with storage.snapshot(factory) as session:
         return study_views.compare_jobs(session, job_ids=job_ids)
+
+
+def read_config_diff(factory: sessionmaker[Session], job_ids: list[int]) -> dict[str, Any]:
+    """The settings that differ between the jobs, as GET /api/compare/config shows them (raises storage.NotFound)."""
+    with storage.snapshot(factory) as session:
+        jobs = [storage.get_job(session, job_id=i) for i in job_ids]
+        return {"jobs": [{"id": j.id, "name": j.name} for j in jobs], "differences": spec_diff([j.spec for j in jobs])}

@@ -11,7 +11,7 @@ from matplotlib import image as mpimg
 from playwright.sync_api import sync_playwright
 
 from tests.server_process import free_port, start_server
-from tests.web.test_view_browser import CHROMIUM, CHROMIUM_ARGS, SCREENSHOT_DIR, ConsoleLog
+from tests.web.test_view_browser import CHROMIUM, CHROMIUM_ARGS, SCREENSHOT_DIR, ConsoleLog, _wait_until_played
 
 pytestmark = pytest.mark.e2e  # real processes: servers, browsers, Dask, the CLI
 
@@ -80,17 +80,22 @@ def test_compare_mode_overlays_a_seeds_study_and_plays_its_best_episodes_togethe
     summary = page.get_by_text("three (seeds, finished); final best J from")
     summary.wait_for(timeout=30_000)
     final = seeds["final_best_J"]
-    assert f"from {min(final):.3f} to {max(final):.3f}, median {np.median(final):.3f}" in summary.inner_text()
+    assert f"from {min(final):.4g} to {max(final):.4g}, median {np.median(final):.4g}" in summary.inner_text()
     for job_id in seeds["job_ids"]:  # one row per job, its best J as the API has it
         job = httpx.get(f"{url}/api/jobs/{job_id}").json()
         page.get_by_text(f"{job['name']} (id {job_id})").first.wait_for(timeout=10_000)
     plot = page.locator(".uplot", has=page.get_by_text("Compare: best J so far (completed)"))
     plot.wait_for(timeout=10_000)
+    # The config diff: a seeds study's jobs differ in their seed only.
+    diff = page.locator("table", has=page.get_by_text("setting", exact=True))
+    diff.wait_for(timeout=10_000)
+    assert [td.inner_text() for td in diff.locator("tbody tr").first.locator("td").all()] == ["seed", "0", "1", "2"]
+    assert diff.locator("tbody tr").count() == 1
     page.get_by_role("button", name="Play best episodes together").click()
     page.get_by_text("Compare (best episodes together)").wait_for(timeout=30_000)
     for n, name in enumerate(("red car", "blue ghost", "green ghost")):
         page.get_by_text(f"{name}: three-seed{n}").wait_for(timeout=10_000)
-    page.wait_for_timeout(2500)  # the cars drive for a moment
+    _wait_until_played(page, 2.0)  # the cars drive for a moment
     pixels = _save(page.screenshot(), "compare.png", tmp_path)
     scene = pixels[:, : int(pixels.shape[1] * 0.6)]
     assert scene.std() > 0.05, "the 3D view looks blank"
@@ -111,7 +116,7 @@ def test_the_heatmap_shows_each_cell_as_stored(server, browser, tmp_path):
     rows = table.locator("tr").all()[2:]  # below the column key's row and the column values' row
     shown = [[td.inner_text() for td in row.locator("td").all()] for row in rows]
     expected = [c["J"] if c["status"] == "completed" else c["status"] for c in grid["cells"]]
-    expected = [f"{v:.3f}" if isinstance(v, float) else v for v in expected]
+    expected = [f"{v:.4g}" if isinstance(v, float) else v for v in expected]
     assert [text for row in shown for text in row] == expected
     assert [row.locator("th").inner_text() for row in rows] == [str(v) for v in GRID["plant.friction_scale"]]
     pixels = _save(page.screenshot(), "heatmap.png", tmp_path)

@@ -12,5 +12,5 @@ def test_cells_show_j_or_how_they_failed():
     table = grid_table({"plant.mass_scale": [1.0, 1.1]}, [{"index": 0, "status": "completed", "J": -0.25},
                                                          {"index": 1, "status": "spun_out", "J": 6.5}])
     page = heatmap_html(table, "t")
-    assert ">-0.250</td>" in page and ">spun_out</td>" in page and FAILED_COLOR in page
-    assert "from -0.250 (yellow, best) to -0.250" in page and "1 failed" in page
+    assert ">-0.25</td>" in page and ">spun_out</td>" in page and FAILED_COLOR in page
+    assert "from -0.25 (yellow, best) to -0.25" in page and "1 failed" in page

@@ -24,11 +24,11 @@ def _frames():
     return EpisodeFrames(COLUMNS, rows, evaluation_id=1234, index=7, theta=THETA, status="completed", J=-1.2345)
 
 
-def test_caption_names_the_api_id_and_the_index_and_theta_at_full_precision():
+def test_caption_names_the_api_id_and_the_index_and_theta_to_4_significant_digits():
     caption = _frames().caption()
     assert "evaluation id 1234 (index 7 in its job)" in caption and "#" not in caption
-    for value in THETA.values():
-        assert repr(value) in caption
+    assert "c_lr 0.02146, c_rl 0.02115, dV 0.02786, k 0" in caption  # full precision: the downloads and the API
+    assert repr(THETA["c_lr"]) not in caption
     assert "lower is better" in caption
     assert EpisodeFrames(COLUMNS, np.zeros((0, len(COLUMNS)))).name() == "what-if episode"
 
@@ -54,4 +54,42 @@ def test_a_replay_shows_its_j_and_theta():
     finally:
         recorder.stop()
     raw = zstandard.ZstdDecompressor().decompressobj().decompress(data[8:])  # after viser's 8-byte size header
-    assert b"evaluation id 1234" in raw and b"J -1.234" in raw and repr(THETA["c_lr"]).encode() in raw
+    assert b"evaluation id 1234" in raw and b"J -1.234" in raw and b"c_lr 0.02146" in raw
+
+
+def test_two_triggers_by_p0_share_one_label_and_distant_ones_have_their_own():
+    from driftlab.web.scene import trigger_labels
+
+    by_p0 = [{"t_s": 7.0, "x_m": -5.215, "y_m": -0.325}, {"t_s": 21.5, "x_m": -5.555, "y_m": 0.085}]
+    [(position, text)] = trigger_labels(by_p0)
+    assert text == "trigger 1  t 7.00 s · trigger 2  t 21.50 s"
+    assert position == trigger_label_position(-5.215, -0.325)
+    apart = trigger_labels([by_p0[0], {"t_s": 12.0, "x_m": 40.0, "y_m": 44.0}])
+    assert [t for _, t in apart] == ["trigger 1  t 7.00 s", "trigger 2  t 12.00 s"]
+
+
+def test_the_config_diff_table_shows_each_differing_setting_to_4_significant_digits():
+    from driftlab.web.compare import config_diff_markdown
+
+    diff = {"jobs": [{"id": 1, "name": "a"}, {"id": 2, "name": "b"}],
+            "differences": [{"key": "bounds.k", "values": [[0.0, 0.12], [0.0, 0.123456]]},
+                            {"key": "config.plant.steer_lag_s", "values": [0.03, None]}]}
+    table = config_diff_markdown(diff)
+    assert "| setting | a (id 1) | b (id 2) |" in table
+    assert "| bounds.k | [0, 0.12] | [0, 0.1235] |" in table and "| config.plant.steer_lag_s | 0.03 | - |" in table
+    assert config_diff_markdown({"jobs": [{"id": 1, "name": "a"}], "differences": []}) == ""
+
+
+def test_the_html_replay_has_a_caption_panel_and_the_state_plots_beside_the_view():
+    recorder = EpisodeRecorder()
+    try:
+        page = recorder.html(_frames(), FigureEight())
+    finally:
+        recorder.stop()
+    panel = page[page.index('<aside id="driftlab-panel">'):page.index("</aside>")]
+    assert "evaluation id 1234 (index 7 in its job)" in panel and "J -1.234" in panel
+    assert "<td>c_lr</td><td>0.02146</td>" in panel and repr(THETA["c_lr"]) not in panel
+    assert panel.count("<svg") == 4 and all(label in panel for label in ("V [m/s]", "beta [rad]", "r [rad/s]",
+                                                                          "delta [rad]"))
+    assert page.index("</aside>") < page.index('<div id="root">')  # the 3D player beside it, in the same page
+    assert "__VISER_EMBED_DATA__" in page

@@ -83,15 +83,20 @@ def resume(job_id: JobId, db: Factory, request: Request) -> dict[str, Any]:
 
 @router.patch("/{job_id}", dependencies=Mutating, response_model=Job, responses=errors(404, 422, 503))
 def extend(job_id: JobId, body: JobPatch, db: Factory, request: Request) -> dict[str, Any]:
-    """A new budget (>= the evaluations stored); a finished job with more iterations continues."""
+    """A new budget (>= the evaluations stored; a finished job with more iterations continues), new notes, or both."""
     try:
         with storage.transaction(db) as session:
-            quotas.check_job(request.app.state.settings,
-                             {**storage.get_job(session, job_id=job_id).spec, "iterations": body.iterations})
-            out = job_dict(session, lifecycle.extend(session, job_id=job_id, iterations=body.iterations))
+            job = storage.get_job(session, job_id=job_id)
+            if body.iterations is not None:
+                quotas.check_job(request.app.state.settings, {**job.spec, "iterations": body.iterations})
+                lifecycle.extend(session, job_id=job_id, iterations=body.iterations)
+            if body.notes is not None:
+                storage.set_notes(session, job_id=job_id, notes=body.notes)
+            out = job_dict(session, job)
     except lifecycle.TransitionError as exc:
         raise HTTPException(422, f"iterations: {exc}") from None
-    wake_runner(request)
+    if body.iterations is not None:
+        wake_runner(request)
     return out
 
 

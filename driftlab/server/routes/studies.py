@@ -13,6 +13,7 @@ from driftlab.server.responses import ComparedJob, Study, StudyListItem, errors
 from driftlab.server.routes.deps import factory, require_token, wake_runner
 from driftlab.server.schemas import StudyCreate, StudyId, check_document_types
 from driftlab.services import studies as study_views
+from driftlab.services.job_documents import spec_diff
 
 router = APIRouter(tags=["studies"])
 Factory = Annotated[sessionmaker[Session], Depends(factory)]
@@ -99,3 +100,16 @@ def compare(db: Factory, jobs: str = Query(..., max_length=400, pattern=JOB_IDS,
     ids = [int(part) for part in jobs.split(",")]  # the pattern holds: each part is an id
     with storage.snapshot(db) as session:
         return study_views.compare_jobs(session, job_ids=ids)
+
+
+@router.get("/api/compare/config", responses=errors(404, 422, 503))
+def compare_config(db: Factory, jobs: str = Query(..., max_length=400, pattern=JOB_IDS,
+                                                  description="job ids, e.g. 1,2 (the first is the reference)")
+                   ) -> dict[str, Any]:
+    """The settings that differ between the jobs (spec keys, ``bounds.<name>``, ``config.<section>.<key>``), each
+    with one value per job in the order given."""
+    ids = [int(part) for part in jobs.split(",")]
+    with storage.snapshot(db) as session:
+        specs = [storage.get_job(session, job_id=i) for i in ids]
+        return {"jobs": [{"id": j.id, "name": j.name} for j in specs],
+                "differences": spec_diff([j.spec for j in specs])}

@@ -1,0 +1,72 @@
+"""A job's search space as its models see it, rescoring its best from the server, and what a new-job form
+starts from."""
+
+from __future__ import annotations
+
+from typing import Annotated, Any, Literal
+
+from fastapi import APIRouter, Depends, HTTPException, Query, Request
+from pydantic import BaseModel, ConfigDict, Field
+from sqlalchemy.orm import Session, sessionmaker
+
+from driftlab.core.config import THETA_KEYS
+from driftlab.core.search_space import MAX_GRID
+from driftlab.db import storage
+from driftlab.server import quotas
+from driftlab.server.responses import Rescore, SearchSpace, errors
+from driftlab.server.routes.deps import factory, require_token
+from driftlab.server.schemas import JobId
+from driftlab.services.job_documents import job_form
+from driftlab.services.search_space import search_space
+from driftlab.worker.rescoring import RescoreBusy
+
+router = APIRouter(tags=["jobs"])
+Factory = Annotated[sessionmaker[Session], Depends(factory)]
+MAX_RESCORE_SAMPLES = 1000
+ThetaKey = Literal[THETA_KEYS]  # type: ignore[valid-type]  # a job learns some of them (its bounds' keys)
+
+
+class RescoreCreate(BaseModel):
+    model_config = ConfigDict(extra="forbid")
+
+    samples: int = Field(default=20, ge=1, le=MAX_RESCORE_SAMPLES, strict=True,
+                         description="fresh seeds the best theta runs on")
+
+
+@router.get("/api/jobs/{job_id}/search-space", response_model=SearchSpace, responses=errors(404, 422, 503))
+def get_search_space(job_id: JobId, db: Factory, request: Request,
+                     x: Annotated[ThetaKey | None, Query(description="parameter along x")] = None,
+                     y: Annotated[ThetaKey | None, Query(description="parameter along y")] = None,
+                     grid: Annotated[int, Query(ge=2, le=MAX_GRID, description="points per axis")] = 30
+                     ) -> dict[str, Any]:
+    """The GP's mean and standard deviation of J and the failure probability over (x, y), the other parameters
+    at the best theta, and each parameter's importance (default x, y: the two most important)."""
+    return search_space(request.app.state.search_spaces, db, job_id=job_id, x=x, y=y, grid=grid)
+
+
+@router.post("/api/jobs/{job_id}/rescore", status_code=202, dependencies=[Depends(require_token)],
+             response_model=Rescore, responses=errors(404, 409, 422, 503))
+def start_rescore(job_id: JobId, body: RescoreCreate, request: Request) -> dict[str, Any]:
+    """Run the best theta, exactly as stored, on ``samples`` fresh seeds (in a worker process); follow it with
+    GET. 404 without a completed evaluation, 409 while one runs for this job."""
+    quotas.check_rescore(request.app.state.settings, body.samples)
+    try:
+        return request.app.state.rescores.start(job_id, body.samples)
+    except RescoreBusy as exc:
+        raise HTTPException(409, str(exc)) from None
+
+
+@router.get("/api/jobs/{job_id}/rescore", response_model=Rescore, responses=errors(404, 422, 503))
+def rescore_status(job_id: JobId, db: Factory, request: Request) -> dict[str, Any]:
+    """The job's latest rescore since the server started: running (``done`` of ``samples``), finished
+    (``result``), failed (``error``), or none."""
+    with storage.snapshot(db) as session:
+        storage.get_job(session, job_id=job_id)
+    return request.app.state.rescores.status(job_id)
+
+
+@router.get("/api/config/job-form", responses=errors(503))
+def get_job_form() -> dict[str, Any]:
+    """What a new job starts from: each plant preset as ``config`` keys (POST /api/jobs), the default config
+    (dotted keys), the default bounds of theta and of the model corrections, the settings' limits."""
+    return job_form()

@@ -1,0 +1,306 @@
+// The researcher's dashboard: jobs (start, pause, resume, extend, clone, delete, rescore, notes) through the REST
+// API, and the selected job's convergence and search space, read again every second.
+// With a token set, open the page as /dashboard/?token=<DRIFTLAB_TOKEN>: every change sends it as a bearer token.
+"use strict";
+import { formBody, openForm as fillForm } from "./jobform.js";
+import { renderSpace } from "./searchspace.js";
+import { el, extent, fmt, frame, line, parallel, points, ramp, RAMPS } from "./svgplot.js";
+
+const POLL_MS = 1000;
+const $ = (id) => document.getElementById(id);
+const params = new URLSearchParams(location.search);
+if (params.get("token")) sessionStorage.setItem("driftlab_token", params.get("token"));
+const TOKEN = sessionStorage.getItem("driftlab_token");
+
+const state = {
+  jobs: [], form: null, selected: null, job: null,
+  evals: [], // the selected job's evaluations, in index order
+  space: null, spaceKey: "", spaceBusy: false,
+  axesChosen: false, // until a parameter is chosen, the contour shows the two most important
+  rescoring: false,
+};
+
+// ----- the API ------------------------------------------------------------------------------------------------
+async function api(method, path, body) {
+  const headers = { "content-type": "application/json" };
+  if (TOKEN) headers.authorization = `Bearer ${TOKEN}`;
+  const r = await fetch(path, { method, headers, body: body === undefined ? undefined : JSON.stringify(body) });
+  if (r.status === 204) return null;
+  const data = parseJson(await r.text()) ?? { detail: `${r.status} ${r.statusText}` };
+  if (!r.ok) {
+    const hint = r.status === 401 ? " (open this page as /dashboard/?token=<DRIFTLAB_TOKEN>)" : "";
+    throw new Error(`${method} ${path}: ${r.status} ${data.detail || r.statusText}${hint}`);
+  }
+  return data;
+}
+
+// Python's json writes NaN and Infinity bare (a failed episode's metrics can hold them): JSON.parse refuses them.
+function parseJson(text) {
+  try {
+    return JSON.parse(text.replace(/([:\[,]\s*)-?(?:NaN|Infinity)(?=\s*[,\]}])/g, "$1null"));
+  } catch {
+    return null;
+  }
+}
+
+function say(text, ok = false) {
+  const m = $("message");
+  m.hidden = !text;
+  m.textContent = text || "";
+  m.className = ok ? "ok" : "";
+}
+
+async function act(fn) {
+  try { await fn(); } catch (e) { say(e.message); }
+}
+
+// ----- the job list -------------------------------------------------------------------------------------------
+function renderJobs() {
+  const body = $("job-table").tBodies[0];
+  body.replaceChildren();
+  for (const j of state.jobs) {
+    const tr = document.createElement("tr");
+    tr.dataset.jobId = j.id;
+    if (j.id === state.selected) tr.className = "selected";
+    for (const text of [j.id, j.name, j.status, `${j.n_done} / ${j.iterations}`, j.best ? fmt(j.best.J) : "–"]) {
+      const td = document.createElement("td");
+      td.textContent = text;
+      tr.appendChild(td);
+    }
+    tr.addEventListener("click", () => select(j.id));
+    body.appendChild(tr);
+  }
+}
+
+function select(jobId) {
+  if (state.selected !== jobId) {
+    state.selected = jobId;
+    state.evals = [];
+    state.space = null;
+    state.spaceKey = "";
+    state.axesChosen = false;
+    $("notes").dataset.loaded = "";
+    $("contour-x").replaceChildren();
+    $("contour-y").replaceChildren();
+  }
+  renderJobs();
+  return refreshJob();
+}
+
+// ----- the selected job ---------------------------------------------------------------------------------------
+async function refreshJob() {
+  if (state.selected === null) return;
+  const id = state.selected;
+  const job = await api("GET", `/api/jobs/${id}`);
+  if (id !== state.selected) return;
+  state.job = job;
+  const after = state.evals.length - 1;
+  const fresh = await api("GET", `/api/jobs/${id}/evaluations?after=${after}&limit=1000`);
+  if (id !== state.selected) return;
+  state.evals.push(...fresh.filter((e) => e.index > after));
+  renderJob();
+  if (fresh.length) renderHistoryPlots();
+  maybeFetchSpace();
+  if (state.rescoring) await pollRescore();
+}
+
+function renderJob() {
+  const j = state.job;
+  $("job-panel").hidden = false;
+  $("job-title").textContent = `${j.id} · ${j.name}`;
+  const best = j.best ? `best J ${fmt(j.best.J)} (evaluation id ${j.best.id})` : "no completed evaluation yet";
+  const eta = j.eta_s !== null && j.eta_s !== undefined ? `, about ${fmt(j.eta_s / 60)} min left` : "";
+  $("job-status").textContent = `status: ${j.status}${j.detail ? ` (${j.detail})` : ""} · ${j.n_done} / ` +
+    `${j.iterations} evaluations${eta} · ${best}`;
+  $("pause").disabled = !["queued", "running"].includes(j.status);
+  $("resume").disabled = !["paused", "failed"].includes(j.status);
+  if (document.activeElement !== $("extend-to")) $("extend-to").value = j.iterations;
+  if (!$("notes").dataset.loaded) { $("notes").value = j.notes || ""; $("notes").dataset.loaded = "1"; }
+  $("view-link").href = `/viser/${TOKEN ? `?token=${encodeURIComponent(TOKEN)}` : ""}`;
+}
+
+function paramNames() {
+  return Object.keys(state.job?.spec?.bounds || {});
+}
+
+function renderHistoryPlots() {
+  const ev = state.evals;
+  const names = paramNames();
+  const J = ev.map((e) => (e.completed ? e.J : NaN));
+  const idx = ev.map((e) => e.index);
+  const best = [];
+  let b = Infinity;
+  for (const v of J) { if (Number.isFinite(v) && v < b) b = v; best.push(Number.isFinite(b) ? b : NaN); }
+  const yr = extent(J);
+  const failedTop = ev.map((e) => (e.completed ? NaN : yr[1]));
+  const conv = frame($("convergence"), { width: 460, height: 260, x: [0, Math.max(state.job.iterations - 1, 1)],
+    y: yr, xlabel: "evaluation", ylabel: "J", title: "Convergence" });
+  points(conv, idx, J, { color: "#2a6fdb" });
+  line(conv, idx, best, { color: "#e8590c" });
+  points(conv, idx, failedTop, { color: "#c92a2a", shape: "x", r: 3.5 });
+  $("convergence").dataset.n = ev.length;
+
+  const slices = $("slices");
+  slices.replaceChildren();
+  const thetaIter = $("theta-iteration");
+  thetaIter.replaceChildren();
+  const bounds = state.job.spec.bounds;
+  for (const name of names) {
+    const xs = ev.map((e) => e.theta[name]);
+    const s = frame(el("svg", { class: "slice" }, slices), { width: 250, height: 190, x: bounds[name], y: yr,
+      xlabel: name, ylabel: "J", title: `J against ${name}` });
+    points(s, xs, J, { color: "#2a6fdb", r: 2.6 });
+    points(s, xs, failedTop, { color: "#c92a2a", shape: "x", r: 3 });
+    const t = frame(el("svg", {}, thetaIter), { width: 250, height: 170, x: [0, Math.max(state.job.iterations - 1, 1)],
+      y: bounds[name], xlabel: "evaluation", ylabel: name, title: name });
+    points(t, idx, ev.map((e) => (e.completed ? e.theta[name] : NaN)), { color: "#2a6fdb", r: 2.4 });
+    points(t, idx, ev.map((e) => (e.completed ? NaN : e.theta[name])), { color: "#c92a2a", shape: "x", r: 3 });
+  }
+  slices.dataset.n = ev.length;
+
+  const bestIndex = state.job.best ? ev.findIndex((e) => e.id === state.job.best.id) : -1;
+  const rows = ev.map((e, i) => ({ ...e.theta, J: e.completed ? e.J : yr[1], completed: e.completed,
+                                   best: i === bestIndex }));
+  const axes = [...names.map((n) => ({ key: n, label: n, range: bounds[n] })), { key: "J", label: "J", range: yr }];
+  rows.sort((a, c) => Number(a.best) - Number(c.best) || Number(a.completed) - Number(c.completed) || c.J - a.J);
+  parallel($("parallel"), rows, axes, { width: 860, height: 240, color: (r) => (r.completed
+    ? ramp(1 - (r.J - yr[0]) / (yr[1] - yr[0] || 1), RAMPS.viridis) : "rgba(201,42,42,0.45)") });
+  $("parallel").dataset.n = ev.length;
+}
+
+// ----- the search space (the models, from GET /api/jobs/{id}/search-space) -------------------------------------
+async function maybeFetchSpace() {
+  const x = state.axesChosen ? $("contour-x").value : "", y = state.axesChosen ? $("contour-y").value : "";
+  const key = `${state.selected}:${state.evals.length}:${x}:${y}`;
+  if (state.spaceBusy || key === state.spaceKey) return;
+  state.spaceBusy = true;
+  const id = state.selected;
+  try {
+    const query = x && y && x !== y ? `?x=${x}&y=${y}&grid=30` : "?grid=30";
+    const space = await api("GET", `/api/jobs/${id}/search-space${query}`);
+    if (id === state.selected) {
+      state.space = space;
+      state.spaceKey = key;
+      renderSpace(state.space, state.evals);
+    }
+  } catch (e) {
+    say(e.message);
+  } finally {
+    state.spaceBusy = false;
+  }
+}
+
+// ----- actions ------------------------------------------------------------------------------------------------
+function confirmDelete(job) {
+  return new Promise((resolve) => {
+    const d = $("confirm");
+    $("confirm-text").textContent = `Delete job ${job.id} (${job.name}) and its ${job.n_done} evaluations? ` +
+      "This cannot be undone.";
+    d.addEventListener("close", () => resolve(d.returnValue === "ok"), { once: true });
+    d.returnValue = "";
+    d.showModal();
+  });
+}
+
+function wireActions() {
+  $("pause").onclick = () => act(async () => {
+    await api("POST", `/api/jobs/${state.selected}/pause`);
+    say(`job ${state.selected}: pause requested (it stops after the evaluations in flight)`, true);
+    await poll();
+  });
+  $("resume").onclick = () => act(async () => {
+    await api("POST", `/api/jobs/${state.selected}/resume`);
+    say(`job ${state.selected}: queued again`, true);
+    await poll();
+  });
+  $("extend").onclick = () => act(async () => {
+    const iterations = Number($("extend-to").value);
+    await api("PATCH", `/api/jobs/${state.selected}`, { iterations });
+    say(`job ${state.selected}: budget ${iterations} evaluations`, true);
+    await poll();
+  });
+  $("delete").onclick = () => act(async () => {
+    const job = state.job;
+    if (!(await confirmDelete(job))) return;
+    await api("DELETE", `/api/jobs/${job.id}`);
+    say(`job ${job.id} (${job.name}) deleted`, true);
+    state.selected = null;
+    state.job = null;
+    $("job-panel").hidden = true;
+    await poll();
+  });
+  $("save-notes").onclick = () => act(async () => {
+    await api("PATCH", `/api/jobs/${state.selected}`, { notes: $("notes").value });
+    $("notes-saved").textContent = "saved";
+  });
+  $("rescore").onclick = () => act(async () => {
+    await api("POST", `/api/jobs/${state.selected}/rescore`, { samples: Number($("rescore-samples").value) });
+    state.rescoring = true;
+    await pollRescore();
+  });
+  $("clone").onclick = () => fillForm(state.form, state.job);
+  $("new-job").onclick = () => fillForm(state.form, null);
+  $("cancel-form").onclick = () => { $("job-form").hidden = true; };
+  $("job-form").onsubmit = (event) => { event.preventDefault(); act(submitForm); };
+  for (const id of ["contour-x", "contour-y"]) {
+    $(id).onchange = () => { state.axesChosen = true; act(maybeFetchSpace); };
+  }
+}
+
+async function pollRescore() {
+  const r = await api("GET", `/api/jobs/${state.selected}/rescore`);
+  const bar = $("rescore-progress");
+  bar.hidden = r.status === "none";
+  bar.max = r.samples || 1;
+  bar.value = r.done || 0;
+  if (r.status === "running") {
+    $("rescore-text").textContent = `rescoring: ${r.done} / ${r.samples} episodes`;
+  } else if (r.status === "finished") {
+    const res = r.result;
+    $("rescore-text").textContent = `rescore: ${res.completed} / ${res.samples} completed, J mean ${fmt(res.J_mean)} ` +
+      `± ${fmt(res.J_std)}, worst ${fmt(res.J_worst)} (stored J ${fmt(r.J_stored)})`;
+    state.rescoring = false;
+  } else if (r.status === "failed") {
+    $("rescore-text").textContent = `rescore failed: ${r.error}`;
+    state.rescoring = false;
+  }
+}
+
+// ----- the new-job form (also "clone with changes", driftlab/server/static/jobform.js) --------------------------
+async function submitForm() {
+  const job = await api("POST", "/api/jobs", formBody(state.form));
+  $("job-form").hidden = true;
+  say(`job ${job.id} (${job.name}) queued`, true);
+  await poll();
+  await select(job.id);
+}
+
+// ----- the loop -----------------------------------------------------------------------------------------------
+async function poll() {
+  state.jobs = await api("GET", "/api/jobs");
+  if (state.selected !== null && !state.jobs.some((j) => j.id === state.selected)) {
+    state.selected = null;
+    $("job-panel").hidden = true;
+  }
+  renderJobs();
+  if (state.selected === null && state.jobs.length) await select(state.jobs[state.jobs.length - 1].id);
+  else await refreshJob();
+}
+
+async function loop() {
+  try { await poll(); } catch (e) { say(e.message); }
+  setTimeout(loop, POLL_MS);
+}
+
+async function start() {
+  state.form = await api("GET", "/api/config/job-form");
+  $("job-form").elements.plant_preset.replaceChildren(
+    ...Object.keys(state.form.plant_presets).map((n) => new Option(n, n)));
+  wireActions();
+  $("new-job").disabled = false; // enabled once the form can be filled
+  const wanted = Number(params.get("job"));
+  if (wanted) state.selected = wanted;
+  loop();
+}
+
+start().catch((e) => say(e.message));

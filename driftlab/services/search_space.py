@@ -1,0 +1,76 @@
+"""A job's search space as the dashboard shows it (GET /api/jobs/{id}/search-space): the GP mean and uncertainty
+of J over two theta coordinates, the learned probability of failure, and the parameters' importance, from the
+models of :mod:`driftlab.core.search_space` fitted to the job's stored evaluations.
+
+Fitted models are kept per (job, evaluations stored): a stored evaluation never changes and a job's id is never
+reused, so tabs that poll a job refit only when an evaluation lands.
+"""
+
+from __future__ import annotations
+
+import threading
+from collections import OrderedDict
+from typing import Any
+
+import numpy as np
+from sqlalchemy.orm import Session, sessionmaker
+
+from driftlab.core.search_space import SearchSpaceModels, fit_models, surface
+from driftlab.db import storage
+
+_CACHE_SIZE = 16
+
+
+class SearchSpaceCache:
+    def __init__(self, size: int = _CACHE_SIZE) -> None:
+        self.size = size
+        self._models: OrderedDict[tuple[int, int], SearchSpaceModels] = OrderedDict()
+        self._lock = threading.Lock()
+
+    def models(self, factory: sessionmaker[Session], job_id: int) -> tuple[SearchSpaceModels, int]:
+        """The models of a job's stored evaluations, and how many evaluations they were fitted to."""
+        with storage.snapshot(factory) as session:
+            job = storage.get_job(session, job_id=job_id)  # NotFound -> 404
+            rows = storage.evaluations(session, job_id=job_id)
+            bounds = job.spec.get("bounds") or {}
+            history = ([dict(e.theta) for e in rows], [float(e.J) for e in rows], [bool(e.completed) for e in rows])
+        key = (job_id, len(rows))
+        with self._lock:
+            if key in self._models:
+                self._models.move_to_end(key)
+                return self._models[key], len(rows)
+        models = fit_models(bounds, *history)  # outside the lock: another job's tab need not wait
+        with self._lock:
+            self._models[key] = models
+            while len(self._models) > self.size:
+                self._models.popitem(last=False)
+        return models, len(rows)
+
+
+def _grid(values: np.ndarray | None) -> list[list[float]] | None:
+    return None if values is None else [[float(v) for v in row] for row in values]
+
+
+def search_space(cache: SearchSpaceCache, factory: sessionmaker[Session], *, job_id: int, x: str | None = None,
+                 y: str | None = None, grid: int = 30) -> dict[str, Any]:
+    """The surface over (x, y) (default: the two most important parameters, or the first two) and the importance.
+
+    Raises:
+        storage.NotFound: no such job.
+        ConfigError: x or y not a parameter of the job, or grid out of range (naming the field).
+    """
+    models, n = cache.models(factory, job_id)
+    importance = models.importance()
+    ranked = sorted(models.names, key=lambda k: -(importance or {}).get(k, 0.0)) if importance else list(models.names)
+    x_key = x or next(k for k in ranked if k != y)
+    y_key = y or next(k for k in ranked if k != x_key)
+    s = surface(models, x_key, y_key, grid)
+    return {
+        "job_id": job_id, "n_evaluations": n, "parameters": list(models.names),
+        "bounds": {k: [float(a), float(b)] for k, a, b in zip(models.names, models.lo, models.hi, strict=True)},
+        "importance": importance, "length_scales": models.length_scales(),
+        "importance_method": "ARD relevance 1/l^2 of the GP's length scales on the unit cube, normalized to sum 1",
+        "best_theta": models.best_theta,
+        "x": x_key, "y": y_key, "x_values": [float(v) for v in s.x_values], "y_values": [float(v) for v in s.y_values],
+        "held": s.held, "mean_J": _grid(s.mean_J), "std_J": _grid(s.std_J), "p_failure": _grid(s.p_failure),
+    }

@@ -1,0 +1,94 @@
+"""The chase camera in a real headless Chromium on the view's own viser server (in this process, on a real SQLite
+file holding one real episode): it follows the car when paused and when the time is scrubbed, not only while
+the episode plays."""
+
+import math
+import os
+import time
+
+import pytest
+from playwright.sync_api import sync_playwright
+
+from driftlab.core.config import Theta
+from driftlab.core.tuning import TuningSpec
+from driftlab.db import storage
+from driftlab.web.dashboard import Dashboard
+from driftlab.web.scene import set_chase_camera
+from driftlab.worker.executors import evaluate_episode
+from tests.web.test_view_browser import CHROMIUM, CHROMIUM_ARGS
+
+pytestmark = pytest.mark.e2e  # a browser
+
+
+class _Camera:
+    position = (0.0, 0.0, 0.0)
+    look_at = (0.0, 0.0, 0.0)
+
+
+def _expected_camera(frames, t_s):
+    i = frames.index_at(t_s)
+    x_m, y_m, _, _ = frames.pose_at(i)
+    camera = _Camera()
+    set_chase_camera(camera, x_m, y_m, frames.course_at(i))
+    return camera.position
+
+
+def _wait(condition, what, timeout_s=60.0):
+    deadline = time.time() + timeout_s
+    while not condition():
+        assert time.time() < deadline, what
+        time.sleep(0.05)
+
+
+@pytest.fixture(scope="module")
+def dashboard(tmp_path_factory):
+    factory = storage.open_database(f"sqlite:///{tmp_path_factory.mktemp('chase') / 'driftlab.db'}")
+    spec = TuningSpec(iterations=1, robust_samples=1, confirm_samples=0)
+    outcome = evaluate_episode(Theta().as_dict(), spec.to_dict()["config"], 0)
+    assert outcome.status == "completed" and outcome.trigger_points
+    with storage.transaction(factory) as session:
+        job = storage.create_job(session, name="chase", spec=spec.to_dict(), seed=0)
+        storage.add_evaluation(session, job_id=job.id, theta=outcome.theta, J=outcome.J, status=outcome.status,
+                               metrics=outcome.metrics, trigger_points=outcome.trigger_points,
+                               wall_ms=outcome.wall_ms, columns=outcome.columns, trajectory=outcome.trajectory,
+                               seeds=[{"seed": 0, "status": outcome.status, "J": outcome.J,
+                                       "completed_fraction": 1.0}], trajectory_seed=0)
+    view = Dashboard(factory, host="127.0.0.1", port=0)
+    yield view, outcome.trigger_points[0]["t_s"]
+    view.stop()
+
+
+def test_the_chase_camera_follows_the_car_when_paused_and_scrubbed(dashboard):
+    view, first_trigger_s = dashboard
+    if not os.path.exists(CHROMIUM):
+        pytest.fail(f"no chromium at {CHROMIUM}: install Debian's package or set DRIFTLAB_CHROMIUM")
+    with sync_playwright() as p:
+        browser = p.chromium.launch(executable_path=CHROMIUM, args=CHROMIUM_ARGS, headless=True)
+        page = browser.new_page(viewport={"width": 1400, "height": 900})
+        page.goto(f"http://127.0.0.1:{view.port}/")
+        page.get_by_role("button", name="Play best").click()
+        page.get_by_role("button", name="Pause").click()
+        page.get_by_role("button", name="Play", exact=True).wait_for(timeout=30_000)
+        _wait(lambda: len(view.sessions) == 1, "the tab's session")
+        session = next(iter(view.sessions.values()))
+        frames = session.playback.player.frames
+
+        page.get_by_text("Chase camera").click()  # switched on while paused: the camera goes to the car at once
+        paused_at = session.playback.player.t_s
+        expected = _expected_camera(frames, paused_at)
+        _wait(lambda: math.dist(session.client.camera.position, expected) < 0.5,
+              f"camera at {session.client.camera.position}, the car's chase position {expected}")
+
+        target_s = round(first_trigger_s + 0.4, 1)  # mid-flick
+        slider = page.get_by_role("slider").nth(1)  # playback speed, then time
+        slider.focus()
+        slider.press("Home")
+        for _ in range(int(round(target_s / 0.1))):
+            slider.press("ArrowRight")
+        _wait(lambda: abs(session.playback.player.t_s - target_s) < 1e-6, f"scrubbed to {target_s} s")
+        assert not session.playback.playing
+        expected = _expected_camera(frames, target_s)
+        _wait(lambda: math.dist(session.client.camera.position, expected) < 0.5,
+              f"camera at {session.client.camera.position}, the car's chase position {expected} at {target_s} s")
+        assert math.dist(expected, _expected_camera(frames, paused_at)) > 5.0  # the car moved, and the camera with it
+        browser.close()

@@ -1,0 +1,176 @@
+"""The dashboard page (/dashboard/) in a real headless Chromium against a real server process and SQLite file: jobs
+started, paused, resumed, rescored and deleted from the page, through the REST API, with and without a token."""
+
+import os
+
+import httpx
+import pytest
+from playwright.sync_api import expect, sync_playwright
+
+from tests.server_process import free_port, start_server, wait_released
+from tests.web.test_view_browser import CHROMIUM, CHROMIUM_ARGS
+
+pytestmark = pytest.mark.e2e  # real processes: servers, browsers, Dask, the CLI
+
+WAIT_MS = 120_000  # a loaded 2-core machine: evaluations land when they land; every wait is on a condition
+
+
+@pytest.fixture(scope="module")
+def server(tmp_path_factory):
+    db = tmp_path_factory.mktemp("dashboard") / "driftlab.db"
+    proc, url = start_server(db, free_port(), extra_args=("--workers", "1"))
+    yield url
+    proc.terminate()
+    proc.wait(timeout=30)
+
+
+@pytest.fixture(scope="module")
+def browser():
+    if not os.path.exists(CHROMIUM):
+        pytest.fail(f"no chromium at {CHROMIUM}: install Debian's package or set DRIFTLAB_CHROMIUM")
+    with sync_playwright() as p:
+        b = p.chromium.launch(executable_path=CHROMIUM, args=CHROMIUM_ARGS, headless=True)
+        yield b
+        b.close()
+
+
+def _page(browser, url):
+    page = browser.new_page(viewport={"width": 1400, "height": 1400})
+    errors = []
+    page.on("pageerror", lambda e: errors.append(str(e)))
+    page.goto(url)
+    return page, errors
+
+
+def _wait_count(page, selector, attribute, more_than):
+    """Until the plot at ``selector`` says (in ``attribute``) it drew more than ``more_than`` evaluations."""
+    page.wait_for_function(
+        "([sel, attr, n]) => Number(document.querySelector(sel)?.getAttribute(attr) || -1) > n",
+        arg=[selector, attribute, more_than], timeout=WAIT_MS)
+    return int(page.get_attribute(selector, attribute))
+
+
+def _job_by_name(url, name):
+    return next(j for j in httpx.get(f"{url}/api/jobs").json() if j["name"] == name)
+
+
+def test_a_job_started_from_the_page_pauses_resumes_and_its_plots_follow(server, browser):
+    page, errors = _page(browser, f"{server}/dashboard/")
+    page.get_by_role("button", name="New job").click()
+    form = page.locator("#job-form")
+    form.locator("input[name=name]").fill("from-the-page")
+    form.locator("input[name=iterations]").fill("400")  # long enough that it runs while paused and resumed
+    form.locator("input[name=seed_points]").fill("6")
+    form.locator("input[name=robust_samples]").fill("1")
+    form.locator("input[name=confirm_samples]").fill("0")
+    form.locator("select[name=plant_preset]").select_option("nominal")
+    form.locator("textarea[name=sets]").fill("plant.steer_lag_s=0.02")
+    form.locator("input[name=bound-k-hi]").fill("0.1")
+    page.get_by_role("button", name="Start job").click()
+    expect(page.locator("#job-title")).to_have_text("1 · from-the-page", timeout=WAIT_MS)
+
+    job = _job_by_name(server, "from-the-page")
+    spec = job["spec"]
+    assert job["iterations"] == 400 and spec["robust_samples"] == 1 and spec["bounds"]["k"] == [0.0, 0.1]
+    assert spec["config"]["plant"]["steer_lag_s"] == 0.02 and spec["config"]["plant"]["friction_circle"] is False
+
+    # Live: the convergence plot and the search space (models refitted) grow as evaluations land.
+    first = _wait_count(page, "#convergence", "data-n", 2)
+    _wait_count(page, "#search-space", "data-n-evaluations", 2)
+    _wait_count(page, "#slices", "data-n", first)
+    assert page.locator("#contour-mean rect").count() > 900  # a 30 x 30 filled contour and its colour bar
+    expect(page.locator("#importance-caption")).to_contain_text("ARD relevance")
+
+    page.get_by_role("button", name="Pause").click()
+    expect(page.locator("#job-status")).to_contain_text("status: paused", timeout=WAIT_MS)
+    wait_released(server, job["id"])
+    paused_at = httpx.get(f"{server}/api/jobs/{job['id']}").json()["n_done"]
+    _wait_count(page, "#convergence", "data-n", paused_at - 1)  # the page has every stored evaluation
+    expect(page.get_by_role("button", name="Resume")).to_be_enabled()
+
+    page.get_by_role("button", name="Resume").click()
+    expect(page.locator("#job-status")).to_contain_text("status: running", timeout=WAIT_MS)
+    _wait_count(page, "#convergence", "data-n", paused_at)
+    _wait_count(page, "#search-space", "data-n-evaluations", paused_at)
+
+    page.locator("#notes-box summary").click()
+    page.locator("#notes").fill("nominal plant, 20 ms lag")
+    page.get_by_role("button", name="Save notes").click()
+    expect(page.locator("#notes-saved")).to_have_text("saved")
+    assert httpx.get(f"{server}/api/jobs/{job['id']}").json()["notes"] == "nominal plant, 20 ms lag"
+
+    page.get_by_role("button", name="Pause").click()
+    wait_released(server, job["id"])
+    page.locator("#rescore-samples").fill("3")
+    page.get_by_role("button", name="Rescore").click()
+    expect(page.locator("#rescore-text")).to_contain_text(" / 3 completed", timeout=WAIT_MS)
+    assert page.locator("#rescore-progress").get_attribute("max") == "3"
+    assert not errors, errors
+    page.close()
+
+
+def test_delete_asks_first_and_cancel_keeps_the_job(server, browser):
+    job = httpx.post(f"{server}/api/jobs", json={"name": "to-delete", "iterations": 3}).json()
+    page, errors = _page(browser, f"{server}/dashboard/?job={job['id']}")
+    expect(page.locator("#job-title")).to_have_text(f"{job['id']} · to-delete", timeout=WAIT_MS)
+    page.get_by_role("button", name="Delete").click()
+    expect(page.locator("#confirm-text")).to_contain_text(f"Delete job {job['id']} (to-delete)")
+    page.get_by_role("button", name="Cancel").click()
+    expect(page.locator("#confirm")).to_be_hidden()
+    assert httpx.get(f"{server}/api/jobs/{job['id']}").status_code == 200
+
+    if httpx.get(f"{server}/api/jobs/{job['id']}").json()["status"] in ("queued", "running"):
+        page.get_by_role("button", name="Pause").click()  # a running job cannot be deleted (409): pause it first
+        wait_released(server, job["id"])
+    page.get_by_role("button", name="Delete").click()
+    page.locator("#confirm-ok").click()
+    expect(page.locator("#message")).to_contain_text(f"job {job['id']} (to-delete) deleted", timeout=WAIT_MS)
+    assert httpx.get(f"{server}/api/jobs/{job['id']}").status_code == 404
+    expect(page.locator(f"#job-table tr[data-job-id='{job['id']}']")).to_have_count(0)
+    assert not errors, errors
+    page.close()
+
+
+def test_with_a_token_the_page_changes_nothing_without_it(tmp_path, browser):
+    proc, url = start_server(tmp_path / "token.db", free_port(), env_extra={"DRIFTLAB_TOKEN": "s3cret"},
+                             extra_args=("--workers", "1"))
+    try:
+        page, _ = _page(browser, f"{url}/dashboard/")
+        page.get_by_role("button", name="New job").click()
+        page.get_by_role("button", name="Start job").click()
+        expect(page.locator("#message")).to_contain_text("401", timeout=WAIT_MS)
+        expect(page.locator("#message")).to_contain_text("Authorization: Bearer")
+        assert httpx.get(f"{url}/api/jobs").json() == []
+        page.close()
+        page, _ = _page(browser, f"{url}/dashboard/?token=s3cret")
+        page.get_by_role("button", name="New job").click()
+        page.locator("#job-form input[name=iterations]").fill("2")
+        page.get_by_role("button", name="Start job").click()
+        expect(page.locator("#message")).to_contain_text("queued", timeout=WAIT_MS)
+        assert len(httpx.get(f"{url}/api/jobs").json()) == 1
+        page.close()
+    finally:
+        proc.terminate()
+        proc.wait(timeout=30)
+
+
+def test_clone_with_changes_starts_from_the_jobs_settings(server, browser):
+    original = httpx.post(f"{server}/api/jobs", json={
+        "name": "original", "iterations": 2, "seed": 7, "robust_samples": 2, "bounds": {"k": [0.0, 0.08]},
+        "config": {"plant.steer_lag_s": 0.05, "scenario.sideslip_rad": 0.42}}).json()
+    page, errors = _page(browser, f"{server}/dashboard/?job={original['id']}")
+    expect(page.locator("#job-title")).to_have_text(f"{original['id']} · original", timeout=WAIT_MS)
+    page.get_by_role("button", name="Clone with changes").click()
+    form = page.locator("#job-form")
+    expect(form.locator("input[name=name]")).to_have_value("original-clone")
+    assert form.locator("input[name=bound-k-hi]").input_value() == "0.08"
+    sets = form.locator("textarea[name=sets]").input_value().splitlines()
+    assert sorted(sets) == ["plant.steer_lag_s=0.05", "scenario.sideslip_rad=0.42"]
+    form.locator("input[name=iterations]").fill("3")
+    page.get_by_role("button", name="Start job").click()
+    expect(page.locator("#job-title")).to_contain_text("original-clone", timeout=WAIT_MS)
+    clone = _job_by_name(server, "original-clone")
+    changed = {k for k in original["spec"] if clone["spec"][k] != original["spec"][k]}
+    assert changed == {"iterations"} and clone["iterations"] == 3  # the config in full, bounds, seed: as cloned
+    assert not errors, errors
+    page.close()

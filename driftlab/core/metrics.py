@@ -72,6 +72,14 @@ def lap_of_steps(cumulative_m: np.ndarray, track: FigureEight) -> np.ndarray:
     return np.minimum((np.maximum(cumulative_m, 0.0) // track.lap_length_m).astype(int), track.laps - 1)
 
 
+def laps_of_rows(rows: np.ndarray, columns: dict[str, int], track: FigureEight) -> np.ndarray:
+    """The lap (1, 2, ...) each trajectory row is on: what the downloads' ``lap`` column, the plots and the view
+    show (cut by arc length as :func:`lap_of_steps`)."""
+    if len(rows) == 0:
+        return np.zeros(0, dtype=int)
+    return lap_of_steps(cumulative_progress_m(rows, track, columns), track) + 1
+
+
 def lap_mean_abs_e_m(e_m: np.ndarray, cumulative_m: np.ndarray, track: FigureEight) -> list[float]:
     """Mean |e| over each lap of the 8 driven."""
     lap = lap_of_steps(cumulative_m, track)

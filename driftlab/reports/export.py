@@ -16,7 +16,7 @@ from typing import Any
 
 import numpy as np
 
-from driftlab.core.metrics import cumulative_progress_m, lap_of_steps
+from driftlab.core.metrics import laps_of_rows
 from driftlab.core.track import FigureEight
 
 # Columns whose values are integers (the planner's phase, the solver flag, the lap); the rest are SI floats.
@@ -26,8 +26,7 @@ INTEGER_COLUMNS = frozenset({"phase", "osqp", "lap"})
 def with_lap_column(columns: list[str], rows: np.ndarray, track: FigureEight) -> tuple[list[str], np.ndarray]:
     """The trajectory with a last column ``lap``: the lap of the 8 each step is on (1, 2, ...; by the arc length
     driven, as the per-lap metrics cut them)."""
-    col = {name: i for i, name in enumerate(columns)}
-    lap = lap_of_steps(cumulative_progress_m(rows, track, col), track) + 1 if len(rows) else np.zeros(0)
+    lap = laps_of_rows(rows, {name: i for i, name in enumerate(columns)}, track)
     return [*columns, "lap"], np.column_stack([rows, lap]) if len(rows) else np.zeros((0, len(columns) + 1))
 
 

@@ -14,7 +14,7 @@ from matplotlib.colors import ListedColormap  # noqa: E402
 
 from driftlab.core.convergence import best_so_far
 from driftlab.core.episode import COL, EpisodeResult  # noqa: E402
-from driftlab.core.metrics import cumulative_progress_m, lap_of_steps  # noqa: E402
+from driftlab.core.metrics import laps_of_rows  # noqa: E402
 from driftlab.core.track import FigureEight  # noqa: E402
 
 
@@ -36,7 +36,7 @@ def plot_episode(result: EpisodeResult, track: FigureEight, path: str | Path, ti
     if track.laps == 1:
         ax_xy.plot(x, y, color="tab:red", lw=1.5, label="path")
     else:  # one colour a lap: whether the drift stays where it was or wanders off
-        lap = lap_of_steps(cumulative_progress_m(result.trajectory, track, COL), track)
+        lap = laps_of_rows(result.trajectory, COL, track) - 1
         errors = result.metrics.lap_mean_abs_e_m
         for i, colour in zip(range(track.laps), plt.cm.autumn(np.linspace(0.0, 0.7, track.laps)), strict=True):
             on_lap = lap == i

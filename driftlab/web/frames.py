@@ -10,7 +10,9 @@ from typing import Any
 
 import numpy as np
 
+from driftlab.core.metrics import laps_of_rows
 from driftlab.core.planner import Phase
+from driftlab.core.track import FigureEight
 
 # Sideslip colour map: beta < 0 (the drifts on the left, counter-clockwise circle) blue, grip grey,
 # beta > 0 (the right, clockwise circle) red; saturated at |beta| = 0.4 rad, the paper's drift sideslip.
@@ -77,6 +79,10 @@ class EpisodeFrames:
     def tracked_circle_at(self, i: int) -> int:
         """The circle tracked in row i: LEFT (+1) or RIGHT (-1), from the planner's phase."""
         return Phase(int(self.rows[i, self.columns.index("phase")])).direction
+
+    def laps_on(self, track: FigureEight) -> np.ndarray:
+        """The lap (1, 2, ...) of ``track`` each row is on, as the downloads' ``lap`` column."""
+        return laps_of_rows(self.rows, {name: i for i, name in enumerate(self.columns)}, track)
 
     def triggers_before(self, t_s: float) -> list[dict[str, Any]]:
         return [p for p in self.trigger_points if p["t_s"] <= t_s]

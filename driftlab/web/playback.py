@@ -248,6 +248,9 @@ class Playback:
         lines = [f"**{MODE_TITLES[self.mode]}** · t {t_s:5.1f} / {frames.duration_s:.1f} s"]
         if self.player.t_s > frames.duration_s + 1e-9:
             lines[0] += f" (ended; the others play on to {self.player.duration_s:.1f} s)"
+        lap = self.player.lap_text()
+        if lap is not None:
+            lines.append(lap)
         if self.stale is not None:
             lines.insert(0, f"**What-if not run**: {self.stale}. The episode below is the previous one (stale), "
                             "paused.")

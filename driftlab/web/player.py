@@ -6,6 +6,7 @@ recording's fixed steps), so live viewing and recording draw identically.
 
 from __future__ import annotations
 
+import numpy as np
 import viser
 
 from driftlab.core.track import FigureEight
@@ -37,6 +38,7 @@ class EpisodePlayer:
         self.more_ghosts: list[tuple[CarModel, Trail]] = []  # created on first use
         self.more_ghost_frames: list[EpisodeFrames] = []
         self.t_s = 0.0
+        self._laps = None  # the lap of each of the car's frames, on a track of several laps
 
     def set_car(self, cg_to_front_m: float, cg_to_rear_m: float) -> None:
         """Draw the car (and its ghost) at a job's vehicle geometry (a CommonRoad car is shorter than Table I's)."""
@@ -57,6 +59,7 @@ class EpisodePlayer:
             self.track = track
             self._highlights = draw_track(self.scene, track)  # same node names: replaces the old track
             self._tracked = None
+            self._laps = None if self.frames is None or track.laps == 1 else self.frames.laps_on(track)
 
     @property
     def duration_s(self) -> float:
@@ -71,6 +74,7 @@ class EpisodePlayer:
              more_ghosts: tuple[EpisodeFrames, ...] = ()) -> None:
         """Start ``frames`` (and a ghost episode beside it, or none, and up to 7 more ghosts) from t = 0."""
         self.frames, self.ghost_frames = frames, ghost
+        self._laps = None if self.track.laps == 1 or frames.n_frames == 0 else frames.laps_on(self.track)
         self.trail.clear()
         self.ghost_trail.clear()
         self.markers.clear()
@@ -99,6 +103,16 @@ class EpisodePlayer:
         self.car.visible = False
         self._set_more_ghosts([])
         self.t_s = 0.0
+
+    def lap_text(self) -> str | None:
+        """On a track of several laps: the car's lap now and each lap's mean |e| so far (None on one lap)."""
+        if self._laps is None or self.frames is None:
+            return None
+        i = self.frames.index_at(self.t_s)
+        lap = int(self._laps[i])
+        e_m = np.abs(self.frames.column("e_m")[: i + 1])
+        means = [f"{float(np.mean(e_m[self._laps[: i + 1] == k])):.2f}" for k in range(1, lap + 1)]
+        return f"lap **{lap} of {self.track.laps}** · mean \\|e\\| by lap: {' · '.join(means)} m"
 
     def show_caption(self, text: str) -> None:
         """A label over the track (recordings have no GUI panel: this is where their J and theta show)."""

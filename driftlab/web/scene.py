@@ -80,7 +80,8 @@ def draw_track(scene: viser.SceneApi, track: FigureEight) -> dict[int, viser.Lin
             f"/track/{name}/tracked", _polyline_segments(circle_points(circle), 2.0 * TRACK_Z_M),
             colors=(255, 200, 110), thickness=0.7, visible=False)
     scene.add_cylinder("/track/p0/post", radius=0.25, height=3.0, color=(20, 20, 20), position=(0.0, 0.0, 1.5))
-    scene.add_label("/track/p0/label", "P0", position=(0.0, 0.0, 3.2), font_screen_scale=1.2)
+    start = "P0" if track.laps == 1 else f"P0 · {track.laps} laps"
+    scene.add_label("/track/p0/label", start, position=(0.0, 0.0, 3.2), font_screen_scale=1.2)
     return highlights
 
 

@@ -23,7 +23,7 @@ from driftlab.web.frames import EpisodeFrames
 from driftlab.web.playback import Playback
 from driftlab.web.plots import padded_range, series
 from driftlab.web.scene import set_overview_camera
-from driftlab.web.sources import JobHistory, car_geometry_of_spec, track_of_spec
+from driftlab.web.sources import JobHistory, car_geometry_of_spec, drift_window_text, track_of_spec
 from driftlab.web.what_if import WhatIfPanel
 
 FRAME_RATE_HZ = 30.0
@@ -84,6 +84,7 @@ class ClientSession:
         self.job_dropdown = gui.add_dropdown("Job", (NO_JOB,))
         self.job_dropdown.on_update(self._on_job_selected)
         self.job_text = gui.add_markdown("")
+        self.window_text = gui.add_markdown("")
         self.convergence = gui.add_uplot(
             (np.zeros(1), np.full(1, np.nan), np.full(1, np.nan), np.full(1, np.nan)),
             (series("evaluation", "#888"), series("J", "#2a6fdb", points=True),
@@ -123,6 +124,15 @@ class ClientSession:
             self.on_history(history)
             self.what_if.reset_sliders(self._best(), run=False)
             self.playback.follow_live()
+            self.window_text.content = "**Drift window**: computing..."
+        threading.Thread(target=self._show_drift_window, args=(history,), daemon=True,
+                         name=f"driftlab-window-{self.client.client_id}").start()
+
+    def _show_drift_window(self, history: JobHistory) -> None:
+        text = drift_window_text(history.spec)  # seconds for a CommonRoad car: not under the tab's lock
+        with self.lock:
+            if self.history is history:
+                self.window_text.content = text
 
     def on_history(self, history: JobHistory) -> None:
         """New evaluations or a new status of a job (from the dashboard's poller)."""

@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+import functools
+import json
 import threading
 from dataclasses import dataclass, field
 from typing import Any
@@ -9,7 +11,9 @@ from typing import Any
 import numpy as np
 from sqlalchemy.orm import Session, sessionmaker
 
+from driftlab.core.config import ConfigError, config_from_dict
 from driftlab.core.convergence import best_position, best_so_far
+from driftlab.core.drivability import drift_window
 from driftlab.core.track import FigureEight
 from driftlab.db import storage, studies
 from driftlab.db.models import Evaluation
@@ -47,6 +51,30 @@ def car_geometry_of_spec(spec: dict[str, Any]) -> tuple[float, float]:
 
 def track_of_spec(spec: dict[str, Any]) -> FigureEight:
     return FigureEight.of_scenario(spec.get("config", {}).get("scenario", {}))
+
+
+def drift_window_text(spec: dict[str, Any]) -> str:
+    """The job's plant's drift window at each radius of its 8 (what ``driftlab equilibrium --window`` prints and
+    the drivability check decides), as a line for the view. Seconds for a CommonRoad car: call it off the GUI."""
+    return _drift_window_text(json.dumps(spec.get("config", {}), sort_keys=True))
+
+
+@functools.lru_cache(maxsize=64)
+def _drift_window_text(config_json: str) -> str:
+    try:
+        config = config_from_dict(json.loads(config_json))
+    except ConfigError as exc:
+        return f"**Drift window**: none to show ({exc})."
+    scenario = config.scenario
+    radii = dict.fromkeys((scenario.left_radius_m, scenario.right_radius_m))
+    parts = []
+    for radius_m in radii:
+        runs = drift_window(config, radius_m).ranges_rad
+        where = ", ".join(f"{low:.2f}-{high:.2f}" for low, high in runs) or "none"
+        inside = any(low - 1e-9 <= scenario.sideslip_rad <= high + 1e-9 for low, high in runs)
+        parts.append(f"R {radius_m:.4g} m: {where} rad ({scenario.sideslip_rad:.4g} "
+                     f"{'inside' if inside else 'outside'})")
+    return ("**Drift window** of this plant, the sideslips that drift each circle: " + "; ".join(parts) + ".")
 
 
 @dataclass

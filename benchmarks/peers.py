@@ -12,8 +12,11 @@ Optuna is a benchmark-only extra (``pip install optuna torch``; its GPSampler ne
 dependency.
 
 Run: OMP_NUM_THREADS=1 python benchmarks/peers.py [--seeds 6] [--evaluations 100] [--methods driftlab,tpe,gp,random]
-     (``driftlab-s=N``: DriftLab with N space-filling points, e.g. driftlab-s=20 for the paper's 20, ``-l=N``
-     of them local around the untuned theta, ``-r=R`` the local box's half-width in unit widths; a ``+mc``
+     [--plant plant.friction_scale=0.93 ...]
+     (``driftlab``: the job default; ``driftlab-s=N``: with N space-filling points, e.g. driftlab-s=20 for the
+     paper's 20, ``-l=N`` of them local around the untuned theta (``-l=0``: no local phase), ``-r=R`` the local
+     box's half-width in unit widths, ``-m=R`` instead: R for the model corrections only, the four others over their
+     whole range, ``-g=N`` the GP's proposals in that box grown to the whole over N evaluations; a ``+mc``
      suffix, e.g. ``driftlab+mc,tpe+mc``: the job's default box with the model corrections, six dimensions)
 """
 
@@ -31,13 +34,15 @@ os.environ.setdefault("OMP_NUM_THREADS", "1")
 CHECKPOINTS = (25, 50, 100)
 
 
-def _objective(robust_samples: int, bo_seed: int):
-    """theta dict -> (J or None if the evaluation failed, penalized J)."""
-    from driftlab.core.config import EpisodeConfig, Theta
+def _objective(robust_samples: int, bo_seed: int, plant: tuple[str, ...] = ()):
+    """theta dict -> (J or None if the evaluation failed, penalized J); ``plant``: key=value overrides of the
+    default plant (a plant drawn away from it)."""
+    from driftlab.core.config import EpisodeConfig, Theta, apply_overrides
     from driftlab.core.episode import run_episode
     from driftlab.core.robust import SampleResult, aggregate, tuning_seeds
 
-    config = EpisodeConfig.preset("default")
+    config = apply_overrides(EpisodeConfig.preset("default"),
+                             {k: float(v) for k, v in (item.split("=") for item in plant)})
     seeds = tuning_seeds(bo_seed, robust_samples)
 
     def evaluate(theta: dict[str, float]) -> tuple[float | None, float]:
@@ -51,12 +56,12 @@ def _objective(robust_samples: int, bo_seed: int):
     return evaluate
 
 
-def _run(args: tuple[str, int, int, int]) -> tuple[str, int, list[float], float]:
+def _run(args: tuple[str, int, int, int, tuple[str, ...]]) -> tuple[str, int, list[float], float]:
     """One optimizer run: (method, seed, best completed J after each evaluation, CPU seconds)."""
-    label, bo_seed, evaluations, robust_samples = args
+    label, bo_seed, evaluations, robust_samples, plant = args
     from driftlab.core.tuning import DEFAULT_BOUNDS, MODEL_BOUNDS, TuningSpec
 
-    evaluate = _objective(robust_samples, bo_seed)
+    evaluate = _objective(robust_samples, bo_seed, plant)
     method, six = label.removesuffix("+mc"), label.endswith("+mc")
     bounds = {**DEFAULT_BOUNDS, **MODEL_BOUNDS} if six else DEFAULT_BOUNDS
     trace: list[float] = []
@@ -65,12 +70,18 @@ def _run(args: tuple[str, int, int, int]) -> tuple[str, int, list[float], float]
     if method.startswith("driftlab"):
         from driftlab.core.optimizer import BayesianOptimizer
 
-        # "driftlab": the job default; "driftlab-sN": N space-filling points first
-        options = dict(part.split("=") for part in method.split("-")[1:])  # e.g. driftlab-s=12-l=5-r=0.15
-        seed_points = int(options.get("s", TuningSpec().seed_points))
-        initial = TuningSpec().initial_points if six else []  # as a job with the model corrections starts
-        opt = BayesianOptimizer(bounds, seed_points=seed_points, active_set=400, seed=bo_seed, initial_points=initial,
-                                local_points=int(options.get("l", 0)), local_radius=float(options.get("r", 0.15)))
+        # "driftlab": the job default (six dimensions: with its local phase); options change it, e.g.
+        # driftlab-l=0 (no local phase), driftlab-s=12-l=5-r=0.15, driftlab-l=11-m=0.05-g=15
+        options = dict(part.split("=") for part in method.split("-")[1:])
+        settings = TuningSpec(seed=bo_seed, model_correction=six).optimizer_options
+        if "s" in options:
+            settings["seed_points"] = int(options["s"])
+        if "l" in options:
+            settings.update(local_points=int(options["l"]), local_radius=float(options.get("r", 0.15)),
+                            local_growth=int(options.get("g", 0)))
+            if "m" in options:  # the model corrections near the untuned model, the paper's four over their range
+                settings["local_radius"] = {name: float(options["m"]) for name in MODEL_BOUNDS}
+        opt = BayesianOptimizer(bounds, **settings)
         for _ in range(evaluations):
             theta = opt.ask()
             value, _ = evaluate(theta)
@@ -110,13 +121,17 @@ def main() -> None:
     parser.add_argument("--robust-samples", type=int, default=4)
     parser.add_argument("--methods", default="driftlab,tpe,gp,random")
     parser.add_argument("--workers", type=int, default=2)
+    parser.add_argument("--plant", nargs="*", default=[], metavar="KEY=VALUE",
+                        help="the default plant changed, e.g. plant.friction_scale=0.93 plant.steer_lag_s=0.08")
     args = parser.parse_args()
     methods = args.methods.split(",")
-    jobs = [(m, s, args.evaluations, args.robust_samples) for s in range(args.seeds) for m in methods]
+    plant = tuple(args.plant)
+    jobs = [(m, s, args.evaluations, args.robust_samples, plant) for s in range(args.seeds) for m in methods]
     with ProcessPoolExecutor(args.workers) as pool:
         results = list(pool.map(_run, jobs))
     points = [c for c in CHECKPOINTS if c <= args.evaluations]
-    print(f"drift objective, default plant and bounds, {args.robust_samples} episodes per evaluation, "
+    plant_text = " with " + " ".join(plant) if plant else ""
+    print(f"drift objective, default plant{plant_text} and bounds, {args.robust_samples} episodes per evaluation, "
           f"{args.seeds} seeds; best completed J (median [q25, q75]) after n evaluations; lower is better")
     print("| method | " + " | ".join(f"n = {c}" for c in points) + " | CPU s per run |")
     print("|---|" + "---|" * (len(points) + 1))

@@ -103,7 +103,11 @@ class BayesianOptimizer:
             around the first initial point, then a Latin hypercube of the box.
         initial_points: points to ask first (e.g. the configuration known to work); each inside the box.
         local_points: of the seed points, how many a Latin hypercube spreads over a box of half-width
-            ``local_radius`` (unit-cube widths) around the first initial point (none without one).
+            ``local_radius`` (unit-cube widths; one for all, or per name, absent names 1: their whole range)
+            around the first initial point, cut to the bounds (none without an initial point).
+        local_growth: after the seed points, the GP's proposals stay in that local box, which grows linearly to
+            the whole box over this many evaluations (0: the whole box at once): a trust region around the
+            configuration known to work, widened as the models learn where the rest of the box fails.
         active_set: most successful observations the GP is fit on.
         seed: random seed (Latin hypercube, candidate sets).
         refit_every: hyperparameter refit period in observations.
@@ -111,7 +115,8 @@ class BayesianOptimizer:
 
     def __init__(self, bounds: Mapping[str, tuple[float, float]], *, seed_points: int = 20, active_set: int = 400,
                  seed: int = 0, refit_every: int = 10, initial_points: Sequence[Mapping[str, float]] = (),
-                 local_points: int = 0, local_radius: float = 0.15) -> None:
+                 local_points: int = 0, local_radius: float | Mapping[str, float] = 0.15,
+                 local_growth: int = 0) -> None:
         if not bounds:
             raise ConfigError("bounds must name at least one parameter")
         for name, pair in bounds.items():
@@ -134,9 +139,14 @@ class BayesianOptimizer:
         check_int("local_points", local_points, 0, seed_points)
         local = min(local_points, seed_points - len(initial)) if initial else 0
         design = qmc.LatinHypercube(d=self.dim, seed=seed).random(seed_points - len(initial) - local)
+        self._radius = (np.array([float(local_radius.get(n, 1.0)) for n in self.names])
+                        if isinstance(local_radius, Mapping) else np.full(self.dim, float(local_radius)))
+        self._centre = initial[0] if initial and (local or local_growth) else None
+        self.local_growth = local_growth
         if local:  # its own stream: the global design stays what it was without a local phase
             around = qmc.LatinHypercube(d=self.dim, seed=np.random.default_rng([seed, 1])).random(local)
-            design = np.vstack([np.clip(initial[0] + local_radius * (2.0 * around - 1.0), 0.0, 1.0), design])
+            low, high = self._region(self._radius)
+            design = np.vstack([low + around * (high - low), design])  # scaled into the box, not piled on its faces
         self._seed_design = np.vstack([*initial, design]) if initial else design
         self.x: list[np.ndarray] = []  # unit-cube inputs, told
         self.y: list[float | None] = []  # None: failed evaluation
@@ -193,6 +203,17 @@ class BayesianOptimizer:
         raw = np.array([float(theta[n]) for n in self.names])
         unit = (raw - self.lo) / (self.hi - self.lo)
         return np.clip(unit, 0.0, 1.0) if clip else unit
+
+    def _region(self, radius: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """The unit box of half-width ``radius`` around the local centre, cut to [0, 1]."""
+        return np.clip(self._centre - radius, 0.0, 1.0), np.clip(self._centre + radius, 0.0, 1.0)
+
+    def _search_box(self) -> tuple[np.ndarray, np.ndarray]:
+        """Where the GP's proposals may go now: the growing trust region, or the whole unit box."""
+        if self._centre is None or self.local_growth <= 0:
+            return np.zeros(self.dim), np.ones(self.dim)
+        grown = min(max(len(self.x) - self.seed_points, 0) / self.local_growth, 1.0)
+        return self._region(self._radius + (1.0 - self._radius) * grown)
 
     def _rng(self) -> np.random.Generator:
         return np.random.default_rng([self.seed, len(self.x), len(self.pending)])
@@ -348,8 +369,9 @@ class BayesianOptimizer:
     def _maximize(self, gp: GaussianProcess, classifier: SuccessProbability | None, best: float,
                   x_best: np.ndarray, failed: np.ndarray) -> np.ndarray:
         rng = self._rng()
-        local = np.clip(x_best + rng.normal(0.0, 0.05, (_LOCAL_CANDIDATES, self.dim)), 0.0, 1.0)
-        candidates = np.vstack([rng.random((_CANDIDATES, self.dim)), local])
+        low, high = self._search_box()
+        local = np.clip(x_best + rng.normal(0.0, 0.05, (_LOCAL_CANDIDATES, self.dim)), low, high)
+        candidates = np.vstack([low + rng.random((_CANDIDATES, self.dim)) * (high - low), local])
         values = self._acquisition(gp, classifier, best, failed, candidates)
         if values.max() <= 0.0 and classifier is not None:
             # Success looks unlikely everywhere: try where it is likeliest.
@@ -367,9 +389,9 @@ class BayesianOptimizer:
 
         for start in starts:
             res = minimize(negative_with_gradient, start, jac=True, method="L-BFGS-B",
-                           bounds=[(0.0, 1.0)] * self.dim, options={"maxiter": _LOCAL_ITERATIONS})
+                           bounds=list(zip(low, high, strict=True)), options={"maxiter": _LOCAL_ITERATIONS})
             if np.all(np.isfinite(res.x)) and -res.fun > best_v:
-                best_x, best_v = np.clip(res.x, 0.0, 1.0), -float(res.fun)
+                best_x, best_v = np.clip(res.x, low, high), -float(res.fun)
         if self._is_repeat(best_x):
             return rng.random(self.dim)
         return best_x

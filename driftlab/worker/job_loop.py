@@ -43,8 +43,7 @@ class Progress:
 def restore_optimizer(spec: TuningSpec, history: list[tuple[dict[str, float], float | None, float]]
                       ) -> BayesianOptimizer:
     """An optimizer in the state it had after telling ``history`` (theta, J or None if failed, the stored J)."""
-    optimizer = BayesianOptimizer(spec.bounds, seed_points=spec.seed_points, active_set=spec.active_set,
-                                  seed=spec.seed, initial_points=spec.initial_points)
+    optimizer = BayesianOptimizer(spec.bounds, **spec.optimizer_options)
     for theta, value, stored_j in history:
         optimizer.tell(theta, value, stored_j)
     return optimizer

@@ -213,3 +213,21 @@ def test_a_local_phase_spreads_its_points_around_the_first_initial_point_then_th
     assert [again.ask() for _ in range(10)] == asked
     with pytest.raises(ConfigError, match=r"local_points must be an integer in \[0, 10\]"):
         BayesianOptimizer(bounds, seed_points=10, local_points=11)
+
+
+def test_a_growing_trust_region_holds_the_named_dimensions_near_the_start_then_opens():
+    bounds = {"a": (0.0, 1.0), "b": (0.0, 1.0)}
+    start = {"a": 0.5, "b": 0.5}
+    opt = BayesianOptimizer(bounds, seed_points=6, seed=1, initial_points=[start], local_points=5,
+                            local_radius={"b": 0.05}, local_growth=10)
+    asked = [opt.ask() for _ in range(6)]
+    assert all(0.45 <= t["b"] <= 0.55 for t in asked)  # b near the start, a over its whole range
+    assert np.ptp([t["a"] for t in asked]) > 0.6
+    for t in asked:  # J rises with a's distance from 0.9 and b's from 0.95: outside the region's first box
+        opt.tell(t, (t["a"] - 0.9) ** 2 + (t["b"] - 0.95) ** 2)
+    for n in range(6, 16):
+        theta = opt.ask()
+        half_width = 0.05 + 0.95 * (n - 6) / 10
+        assert abs(theta["b"] - 0.5) <= half_width + 1e-9
+        opt.tell(theta, (theta["a"] - 0.9) ** 2 + (theta["b"] - 0.95) ** 2)
+    assert opt.ask()["b"] > 0.6  # the region has opened: the GP goes where J is low

@@ -69,7 +69,8 @@ def _cumulative_progress_m(x_m, y_m, phase, left_center_y_m, left_radius_m, righ
 
 def lap_of_steps(cumulative_m: np.ndarray, track: FigureEight) -> np.ndarray:
     """The lap (0, 1, ...) each step is on, cut by the arc length driven (one lap = ``track.lap_length_m``)."""
-    return np.minimum((np.maximum(cumulative_m, 0.0) // track.lap_length_m).astype(int), track.laps - 1)
+    driven_m = np.nan_to_num(np.maximum(cumulative_m, 0.0), nan=0.0)  # a diverged step (NaN) counts as lap 0
+    return np.minimum((driven_m // track.lap_length_m).astype(int), track.laps - 1)
 
 
 def laps_of_rows(rows: np.ndarray, columns: dict[str, int], track: FigureEight) -> np.ndarray:

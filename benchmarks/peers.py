@@ -114,6 +114,13 @@ def _run(args: tuple[str, int, int, int, tuple[str, ...]]) -> tuple[str, int, li
     return label, bo_seed, trace, time.process_time() - started
 
 
+_NONE = 1e9  # stands for "no completed evaluation yet" in the quantiles
+
+
+def _cell(value: float, spec: str) -> str:
+    return "none" if value >= _NONE else format(value, spec)
+
+
 def main() -> None:
     parser = argparse.ArgumentParser()
     parser.add_argument("--seeds", type=int, default=6)
@@ -139,9 +146,10 @@ def main() -> None:
         runs = [r for r in results if r[0] == method]
         cells = []
         for c in points:
-            values = np.array([r[2][c - 1] for r in runs])
-            q25, med, q75 = np.percentile(values, [25, 50, 75])
-            cells.append(f"{med:.3f} [{q25:.2f}, {q75:.2f}]")
+            # a run with no completion yet has best inf: it ranks last, and a quantile that lands on it says "none"
+            values = np.minimum(np.array([r[2][c - 1] for r in runs]), _NONE)
+            q25, med, q75 = np.percentile(values, [25, 50, 75], method="nearest")
+            cells.append(f"{_cell(med, '.3f')} [{_cell(q25, '.2f')}, {_cell(q75, '.2f')}]")
         cpu = np.median([r[3] for r in runs])
         print(f"| {method} | " + " | ".join(cells) + f" | {cpu:.1f} |")
 

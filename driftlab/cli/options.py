@@ -110,9 +110,9 @@ def add_job_options(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--model-correction", choices=("on", "off"),
                         help="also learn the controller model's friction and tyre-C scales (theta.model_mu_scale, "
                              "theta.model_c_scale); default on, off with --preset paper")
-    parser.add_argument("--local-phase", choices=("on", "off"), default="on",
+    parser.add_argument("--local-phase", choices=("on", "off"),
                         help="with model correction: start near the uncorrected model and widen the search as the "
-                             "models learn (default on; off: the seed points fill the whole box)")
+                             "models learn (default: on for DriftLab's plants, off for CommonRoad's)")
     parser.add_argument("--deterministic", action="store_true", default=None,
                         help="one evaluation at a time (its seeds still in parallel): the thetas depend on the seed "
                              "and settings only, not on the number of workers or which episode finishes first")

@@ -71,9 +71,10 @@ class JobCreate(BaseModel):
     model_correction: bool = Field(default=True, strict=True,
                                    description="also learn the controller model's friction and tyre-C scales "
                                                "(theta.model_mu_scale, theta.model_c_scale)")
-    local_phase: bool = Field(default=True, strict=True,
-                              description="with model_correction: start near the uncorrected model (most of the "
-                                          "corrections' box fails) and widen the search as the models learn")
+    local_phase: bool | None = Field(default=None, strict=True,
+                                     description="with model_correction: start near the uncorrected model (most of "
+                                                 "the corrections' box fails) and widen the search as the models "
+                                                 "learn; default: on for DriftLab's plants, off for CommonRoad's")
     deterministic: bool = Field(default=False, strict=True,
                                 description="ask the next theta only when every earlier evaluation is stored: the "
                                             "thetas then depend on the seed and settings only, not on how many "

@@ -52,3 +52,16 @@ def test_a_job_with_the_corrections_starts_from_the_untuned_theta():
     assert TuningSpec().initial_points == [Theta().as_dict()]
     assert TuningSpec(model_correction=False).initial_points == []
     assert TuningSpec(bounds={"k": [0.06, 0.1]}).initial_points == []  # outside the box: not asked
+
+
+def test_the_local_phase_is_on_for_driftlabs_plants_and_off_for_a_commonroad_car_unless_told():
+    default = TuningSpec()
+    assert default.local_phase and default.optimizer_options["local_points"] == 11
+    assert default.optimizer_options["local_radius"] == {name: 0.05 for name in MODEL_BOUNDS}
+    std = TuningSpec(config=EpisodeConfig.preset("commonroad_std"))
+    assert std.local_phase is False and "local_points" not in std.optimizer_options
+    assert TuningSpec(config=EpisodeConfig.preset("commonroad_std"), local_phase=True).local_phase
+    assert "local_points" not in TuningSpec(model_correction=False).optimizer_options  # four dimensions: no phase
+    assert TuningSpec.from_dict(std.to_dict()).local_phase is False  # stored as what it resolved to
+    with pytest.raises(ConfigError, match="local_phase must be true or false"):
+        TuningSpec(local_phase="yes")

@@ -9,7 +9,7 @@ from __future__ import annotations
 
 import threading
 import time
-from collections.abc import Callable
+from collections.abc import Callable, Hashable
 from concurrent.futures import CancelledError, Future
 from dataclasses import dataclass, field
 
@@ -145,7 +145,8 @@ class _Lease:
 
 
 def run_job(factory: sessionmaker[Session], job_id: int, executor: EpisodeExecutor, *, runner: str,
-            workers: int = 1, slots: EpisodeSlots | None = None, should_stop: Callable[[], bool] = lambda: False,
+            workers: int = 1, slots: EpisodeSlots | None = None, owner: Hashable | None = None,
+            should_stop: Callable[[], bool] = lambda: False,
             on_progress: Callable[[Progress], None] | None = None) -> str:
     """Runs a job whose lease ``runner`` holds (:func:`claim_job`) until its budget is spent, it is paused
     (the lease is lost), or ``should_stop()`` (the runner shuts down: the job goes back to the queue). Returns
@@ -155,12 +156,12 @@ def run_job(factory: sessionmaker[Session], job_id: int, executor: EpisodeExecut
     every theta) on the executor; one that completes every episode with a J better than the best so far
     then runs ``confirm_samples`` more seeds, and is stored with all of them. The job keeps at most its share
     of ``slots`` episodes in flight (the executor's capacity shared with the other jobs running on it, see
-    driftlab.worker.slots; ``workers`` alone when no ``slots`` are given); an evaluation's episodes wait for a slot,
-    and a new theta is asked only when none waits and the share has room, so with several samples per evaluation
-    the optimizer stays nearly sequential.
+    driftlab.worker.slots; ``workers`` alone when no ``slots`` are given; ``owner`` names the job there, if the
+    caller joined it already); an evaluation's episodes wait for a slot, and a new theta is asked only when none
+    waits and the share has room, so with several samples per evaluation the optimizer stays nearly sequential.
     """
     slots = slots or EpisodeSlots(workers)
-    owner, wake = object(), threading.Event()
+    owner, wake = owner if owner is not None else object(), threading.Event()
     slots.join(owner, wake)
     try:
         return _run(factory, job_id, executor, runner, slots, owner, wake, should_stop, on_progress)
@@ -215,8 +216,9 @@ def _run(factory: sessionmaker[Session], job_id: int, executor: EpisodeExecutor,
                 submit_waiting()
                 free = not spec.deterministic and not waiting and slots.has_room(owner)
             submit_waiting()  # what is asked completes, paused or not: its episodes were started or are due
-            if not episodes and not waiting:
+            if not episodes and not waiting and (stopping or n_done + len(evaluations) >= lease.iterations):
                 break
+            # Else wait for an episode to come back, or for a slot the other jobs free (the share may be full).
             wake.wait(timeout=lifecycle.HEARTBEAT_S)
             wake.clear()
             for future in [f for f in episodes if f.done()]:

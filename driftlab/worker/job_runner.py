@@ -114,30 +114,38 @@ class JobRunner:
 
     def _run_job(self, job_id: int) -> None:
         try:
-            run_job(self.factory, job_id, self._executor, runner=self.runner_id, slots=self._slots,
+            run_job(self.factory, job_id, self._executor, runner=self.runner_id, slots=self._slots, owner=job_id,
                     should_stop=self._stop.is_set)
         finally:
             with self._jobs_lock:
                 self._jobs.pop(job_id, None)
             self._wake.set()  # its share is free: the next job may start
 
-    def _start_job(self, job_id: int) -> None:
-        thread = threading.Thread(target=self._run_job, args=(job_id,), name=f"driftlab-job-{job_id}", daemon=True)
-        with self._jobs_lock:
-            self._jobs[job_id] = thread
-        thread.start()
+    def _start_claimable_jobs(self) -> bool:
+        """Claims what it can (a job takes at least one of the executor's slots: no more jobs at once than it has
+        workers) and starts them together: every job claimed now has its share before any of them asks."""
+        claimed = []
+        while len(self.running_job_ids) + len(claimed) < self._slots.capacity:
+            job_id = self._claim_next()
+            if job_id is None:
+                break
+            claimed.append(job_id)
+            self._slots.join(job_id)
+        for job_id in claimed:
+            thread = threading.Thread(target=self._run_job, args=(job_id,), name=f"driftlab-job-{job_id}",
+                                      daemon=True)
+            with self._jobs_lock:
+                self._jobs[job_id] = thread
+            thread.start()
+        return bool(claimed)
 
     def _loop(self) -> None:
         try:
             while not self._stop.is_set():
-                # A job takes at least one of the executor's slots: no more jobs at once than it has workers.
-                if len(self.running_job_ids) < self._slots.capacity:
-                    job_id = self._claim_next()
-                    if job_id is not None:
-                        self._start_job(job_id)
-                        continue
-                    if not self.running_job_ids and self._run_next_study():
-                        continue
+                if self._start_claimable_jobs():
+                    continue
+                if not self.running_job_ids and self._run_next_study():
+                    continue
                 self._wake.wait(self.poll_s)
                 self._wake.clear()
         finally:

@@ -94,6 +94,7 @@ def _store(factory: sessionmaker[Session], lease: _Lease, evaluation: _PendingEv
     score, samples, shown = scored
     metrics = {**shown.metrics, "n_samples": len(samples), "n_completed": score.n_completed,
                "J_samples_mean": score.J}
+    packed = storage.pack_trajectory(shown.trajectory)  # before the write lock (dropped if not kept)
     with storage.transaction(factory) as session:
         job = session.get(Job, lease.job_id)
         if job is None or job.runner_id != lease.runner:
@@ -106,7 +107,7 @@ def _store(factory: sessionmaker[Session], lease: _Lease, evaluation: _PendingEv
                                wall_ms=sum(o.wall_ms for o in evaluation.outcomes.values()),
                                columns=shown.columns, trajectory=shown.trajectory,
                                seeds=[s.as_dict() for s in samples], trajectory_seed=shown.seed,
-                               max_trajectories=lease.max_trajectories)
+                               max_trajectories=lease.max_trajectories, packed=packed)
     return STORED
 
 

@@ -14,7 +14,7 @@ optimizer is the limit), "db" the write transactions' share of the wall time (ne
 workers' (episode time / (N x wall)), and "cpu" this process's CPU seconds per wall second (2 cores here).
 
 Run: OMP_NUM_THREADS=1 python benchmarks/bench_concurrency.py [--workers 1 2 4 8 16 32] [--evaluations 30]
-     [--real-evaluations 6] [--skip-real]
+     [--real-evaluations 6] [--real-repeats 3] [--skip-real] [--skip-simulated]
 """
 
 from __future__ import annotations
@@ -48,13 +48,9 @@ class SleepingCluster:
     def __init__(self, workers: int, template: EpisodeOutcome, episode_s: float = EPISODE_S) -> None:
         self.workers, self.template, self.episode_s = workers, template, episode_s
         self.pool = ThreadPoolExecutor(workers)
-        self.busy_s = 0.0
-        self._lock = threading.Lock()
 
     def _episode(self, theta, seed) -> EpisodeOutcome:
         time.sleep(self.episode_s)
-        with self._lock:
-            self.busy_s += self.episode_s
         j = sum((v - 0.5) ** 2 for v in theta.values()) + 0.01 * (seed % 7) - 2.0
         return replace(self.template, theta=dict(theta), seed=seed, J=j, wall_ms=self.episode_s * 1000)
 
@@ -125,12 +121,25 @@ def _study(db_dir: str, spec: dict, name: str):
 def _one_after_another(factory, jobs, executor, workers: int) -> None:
     for job_id in jobs:
         claim_job(factory, job_id, "bench")
-        assert run_job(factory, job_id, executor, runner="bench", workers=workers) == "finished"
+        status = run_job(factory, job_id, executor, runner="bench", workers=workers)
+        if status != "finished":
+            with storage.snapshot(factory) as session:
+                raise RuntimeError(f"job {job_id} {status}: {storage.get_job(session, job_id=job_id).error}")
+
+
+class _Lent:
+    """The executor for a runner that stops (and would shut it down) while the benchmark still needs it."""
+
+    def __init__(self, executor) -> None:
+        self.submit = executor.submit
+
+    def shutdown(self) -> None:
+        pass
 
 
 def _at_once(factory, study_id, executor, workers: int) -> None:
     runner = JobRunner(factory, workers=workers)
-    runner.start(executor=executor)
+    runner.start(executor=_Lent(executor))
     try:
         while True:
             with storage.snapshot(factory) as session:
@@ -154,14 +163,16 @@ def measure(mode: str, db_dir: str, spec: dict, executor, workers: int) -> dict:
             _at_once(factory, study_id, executor, workers)
         wall, cpu = time.perf_counter() - wall0, time.process_time() - cpu0
     with storage.snapshot(factory) as session:
-        n = sum(storage.count_evaluations(session, job_id=j) for j in jobs)
-        for j in jobs:  # numbered once each, none missing
-            assert [e.index for e in storage.evaluations(session, job_id=j)] == list(range(spec["iterations"]))
+        stored = [storage.evaluations(session, job_id=j) for j in jobs]
+    for evaluations in stored:  # numbered once each, none missing
+        assert [e.index for e in evaluations] == list(range(spec["iterations"]))
+    n = sum(len(evaluations) for evaluations in stored)
+    episodes_s = sum(e.wall_ms for evaluations in stored for e in evaluations) / 1000
     storage.engine_of(factory).dispose()
     return {"wall": wall, "rate": n / wall, "ask_ms": 1000 * statistics.median(meter.ask_s),
             "store_ms": 1000 * statistics.median(meter.store_s),
             "job": max(meter.thread_s.values()) / wall, "db": sum(meter.store_s) / wall, "cpu": cpu / wall,
-            "work": getattr(executor, "busy_s", 0.0) / (workers * wall)}
+            "work": episodes_s / (workers * wall)}
 
 
 def _row(label: str, seq: dict, conc: dict) -> str:
@@ -201,7 +212,6 @@ def simulated(workers: list[int], evaluations: int, db_dir: str) -> None:
     for n in workers:
         cluster = SleepingCluster(n, template)
         seq = measure("sequential", db_dir, spec, cluster, n)
-        cluster.busy_s = 0.0
         conc = measure("concurrent", db_dir, spec, cluster, n)
         cluster.shutdown()
         rows.append((n, seq, conc))
@@ -231,9 +241,11 @@ def main() -> None:
     parser.add_argument("--real-evaluations", type=int, default=6)
     parser.add_argument("--real-repeats", type=int, default=3)
     parser.add_argument("--skip-real", action="store_true")
+    parser.add_argument("--skip-simulated", action="store_true")
     args = parser.parse_args()
     with tempfile.TemporaryDirectory() as db_dir:
-        simulated(args.workers, args.evaluations, db_dir)
+        if not args.skip_simulated:
+            simulated(args.workers, args.evaluations, db_dir)
         if not args.skip_real:
             real(args.real_evaluations, db_dir, args.real_repeats)
 

@@ -129,23 +129,30 @@ def unique_job_name(session: Session, base: str) -> str:
 def add_evaluation(session: Session, *, job_id: int, theta: dict[str, float], J: float, status: str,
                    metrics: dict[str, Any], trigger_points: list[dict[str, float]], wall_ms: float,
                    columns: list[str], trajectory: np.ndarray, seeds: list[dict[str, Any]] | None = None,
-                   trajectory_seed: int | None = None, max_trajectories: int | None = None) -> Evaluation:
+                   trajectory_seed: int | None = None, max_trajectories: int | None = None,
+                   packed: bytes | None = None) -> Evaluation:
     """Appends the next evaluation of a job (its index is the count so far, so numbering survives resumes).
 
     Its trajectory (up to ~100 kB) is kept while the job holds fewer than ``max_trajectories`` of them, and always
-    when the evaluation is the job's new best: a long job's storage stays bounded and its best stays watchable."""
+    when the evaluation is the job's new best: a long job's storage stays bounded and its best stays watchable.
+    ``packed`` is the trajectory already packed (:func:`pack_trajectory`, before the write transaction: compressing
+    takes longer than the rest of the commit, and the write lock is held meanwhile)."""
     index = count_evaluations(session, job_id=job_id)
     evaluation = Evaluation(job_id=job_id, index=index, theta=theta, J=J, status=status, metrics=metrics,
                             trigger_points=trigger_points, wall_ms=wall_ms, seeds=seeds,
                             trajectory_seed=trajectory_seed)
     if (max_trajectories is None or count_trajectories(session, job_id=job_id) < max_trajectories
             or _beats_best(session, job_id=job_id, J=J, completed=status == "completed")):
-        data = np.ascontiguousarray(trajectory, dtype=np.float64)
-        evaluation.trajectory = Trajectory(columns=list(columns), rows=int(data.shape[0]),
-                                           data=zlib.compress(data.tobytes(), 6))
+        evaluation.trajectory = Trajectory(columns=list(columns), rows=int(trajectory.shape[0]),
+                                           data=packed if packed is not None else pack_trajectory(trajectory))
     session.add(evaluation)
     session.flush()
     return evaluation
+
+
+def pack_trajectory(trajectory: np.ndarray) -> bytes:
+    """A trajectory as stored: zlib-compressed float64, row-major."""
+    return zlib.compress(np.ascontiguousarray(trajectory, dtype=np.float64).tobytes(), 6)
 
 
 def count_trajectories(session: Session, *, job_id: int) -> int:

@@ -7,9 +7,10 @@ that was interrupted continues from what is stored, with no repeated evaluation 
 
 from __future__ import annotations
 
+import threading
 import time
-from collections.abc import Callable
-from concurrent.futures import FIRST_COMPLETED, CancelledError, Future, wait
+from collections.abc import Callable, Hashable
+from concurrent.futures import CancelledError, Future
 from dataclasses import dataclass, field
 
 from sqlalchemy.orm import Session, sessionmaker
@@ -23,6 +24,7 @@ from driftlab.db.lifecycle import JobStatus
 from driftlab.db.models import Job
 from driftlab.settings import Settings
 from driftlab.worker.executors import EpisodeExecutor, EpisodeOutcome
+from driftlab.worker.slots import EpisodeSlots
 
 
 @dataclass
@@ -91,6 +93,7 @@ def _store(factory: sessionmaker[Session], lease: _Lease, evaluation: _PendingEv
     score, samples, shown = scored
     metrics = {**shown.metrics, "n_samples": len(samples), "n_completed": score.n_completed,
                "J_samples_mean": score.J}
+    packed = storage.pack_trajectory(shown.trajectory)  # before the write lock (dropped if not kept)
     with storage.transaction(factory) as session:
         job = session.get(Job, lease.job_id)
         if job is None or job.runner_id != lease.runner:
@@ -103,7 +106,7 @@ def _store(factory: sessionmaker[Session], lease: _Lease, evaluation: _PendingEv
                                wall_ms=sum(o.wall_ms for o in evaluation.outcomes.values()),
                                columns=shown.columns, trajectory=shown.trajectory,
                                seeds=[s.as_dict() for s in samples], trajectory_seed=shown.seed,
-                               max_trajectories=lease.max_trajectories)
+                               max_trajectories=lease.max_trajectories, packed=packed)
     return STORED
 
 
@@ -142,7 +145,8 @@ class _Lease:
 
 
 def run_job(factory: sessionmaker[Session], job_id: int, executor: EpisodeExecutor, *, runner: str,
-            workers: int = 1, should_stop: Callable[[], bool] = lambda: False,
+            workers: int = 1, slots: EpisodeSlots | None = None, owner: Hashable | None = None,
+            should_stop: Callable[[], bool] = lambda: False,
             on_progress: Callable[[Progress], None] | None = None) -> str:
     """Runs a job whose lease ``runner`` holds (:func:`claim_job`) until its budget is spent, it is paused
     (the lease is lost), or ``should_stop()`` (the runner shuts down: the job goes back to the queue). Returns
@@ -150,10 +154,24 @@ def run_job(factory: sessionmaker[Session], job_id: int, executor: EpisodeExecut
 
     Each evaluation runs one episode per seed of the job (``robust_samples`` of them, the same seeds for
     every theta) on the executor; one that completes every episode with a J better than the best so far
-    then runs ``confirm_samples`` more seeds, and is stored with all of them. New thetas are asked while
-    fewer than ``workers`` episodes are in flight, so with several samples per evaluation the optimizer stays
-    nearly sequential.
+    then runs ``confirm_samples`` more seeds, and is stored with all of them. The job keeps at most its share
+    of ``slots`` episodes in flight (the executor's capacity shared with the other jobs running on it, see
+    driftlab.worker.slots; ``workers`` alone when no ``slots`` are given; ``owner`` names the job there, if the
+    caller joined it already); an evaluation's episodes wait for a slot, and a new theta is asked only when none
+    waits and the share has room, so with several samples per evaluation the optimizer stays nearly sequential.
     """
+    slots = slots or EpisodeSlots(workers)
+    owner, wake = owner if owner is not None else object(), threading.Event()
+    slots.join(owner, wake)
+    try:
+        return _run(factory, job_id, executor, runner, slots, owner, wake, should_stop, on_progress)
+    finally:
+        slots.leave(owner)
+
+
+def _run(factory: sessionmaker[Session], job_id: int, executor: EpisodeExecutor, runner: str, slots: EpisodeSlots,
+         owner: object, wake: threading.Event, should_stop: Callable[[], bool],
+         on_progress: Callable[[Progress], None] | None) -> str:
     with storage.transaction(factory) as session:
         job = storage.get_job(session, job_id=job_id)
         spec = TuningSpec.from_dict(job.spec)
@@ -167,12 +185,21 @@ def run_job(factory: sessionmaker[Session], job_id: int, executor: EpisodeExecut
     n_done = len(history)
     evaluations: list[_PendingEvaluation] = []
     episodes: dict[Future[EpisodeOutcome], _PendingEvaluation] = {}
+    waiting: list[tuple[_PendingEvaluation, int]] = []  # asked episodes waiting for a slot
+
+    def submit_waiting() -> None:
+        while waiting and slots.try_take(owner):
+            evaluation, seed = waiting.pop(0)
+            future = executor.submit(evaluation.theta, config_doc, seed)
+            future.add_done_callback(lambda _: wake.set())
+            episodes[future] = evaluation
+
     started = time.perf_counter()
     n_at_start = n_done
     shutting_down = False
     try:
         while True:
-            if n_done >= lease.iterations and not episodes:
+            if n_done >= lease.iterations and not episodes and not waiting:
                 lease.renew_if_due(force=True)  # a budget raised at the last moment still counts
                 if n_done >= lease.iterations or not lease.held:
                     break
@@ -181,19 +208,24 @@ def run_job(factory: sessionmaker[Session], job_id: int, executor: EpisodeExecut
             stopping = shutting_down or not lease.held
             # Deterministic: one evaluation at a time (its seeds still run in parallel), so the optimizer's
             # history never depends on which worker finished first.
-            free = not evaluations if spec.deterministic else len(episodes) < workers
+            free = not evaluations if spec.deterministic else not waiting and slots.has_room(owner)
             while (not stopping and free and n_done + len(evaluations) < lease.iterations):
                 evaluation = _PendingEvaluation(optimizer.ask(), seeds)
                 evaluations.append(evaluation)
-                for seed in seeds:
-                    episodes[executor.submit(evaluation.theta, config_doc, seed)] = evaluation
-                free = not spec.deterministic and len(episodes) < workers
-            if not episodes:
+                waiting.extend((evaluation, seed) for seed in seeds)
+                submit_waiting()
+                free = not spec.deterministic and not waiting and slots.has_room(owner)
+            submit_waiting()  # what is asked completes, paused or not: its episodes were started or are due
+            if not episodes and not waiting and (stopping or n_done + len(evaluations) >= lease.iterations):
                 break
-            finished, _ = wait(list(episodes), timeout=lifecycle.HEARTBEAT_S, return_when=FIRST_COMPLETED)
-            for future in finished:
+            # Else wait for an episode to come back, or for a slot the other jobs free (the share may be full).
+            wake.wait(timeout=lifecycle.HEARTBEAT_S)
+            wake.clear()
+            for future in [f for f in episodes if f.done()]:
+                evaluation = episodes.pop(future)
+                slots.give_back(owner)
                 outcome = future.result()
-                episodes.pop(future).outcomes[outcome.seed] = outcome
+                evaluation.outcomes[outcome.seed] = outcome
             for evaluation in [e for e in evaluations if e.done]:
                 scored = evaluation.score()
                 score = scored[0]
@@ -203,16 +235,17 @@ def run_job(factory: sessionmaker[Session], job_id: int, executor: EpisodeExecut
                     # hundreds of thetas, some pass a few seeds by luck near a failure boundary).
                     evaluation.confirming = True
                     evaluation.seeds = evaluation.seeds + confirm_seeds
-                    for seed in confirm_seeds:
-                        episodes[executor.submit(evaluation.theta, config_doc, seed)] = evaluation
+                    waiting.extend((evaluation, seed) for seed in confirm_seeds)
                     continue
                 evaluations.remove(evaluation)
                 outcome_of_store = _store(factory, lease, evaluation, scored)
                 if outcome_of_store == LOST:
                     lease.held = False  # taken over: stop at once, the new runner owns the job
+                    waiting.clear()
                     continue
                 if outcome_of_store == OVER_BUDGET:
                     n_done = max(n_done, lease.iterations)  # the budget is spent: what is in flight is dropped
+                    waiting.clear()
                     continue
                 completed = score.status == "completed"
                 optimizer.tell(evaluation.theta, score.J if completed else None, score.J)

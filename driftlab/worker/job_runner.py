@@ -1,5 +1,7 @@
-"""The server's background job runner: one thread that takes the next claimable job (queued, or held by a
-dead runner) and runs it, or else the next claimable robustness study; their episodes run on the executor.
+"""The server's background job runner: one thread that claims claimable jobs (queued, or held by a dead runner)
+and runs each on a thread of its own, as many at once as the executor has workers, or else (when no job runs or
+waits) the next claimable robustness study. Every episode runs on the one executor, whose capacity the running jobs
+share (driftlab.worker.slots): a seeds study's jobs run side by side, each with its own optimizer.
 
 Exactly one runner runs a job at a time (the lease in driftlab.db.lifecycle): a `driftlab tune` on the same
 job is refused while this one holds it, and a job this server held when it died is taken over by the next
@@ -17,6 +19,7 @@ from driftlab.db import lifecycle, storage, studies
 from driftlab.db.models import Job, Study
 from driftlab.worker.executors import EpisodeExecutor, open_executor
 from driftlab.worker.job_loop import EXECUTOR_LOST, claim_job, run_job
+from driftlab.worker.slots import EpisodeSlots
 from driftlab.worker.study_runner import run_study
 
 
@@ -32,12 +35,25 @@ class JobRunner:
         self._wake = threading.Event()
         self._thread: threading.Thread | None = None
         self._executor: EpisodeExecutor | None = None
-        self.current_job_id: int | None = None
+        self._slots: EpisodeSlots | None = None
+        self._jobs: dict[int, threading.Thread] = {}  # the jobs running now, each on its thread
+        self._jobs_lock = threading.Lock()
         self.current_study_id: int | None = None
 
-    def start(self) -> None:
-        # Below the what-if worker and the web server in priority: a slider must not wait behind a job.
-        self._executor, self.workers = open_executor(self.workers, self.dask_address, niceness=10)
+    @property
+    def running_job_ids(self) -> list[int]:
+        """The jobs this runner runs now (several at once, up to the executor's capacity)."""
+        with self._jobs_lock:
+            return sorted(self._jobs)
+
+    def start(self, executor: EpisodeExecutor | None = None) -> None:
+        """Opens the executor (or takes ``executor``, whose capacity is ``workers``) and starts the runner."""
+        if executor is None:
+            # Below the what-if worker and the web server in priority: a slider must not wait behind a job.
+            self._executor, self.workers = open_executor(self.workers, self.dask_address, niceness=10)
+        else:
+            self._executor, self.workers = executor, self.workers or 1
+        self._slots = EpisodeSlots(self.workers)
         self._thread = threading.Thread(target=self._loop, name="driftlab-job-runner", daemon=True)
         self._thread.start()
 
@@ -68,7 +84,7 @@ class JobRunner:
         self._requeue_jobs_waiting_for_the_cluster()
         with storage.transaction(self.factory) as session:
             job_id = lifecycle.next_claimable(session)
-        if job_id is None:
+        if job_id is None or job_id in self.running_job_ids:  # ours, its heartbeat late: its thread still runs it
             return None
         try:
             claim_job(self.factory, job_id, self.runner_id)
@@ -96,18 +112,44 @@ class JobRunner:
             self.current_study_id = None
         return True
 
-    def _loop(self) -> None:
-        while not self._stop.is_set():
+    def _run_job(self, job_id: int) -> None:
+        try:
+            run_job(self.factory, job_id, self._executor, runner=self.runner_id, slots=self._slots, owner=job_id,
+                    should_stop=self._stop.is_set)
+        finally:
+            with self._jobs_lock:
+                self._jobs.pop(job_id, None)
+            self._wake.set()  # its share is free: the next job may start
+
+    def _start_claimable_jobs(self) -> bool:
+        """Claims what it can (a job takes at least one of the executor's slots: no more jobs at once than it has
+        workers) and starts them together: every job claimed now has its share before any of them asks."""
+        claimed = []
+        while len(self.running_job_ids) + len(claimed) < self._slots.capacity:
             job_id = self._claim_next()
-            if job_id is None and self._run_next_study():
-                continue
             if job_id is None:
+                break
+            claimed.append(job_id)
+            self._slots.join(job_id)
+        for job_id in claimed:
+            thread = threading.Thread(target=self._run_job, args=(job_id,), name=f"driftlab-job-{job_id}",
+                                      daemon=True)
+            with self._jobs_lock:
+                self._jobs[job_id] = thread
+            thread.start()
+        return bool(claimed)
+
+    def _loop(self) -> None:
+        try:
+            while not self._stop.is_set():
+                if self._start_claimable_jobs():
+                    continue
+                if not self.running_job_ids and self._run_next_study():
+                    continue
                 self._wake.wait(self.poll_s)
                 self._wake.clear()
-                continue
-            self.current_job_id = job_id
-            try:
-                run_job(self.factory, job_id, self._executor, runner=self.runner_id, workers=self.workers,
-                        should_stop=self._stop.is_set)
-            finally:
-                self.current_job_id = None
+        finally:
+            with self._jobs_lock:
+                threads = list(self._jobs.values())
+            for thread in threads:  # each stops after its episodes in flight (should_stop)
+                thread.join(timeout=30)

@@ -54,6 +54,11 @@ class LocalProcessExecutor:
         self.workers = workers
         self.pool = ProcessPoolExecutor(max_workers=workers, mp_context=multiprocessing.get_context("spawn"),
                                         initializer=_init_worker, initargs=(niceness, os.getpid()))
+        # Start every worker now, from this thread: the pool would start them on demand from the thread that
+        # submits, and a worker dies with the thread that started it (PR_SET_PDEATHSIG follows the parent thread),
+        # so a job's thread that ends would take the workers it started with it (the server runs jobs on threads).
+        for _ in range(workers):
+            self.pool.submit(os.getpid)
 
     def submit(self, theta: dict[str, float], config_doc: dict[str, Any], seed: int = 0) -> Future[EpisodeOutcome]:
         return self.pool.submit(evaluate_episode, theta, config_doc, seed)

@@ -1,0 +1,90 @@
+"""The executor's capacity (episodes it runs at once: the local pool's processes, the Dask cluster's threads)
+shared among the jobs that run on it at the same time.
+
+Each job keeps at most its fair share of episodes in flight (the capacity split evenly among the jobs running now,
+the remainder to those that joined first), and all of them together never more than the capacity: the workers are
+filled, never oversubscribed. A job that finishes (or pauses) leaves and frees its share for the others; a job that
+joins takes its share as the others' episodes come back (nothing in flight is cancelled).
+"""
+
+from __future__ import annotations
+
+import threading
+from collections.abc import Hashable
+
+
+class EpisodeSlots:
+    def __init__(self, capacity: int) -> None:
+        self.capacity = max(int(capacity), 1)
+        self._lock = threading.Lock()
+        self._held: dict[Hashable, int] = {}  # episodes in flight per job, in the order the jobs joined
+        self._wakes: dict[Hashable, threading.Event] = {}
+        self._in_flight = 0
+        self.peak = 0  # the most episodes in flight at once so far
+
+    def join(self, owner: Hashable, wake: threading.Event | None = None) -> None:
+        """``owner`` (one running job) takes part; ``wake`` is set whenever a slot it may use becomes free."""
+        with self._lock:
+            self._held.setdefault(owner, 0)
+            if wake is not None:
+                self._wakes[owner] = wake
+
+    def leave(self, owner: Hashable) -> None:
+        """The job stops: whatever it still counted as in flight is freed, and its share goes to the others."""
+        with self._lock:
+            self._in_flight -= self._held.pop(owner, 0)
+            self._wakes.pop(owner, None)
+            self._wake_all()
+
+    def _share(self, owner: Hashable) -> int:
+        n = len(self._held)
+        base, extra = divmod(self.capacity, max(n, 1))
+        rank = list(self._held).index(owner)
+        return max(base + (rank < extra), 1)
+
+    def share(self, owner: Hashable) -> int:
+        """How many episodes ``owner`` may keep in flight now."""
+        with self._lock:
+            return self._share(owner)
+
+    def _room(self, owner: Hashable) -> bool:
+        return self._held[owner] < self._share(owner) and self._in_flight < self.capacity
+
+    def has_room(self, owner: Hashable) -> bool:
+        """Whether ``owner`` could start one more episode now."""
+        with self._lock:
+            return self._room(owner)
+
+    def try_take(self, owner: Hashable) -> bool:
+        """Count one more episode of ``owner`` in flight if its share and the capacity allow it."""
+        with self._lock:
+            if not self._room(owner):
+                return False
+            self._held[owner] += 1
+            self._in_flight += 1
+            self.peak = max(self.peak, self._in_flight)
+            return True
+
+    def give_back(self, owner: Hashable) -> None:
+        """One episode of ``owner`` came back."""
+        with self._lock:
+            if self._held.get(owner, 0) > 0:
+                full = self._in_flight >= self.capacity
+                self._held[owner] -= 1
+                self._in_flight -= 1
+                if full:  # a job held back by the capacity (not by its own share) may go on
+                    self._wake_all()
+
+    def _wake_all(self) -> None:
+        for wake in self._wakes.values():
+            wake.set()
+
+    @property
+    def in_flight(self) -> int:
+        with self._lock:
+            return self._in_flight
+
+    @property
+    def jobs(self) -> int:
+        with self._lock:
+            return len(self._held)

@@ -35,7 +35,8 @@ def tuning_spec(args: argparse.Namespace):
     return TuningSpec(iterations=iterations, seed_points=seed_points, active_set=active_set,
                       seed=args.seed, robust_samples=args.robust_samples, confirm_samples=args.confirm_samples,
                       bounds=bounds, config=config, model_correction=correction,
-                      local_phase=None if args.local_phase is None else args.local_phase == "on", deterministic=bool(args.deterministic))
+                      local_phase=None if args.local_phase is None else args.local_phase == "on",
+                      deterministic=bool(args.deterministic))
 
 
 def open_tuning_job(factory, args: argparse.Namespace, runner: str) -> tuple[int, str]:

@@ -144,6 +144,14 @@ class _Lease:
         self._last = time.monotonic()
 
 
+def _may_ask(waiting: list, evaluations: list[_PendingEvaluation], room: bool) -> bool:
+    """Whether to ask the next theta now: nothing waits for a slot, and the share has room or only one evaluation
+    is unfinished, all of its episodes started. The ask then runs while that evaluation's last episodes do (with 4
+    seeds on 2 workers, a worker used to sit idle through it); the optimizer knows no less than if it asked when
+    they came back, since an evaluation is told only once all of its seeds are in."""
+    return not waiting and (room or len(evaluations) == 1)
+
+
 def run_job(factory: sessionmaker[Session], job_id: int, executor: EpisodeExecutor, *, runner: str,
             workers: int = 1, slots: EpisodeSlots | None = None, owner: Hashable | None = None,
             should_stop: Callable[[], bool] = lambda: False,
@@ -208,13 +216,13 @@ def _run(factory: sessionmaker[Session], job_id: int, executor: EpisodeExecutor,
             stopping = shutting_down or not lease.held
             # Deterministic: one evaluation at a time (its seeds still run in parallel), so the optimizer's
             # history never depends on which worker finished first.
-            free = not evaluations if spec.deterministic else not waiting and slots.has_room(owner)
+            free = not evaluations if spec.deterministic else _may_ask(waiting, evaluations, slots.has_room(owner))
             while (not stopping and free and n_done + len(evaluations) < lease.iterations):
                 evaluation = _PendingEvaluation(optimizer.ask(), seeds)
                 evaluations.append(evaluation)
                 waiting.extend((evaluation, seed) for seed in seeds)
                 submit_waiting()
-                free = not spec.deterministic and not waiting and slots.has_room(owner)
+                free = not spec.deterministic and _may_ask(waiting, evaluations, slots.has_room(owner))
             submit_waiting()  # what is asked completes, paused or not: its episodes were started or are due
             if not episodes and not waiting and (stopping or n_done + len(evaluations) >= lease.iterations):
                 break

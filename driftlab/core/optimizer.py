@@ -31,17 +31,15 @@ import warnings
 from collections.abc import Mapping, Sequence
 
 import numpy as np
-from scipy.linalg import solve_triangular
 from scipy.optimize import minimize
-from scipy.special import erf
 from scipy.stats import qmc
 from sklearn.exceptions import ConvergenceWarning
 from sklearn.gaussian_process import GaussianProcessClassifier
-from sklearn.gaussian_process._gpc import COEFS, LAMBDAS
 from sklearn.gaussian_process.kernels import RBF, ConstantKernel
 
 from driftlab.core.acquisition import constrained_ei, expected_improvement, failure_clearance
 from driftlab.core.errors import ConfigError
+from driftlab.core.failure_model import SuccessProbability, bounded_lbfgs
 from driftlab.core.limits import check_int
 from driftlab.core.surrogate import GaussianProcess, Hyperparameters, fit_hyperparameters
 
@@ -54,44 +52,9 @@ _EI_XI = 0.0
 _MIN_SUCCESS_PROBABILITY = 0.5
 _FAILURE_CLEARANCE = 0.015  # unit-cube distance over which a failure suppresses proposals
 _CLASSIFIER_POINTS = 150  # the classifier conditions on every failure and a spread of successes, this many
-_CLASSIFIER_FIT_ITERATIONS = 20
 # After this many failed evaluations in a row, propose near the best success instead (see _retreat).
 _FAILURE_STREAK = 5
 _RETREAT_SPREAD = 0.05  # unit-cube standard deviation of the first retreat; halved every _FAILURE_STREAK more
-
-
-def _bounded_lbfgs(obj_func, initial_theta, bounds):
-    """sklearn's default classifier optimizer (L-BFGS-B on the log marginal likelihood) with at most 20
-    iterations: run to convergence it took 20-60 ms at a refit, and the hyperparameters move little after."""
-    result = minimize(obj_func, initial_theta, method="L-BFGS-B", jac=True, bounds=bounds,
-                      options={"maxiter": _CLASSIFIER_FIT_ITERATIONS})
-    return result.x, result.fun
-
-
-class SuccessProbability:
-    """P(success) of a fitted binary Laplace GP classifier, as sklearn's ``predict_proba`` computes it (GPML
-    Algorithm 3.2, Williams & Barber's erf approximation), but with a triangular solve against the stored
-    Cholesky factor: sklearn solves it as a general matrix (an LU factorization of n x n per call), which
-    made the acquisition's many small calls cost ~2 ms each at n = 400."""
-
-    def __init__(self, classifier: GaussianProcessClassifier) -> None:
-        fitted = classifier.base_estimator_
-        self.kernel = fitted.kernel_
-        self.x_train = fitted.X_train_
-        self.coef = fitted.y_train_ - fitted.pi_
-        self.w_sr = fitted.W_sr_
-        self.chol_lower = fitted.L_
-
-    def __call__(self, x: np.ndarray) -> np.ndarray:
-        k_star = self.kernel(self.x_train, x)
-        mean = k_star.T @ self.coef
-        v = solve_triangular(self.chol_lower, self.w_sr[:, None] * k_star, lower=True, check_finite=False)
-        var = self.kernel.diag(x) - np.einsum("ij,ij->j", v, v)
-        alpha = 1.0 / (2.0 * var)
-        gamma = LAMBDAS * mean
-        integrals = (np.sqrt(np.pi / alpha) * erf(gamma * np.sqrt(alpha / (alpha + LAMBDAS**2)))
-                     / (2.0 * np.sqrt(var * 2.0 * np.pi)))
-        return (COEFS * integrals).sum(axis=0) + 0.5 * COEFS.sum()
 
 
 class BayesianOptimizer:
@@ -342,7 +305,7 @@ class BayesianOptimizer:
             if 0 < ok_prefix.sum() < boundary:
                 kernel = ConstantKernel(4.0, (1e-1, 1e3)) * RBF(np.full(self.dim, 0.3), (0.05, 5.0))
                 chosen = self._classifier_indices(x[:boundary], ok_prefix, _HYPER_FIT_POINTS)
-                clf = GaussianProcessClassifier(kernel, optimizer=_bounded_lbfgs, random_state=self.seed)
+                clf = GaussianProcessClassifier(kernel, optimizer=bounded_lbfgs, random_state=self.seed)
                 with warnings.catch_warnings():
                     warnings.simplefilter("ignore", ConvergenceWarning)
                     clf.fit(x[chosen], ok_prefix[chosen].astype(int))

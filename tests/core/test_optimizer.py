@@ -151,7 +151,7 @@ def test_success_probability_equals_sklearns_predict_proba():
     from sklearn.gaussian_process import GaussianProcessClassifier
     from sklearn.gaussian_process.kernels import RBF, ConstantKernel
 
-    from driftlab.core.optimizer import SuccessProbability
+    from driftlab.core.failure_model import SuccessProbability
 
     rng = np.random.default_rng(3)
     x = rng.random((300, 4))

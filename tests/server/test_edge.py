@@ -154,7 +154,8 @@ def test_work_per_request_is_bounded_and_a_refusal_stores_nothing(open_server):
 
 
 def test_the_queue_is_bounded(tmp_path):
-    proc, url = start_server(tmp_path / "queue.db", free_port(), env_extra={"DRIFTLAB_MAX_QUEUED_JOBS": "2"})
+    proc, url = start_server(tmp_path / "queue.db", free_port(), env_extra={"DRIFTLAB_MAX_QUEUED_JOBS": "2"},
+                             extra_args=("--workers", "1"))  # one job runs at a time
     try:
         first = httpx.post(f"{url}/api/jobs", json={"iterations": 5000, "seed_points": 5}).json()["id"]
         wait_status(url, first, {"running"})  # it runs; the next two wait

@@ -27,7 +27,8 @@ SCREENSHOT_DIR = os.environ.get("DRIFTLAB_SCREENSHOTS")  # set to keep the scree
 @pytest.fixture(scope="module")
 def server(tmp_path_factory):
     db = tmp_path_factory.mktemp("view") / "driftlab.db"
-    proc, url = start_server(db, free_port())
+    # One worker: the runner runs one job at a time (with more, jobs run side by side, see tests/worker)
+    proc, url = start_server(db, free_port(), extra_args=("--workers", "1"))
     yield url
     proc.terminate()
     proc.wait(timeout=30)
@@ -208,7 +209,7 @@ def test_landing_page_links_the_view(server):
 
 def test_an_empty_job_shows_nothing_of_another_job(server, browser, job):
     _wait_for_evaluations(server, job["id"], 16)
-    # The runner takes one job at a time, in order: behind a long job, a new one stays empty.
+    # With one worker the runner takes one job at a time, in order: behind a long job, a new one stays empty.
     busy = httpx.post(f"{server}/api/jobs", json={"name": "busy", "iterations": 5000, "seed_points": 5}).json()
     _wait_for_evaluations(server, busy["id"], 1)
     empty = httpx.post(f"{server}/api/jobs", json={"name": "empty", "iterations": 10}).json()

@@ -112,7 +112,7 @@ def add_job_options(parser: argparse.ArgumentParser) -> None:
                              "theta.model_c_scale); default on, off with --preset paper")
     parser.add_argument("--local-phase", choices=("on", "off"),
                         help="with model correction: start near the uncorrected model and widen the search as the "
-                             "models learn (default: on for DriftLab's plants, off for CommonRoad's)")
+                             "models learn (default: on for DriftLab's plants, off for others, e.g. CommonRoad's)")
     parser.add_argument("--deterministic", action="store_true", default=None,
                         help="one evaluation at a time (its seeds still in parallel): the thetas depend on the seed "
                              "and settings only, not on the number of workers or which episode finishes first")

@@ -356,7 +356,7 @@ class BayesianOptimizer:
             if np.all(np.isfinite(res.x)) and -res.fun > best_v:
                 best_x, best_v = np.clip(res.x, low, high), -float(res.fun)
         if self._is_repeat(best_x):
-            return rng.random(self.dim)
+            return low + rng.random(self.dim) * (high - low)
         return best_x
 
     def _is_repeat(self, unit: np.ndarray) -> bool:

@@ -48,9 +48,10 @@ DEFAULT_SEED_POINTS = 12
 # (unit widths of their bounds) of the uncorrected model, and the GP's proposals stay in that box, grown to the
 # whole over LOCAL_GROWTH evaluations. Best J after 25 evaluations -1.49 against -0.78 without it (the four-
 # dimensional run: -1.62): the corrections' box is mostly failure, and a space-filling design spent on it
-# learns where the car fails before where it drifts well. Off by default on a CommonRoad car: its drift family is
-# not the model's, the corrections it needs lie further out, and with the local phase the same jobs did worse
-# (STD, job seed 0: 37 of 40 fresh seeds against 40; MB: no completion in 150 against one).
+# learns where the car fails before where it drifts well. Off by default on any other plant (CommonRoad's, a
+# registered car): its drift family is not the model's, the corrections it needs may lie further out, and on
+# CommonRoad's the same jobs did worse with it (STD, job seed 0: 37 of 40 fresh seeds against 40; MB, seed 0: no
+# evaluation completed in 150, against a best completed evaluation at iteration 70 without it).
 LOCAL_POINTS = 11
 LOCAL_MODEL_RADIUS = 0.05
 LOCAL_GROWTH = 15
@@ -101,7 +102,7 @@ class TuningSpec:
             unless bounded otherwise. Off: the paper's four parameters (jobs stored before revision 8).
         local_phase: with the model corrections, start near the uncorrected model (LOCAL_POINTS, LOCAL_GROWTH);
             off: the seed points fill the whole box (jobs stored before revision 10). None (the default): on for
-            DriftLab's own plants, off for a CommonRoad car (see LOCAL_POINTS); stored as what it resolved to.
+            DriftLab's own plants, off for any other (see LOCAL_POINTS); stored as what it resolved to.
         deterministic: the next theta is asked only once every evaluation asked before is stored and told, so the
             sequence of thetas is a function of the seed and the settings whatever the number of workers or
             their speed. Off (the default): a new theta is asked as soon as a worker is free, and the order in

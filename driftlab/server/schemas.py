@@ -74,7 +74,7 @@ class JobCreate(BaseModel):
     local_phase: bool | None = Field(default=None, strict=True,
                                      description="with model_correction: start near the uncorrected model (most of "
                                                  "the corrections' box fails) and widen the search as the models "
-                                                 "learn; default: on for DriftLab's plants, off for CommonRoad's")
+                                                 "learn; default: on for DriftLab's plants, off for others")
     deterministic: bool = Field(default=False, strict=True,
                                 description="ask the next theta only when every earlier evaluation is stored: the "
                                             "thetas then depend on the seed and settings only, not on how many "

@@ -166,7 +166,8 @@ def run_job(factory: sessionmaker[Session], job_id: int, executor: EpisodeExecut
     of ``slots`` episodes in flight (the executor's capacity shared with the other jobs running on it, see
     driftlab.worker.slots; ``workers`` alone when no ``slots`` are given; ``owner`` names the job there, if the
     caller joined it already); an evaluation's episodes wait for a slot, and a new theta is asked only when none
-    waits and the share has room, so with several samples per evaluation the optimizer stays nearly sequential.
+    waits and either the share has room or one evaluation is unfinished (:func:`_may_ask`), so with several
+    samples per evaluation the optimizer stays nearly sequential.
     """
     slots = slots or EpisodeSlots(workers)
     owner, wake = owner if owner is not None else object(), threading.Event()

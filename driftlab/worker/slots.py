@@ -83,8 +83,3 @@ class EpisodeSlots:
     def in_flight(self) -> int:
         with self._lock:
             return self._in_flight
-
-    @property
-    def jobs(self) -> int:
-        with self._lock:
-            return len(self._held)

@@ -153,6 +153,15 @@ def test_revision_0006_adds_studies_to_a_database_with_jobs(tmp_path):
         assert session.get(Meta, "schema_version").value == "10"
 
 
+def _insert_old_rows(connection, rows) -> None:
+    """Finished jobs and studies as an older revision stored them: (table, spec) each, ids 1, 2, ..."""
+    for i, (table, spec) in enumerate(rows):
+        extra, value = ("seed", 0) if table == "jobs" else ("kind", spec["kind"])
+        connection.exec_driver_sql(f"INSERT INTO {table} (id, name, spec, {extra}, status, created_at, updated_at) "
+                                   "VALUES (?, ?, ?, ?, 'finished', '2026-11-01', '2026-11-01')",
+                                   (i + 1, f"old{i}", json.dumps(spec), value))
+
+
 def test_revision_0007_pins_stored_jobs_and_studies_to_osqp(tmp_path):
     """Jobs and studies stored before the exact QP solver keep the solver they ran; new ones get DAQP."""
     from alembic import command
@@ -168,12 +177,8 @@ def test_revision_0007_pins_stored_jobs_and_studies_to_osqp(tmp_path):
     job_spec = {**TuningSpec().to_dict(), "config": config}
     with engine.connect() as connection, connection.begin():
         command.upgrade(schema._config(connection), "0006")
-        for i, (table, spec) in enumerate((("jobs", job_spec), ("studies", {"kind": "robustness", "config": config}),
-                                           ("studies", {"kind": "seeds", "spec": job_spec}))):
-            extra, value = ("seed", 0) if table == "jobs" else ("kind", spec["kind"])
-            connection.exec_driver_sql(f"INSERT INTO {table} (id, name, spec, {extra}, status, created_at, updated_at) "
-                                       "VALUES (?, ?, ?, ?, 'finished', '2026-11-01', '2026-11-01')",
-                                       (i + 1, f"old{i}", json.dumps(spec), value))
+        _insert_old_rows(connection, [("jobs", job_spec), ("studies", {"kind": "robustness", "config": config}),
+                                      ("studies", {"kind": "seeds", "spec": job_spec})])
     factory = storage.open_database(url)
     with storage.transaction(factory) as session:
         assert TuningSpec.from_dict(session.get(JobRow, 1).spec).config.mpc.qp_solver == "osqp"
@@ -198,12 +203,8 @@ def test_revision_0008_keeps_stored_jobs_in_the_box_they_were_learned_in(tmp_pat
     del job_spec["model_correction"]  # as revision 7 stored it
     with engine.connect() as connection, connection.begin():
         command.upgrade(schema._config(connection), "0007")
-        for i, (table, spec) in enumerate((("jobs", job_spec), ("studies", {"kind": "seeds", "spec": job_spec}),
-                                           ("studies", {"kind": "robustness", "theta": {"k": 0.05}}))):
-            extra, value = ("seed", 0) if table == "jobs" else ("kind", spec["kind"])
-            connection.exec_driver_sql(f"INSERT INTO {table} (id, name, spec, {extra}, status, created_at, updated_at) "
-                                       "VALUES (?, ?, ?, ?, 'finished', '2026-11-01', '2026-11-01')",
-                                       (i + 1, f"old{i}", json.dumps(spec), value))
+        _insert_old_rows(connection, [("jobs", job_spec), ("studies", {"kind": "seeds", "spec": job_spec}),
+                                      ("studies", {"kind": "robustness", "theta": {"k": 0.05}})])
     four = {"c_lr", "c_rl", "dV", "k"}
     factory = storage.open_database(url)
     with storage.transaction(factory) as session:
@@ -230,11 +231,7 @@ def test_revision_0010_keeps_stored_jobs_asking_what_they_asked(tmp_path):
     del job_spec["local_phase"]  # as revision 9 stored it
     with engine.connect() as connection, connection.begin():
         command.upgrade(schema._config(connection), "0009")
-        for i, (table, spec) in enumerate((("jobs", job_spec), ("studies", {"kind": "seeds", "spec": job_spec}))):
-            extra, value = ("seed", 0) if table == "jobs" else ("kind", spec["kind"])
-            connection.exec_driver_sql(f"INSERT INTO {table} (id, name, spec, {extra}, status, created_at, updated_at) "
-                                       "VALUES (?, ?, ?, ?, 'finished', '2026-11-01', '2026-11-01')",
-                                       (i + 1, f"old{i}", json.dumps(spec), value))
+        _insert_old_rows(connection, [("jobs", job_spec), ("studies", {"kind": "seeds", "spec": job_spec})])
     factory = storage.open_database(url)
     with storage.transaction(factory) as session:
         old = TuningSpec.from_dict(session.get(JobRow, 1).spec)

@@ -145,11 +145,13 @@ class _Lease:
 
 
 def _may_ask(waiting: list, evaluations: list[_PendingEvaluation], room: bool) -> bool:
-    """Whether to ask the next theta now: nothing waits for a slot, and the share has room or only one evaluation
-    is unfinished, all of its episodes started. The ask then runs while that evaluation's last episodes do (with 4
-    seeds on 2 workers, a worker used to sit idle through it); the optimizer knows no less than if it asked when
-    they came back, since an evaluation is told only once all of its seeds are in."""
-    return not waiting and (room or len(evaluations) == 1)
+    """Whether to ask the next theta now: while at most one evaluation is unfinished (the next one is asked as
+    soon as the previous one starts, so its episodes wait ready when the workers free up), or while the share has
+    room and nothing waits for a slot. The optimizer knows no less than if it asked later: an evaluation is told
+    only once all of its seeds are in, so the next theta is asked with the unfinished one pending either way. (It
+    used to wait until the unfinished evaluation's last episodes had started: with 4 seeds on 2 workers the workers
+    then ran dry whenever the ask took longer than those last episodes.)"""
+    return len(evaluations) < 2 or (not waiting and room)
 
 
 def run_job(factory: sessionmaker[Session], job_id: int, executor: EpisodeExecutor, *, runner: str,
@@ -165,8 +167,8 @@ def run_job(factory: sessionmaker[Session], job_id: int, executor: EpisodeExecut
     then runs ``confirm_samples`` more seeds, and is stored with all of them. The job keeps at most its share
     of ``slots`` episodes in flight (the executor's capacity shared with the other jobs running on it, see
     driftlab.worker.slots; ``workers`` alone when no ``slots`` are given; ``owner`` names the job there, if the
-    caller joined it already); an evaluation's episodes wait for a slot, and a new theta is asked only when none
-    waits and either the share has room or one evaluation is unfinished (:func:`_may_ask`), so with several
+    caller joined it already); an evaluation's episodes wait for a slot, and a new theta is asked while at most one
+    evaluation is unfinished, or while the share has room and none waits (:func:`_may_ask`), so with several
     samples per evaluation the optimizer stays nearly sequential.
     """
     slots = slots or EpisodeSlots(workers)
@@ -235,6 +237,7 @@ def _run(factory: sessionmaker[Session], job_id: int, executor: EpisodeExecutor,
                 slots.give_back(owner)
                 outcome = future.result()
                 evaluation.outcomes[outcome.seed] = outcome
+            submit_waiting()  # the freed workers take what waits before this thread stores, tells and asks
             for evaluation in [e for e in evaluations if e.done]:
                 scored = evaluation.score()
                 score = scored[0]

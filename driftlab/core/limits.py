@@ -15,7 +15,6 @@ JOB_LIMITS: dict[str, tuple[int, int]] = {
     "seed": (0, 2**31 - 1),
     "robust_samples": (1, MAX_ROBUST_SAMPLES),
     "confirm_samples": (0, MAX_ROBUST_SAMPLES - 1),
-    "classifier_every": (1, 100),
 }
 
 

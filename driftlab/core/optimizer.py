@@ -47,7 +47,6 @@ _CANDIDATES = 256
 _LOCAL_CANDIDATES = 128
 _LOCAL_STARTS = 2
 _LOCAL_ITERATIONS = 10
-_LOCAL_EVALUATIONS = 15  # acquisition evaluations per local search (line searches included)
 _HYPER_FIT_POINTS = 80  # hyperparameters from at most this many points; the GPs then condition on all
 _EI_XI = 0.0
 _MIN_SUCCESS_PROBABILITY = 0.5
@@ -75,15 +74,12 @@ class BayesianOptimizer:
         active_set: most successful observations the GP is fit on.
         seed: random seed (Latin hypercube, candidate sets).
         refit_every: hyperparameter refit period in observations.
-        classifier_every: once the history holds 4 refit periods, the failure classifier is conditioned again
-            only every this many tells, on that prefix (1: on every ask). Conditioning it was half of an ask at
-            n = 400; a failure told since still repels proposals through the failure clearance.
     """
 
     def __init__(self, bounds: Mapping[str, tuple[float, float]], *, seed_points: int = 20, active_set: int = 400,
                  seed: int = 0, refit_every: int = 10, initial_points: Sequence[Mapping[str, float]] = (),
                  local_points: int = 0, local_radius: float | Mapping[str, float] = 0.15,
-                 local_growth: int = 0, classifier_every: int = 1) -> None:
+                 local_growth: int = 0) -> None:
         if not bounds:
             raise ConfigError("bounds must name at least one parameter")
         for name, pair in bounds.items():
@@ -92,8 +88,6 @@ class BayesianOptimizer:
                 raise ConfigError(f"bounds.{name} must be [lo, hi] with finite lo < hi, got {list(pair)}")
         check_int("seed_points", seed_points)
         check_int("active_set", active_set)
-        check_int("classifier_every", classifier_every, 1, 100)
-        self.classifier_every = classifier_every
         self.names = list(bounds)
         self.lo = np.array([float(bounds[n][0]) for n in self.names])
         self.hi = np.array([float(bounds[n][1]) for n in self.names])
@@ -125,8 +119,6 @@ class BayesianOptimizer:
         self._regression_hp: Hyperparameters | None = None
         self._clf_at = -1
         self._label_hp = None
-        self._conditioned_at: tuple[int, int] | None = None
-        self._success_probability: SuccessProbability | None = None
 
     # -- public interface -------------------------------------------------------------------------------
     def ask(self) -> dict[str, float]:
@@ -321,24 +313,11 @@ class BayesianOptimizer:
             else:
                 self._label_hp = ConstantKernel(4.0) * RBF(np.full(self.dim, 0.3))
             self._clf_at = boundary
-        prefix = self._conditioning_prefix(ok)
-        if self._conditioned_at != (prefix, boundary):
-            chosen = self._classifier_indices(x[:prefix], ok[:prefix], _CLASSIFIER_POINTS)
-            # warm_start: sklearn searches the Laplace mode twice in one fit (for the likelihood, then for
-            # prediction); the second search starts from the first one's mode. Nothing carries over between fits.
-            classifier = GaussianProcessClassifier(self._label_hp, optimizer=None, warm_start=True)
-            self._success_probability = SuccessProbability(classifier.fit(x[chosen], ok[chosen].astype(int)))
-            self._conditioned_at = (prefix, boundary)
-        return self._success_probability
-
-    def _conditioning_prefix(self, ok: np.ndarray) -> int:
-        """How much of the history the classifier is conditioned on: all of it while the history is short, then
-        the last multiple of ``classifier_every`` (all of it if that prefix lacks a success or a failure)."""
-        n = len(ok)
-        if n < 4 * self.refit_every:
-            return n
-        prefix = (n // self.classifier_every) * self.classifier_every
-        return prefix if 0 < ok[:prefix].sum() < prefix else n
+        chosen = self._classifier_indices(x, ok, _CLASSIFIER_POINTS)
+        # warm_start: sklearn searches the Laplace mode twice in one fit (for the likelihood, then for
+        # prediction); the second search starts from the first one's mode. Nothing carries over between fits.
+        classifier = GaussianProcessClassifier(self._label_hp, optimizer=None, warm_start=True)
+        return SuccessProbability(classifier.fit(x[chosen], ok[chosen].astype(int)))
 
     def _acquisition(self, gp: GaussianProcess, classifier: SuccessProbability | None, best: float,
                      failed: np.ndarray, x: np.ndarray) -> np.ndarray:
@@ -373,7 +352,7 @@ class BayesianOptimizer:
 
         for start in starts:
             res = minimize(negative_with_gradient, start, jac=True, method="L-BFGS-B",
-                           bounds=list(zip(low, high, strict=True)), options={"maxiter": _LOCAL_ITERATIONS, "maxfun": _LOCAL_EVALUATIONS})
+                           bounds=list(zip(low, high, strict=True)), options={"maxiter": _LOCAL_ITERATIONS})
             if np.all(np.isfinite(res.x)) and -res.fun > best_v:
                 best_x, best_v = np.clip(res.x, low, high), -float(res.fun)
         if self._is_repeat(best_x):

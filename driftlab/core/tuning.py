@@ -55,11 +55,6 @@ DEFAULT_SEED_POINTS = 12
 LOCAL_POINTS = 11
 LOCAL_MODEL_RADIUS = 0.05
 LOCAL_GROWTH = 15
-# Tells between two conditionings of the optimizer's failure classifier, from 40 evaluations on (before, every
-# ask). Conditioning it on every ask was half of an ask at n = 400 (~12 ms of ~25 ms); the job default's robust
-# 500-run spends its main process's time on asks while the workers share the same two cores
-# (benchmarks/bench_all.py --robust; benchmarks/peers.py for its sample efficiency, docs/benchmarks.md).
-CLASSIFIER_EVERY = 5
 # The paper's 500-run learns the paper's four parameters only.
 PAPER_PRESET = {"iterations": 500, "seed_points": 20, "active_set": 400, "model_correction": False}
 
@@ -108,8 +103,6 @@ class TuningSpec:
         local_phase: with the model corrections, start near the uncorrected model (LOCAL_POINTS, LOCAL_GROWTH);
             off: the seed points fill the whole box (jobs stored before revision 10). None (the default): on for
             DriftLab's own plants, off for any other (see LOCAL_POINTS); stored as what it resolved to.
-        classifier_every: tells between two conditionings of the failure classifier once 40 evaluations are in
-            (1..100; CLASSIFIER_EVERY by default, 1 for jobs stored before revision 11).
         deterministic: the next theta is asked only once every evaluation asked before is stored and told, so the
             sequence of thetas is a function of the seed and the settings whatever the number of workers or
             their speed. Off (the default): a new theta is asked as soon as a worker is free, and the order in
@@ -128,11 +121,10 @@ class TuningSpec:
     config: EpisodeConfig = field(default_factory=EpisodeConfig)
     model_correction: bool = True
     local_phase: bool | None = None
-    classifier_every: int = CLASSIFIER_EVERY
     deterministic: bool = False
 
     def __post_init__(self) -> None:
-        for name in ("iterations", "seed_points", "active_set", "seed", "robust_samples", "classifier_every"):
+        for name in ("iterations", "seed_points", "active_set", "seed", "robust_samples"):
             check_int(name, getattr(self, name))
         # The confirmation seeds follow the evaluation seeds in the job's block of MAX_ROBUST_SAMPLES.
         check_int("confirm_samples", self.confirm_samples, 0, MAX_ROBUST_SAMPLES - self.robust_samples)
@@ -160,8 +152,7 @@ class TuningSpec:
         return {"iterations": self.iterations, "seed_points": self.seed_points, "active_set": self.active_set,
                 "seed": self.seed, "robust_samples": self.robust_samples, "confirm_samples": self.confirm_samples,
                 "bounds": {k: list(v) for k, v in self.bounds.items()}, "model_correction": self.model_correction,
-                "local_phase": self.local_phase, "classifier_every": self.classifier_every,
-                "deterministic": self.deterministic,
+                "local_phase": self.local_phase, "deterministic": self.deterministic,
                 "config": config_to_dict(self.config)}
 
     @property
@@ -179,7 +170,7 @@ class TuningSpec:
     def optimizer_options(self) -> dict[str, Any]:
         """The optimizer's settings for this job (:class:`driftlab.core.optimizer.BayesianOptimizer`'s keywords)."""
         options: dict[str, Any] = {"seed_points": self.seed_points, "active_set": self.active_set, "seed": self.seed,
-                                   "initial_points": self.initial_points, "classifier_every": self.classifier_every}
+                                   "initial_points": self.initial_points}
         if self.local_phase and self.model_correction:
             options.update(local_points=min(LOCAL_POINTS, self.seed_points - 1), local_growth=LOCAL_GROWTH,
                            local_radius={name: LOCAL_MODEL_RADIUS for name in MODEL_BOUNDS})
@@ -199,13 +190,12 @@ class TuningSpec:
     def from_dict(cls, data: dict[str, Any]) -> TuningSpec:
         """From a stored or posted document. ``config`` may be nested sections or flat dotted keys."""
         allowed = {"iterations", "seed_points", "active_set", "seed", "robust_samples", "confirm_samples", "bounds",
-                   "model_correction", "local_phase", "classifier_every", "deterministic", "config"}
+                   "model_correction", "local_phase", "deterministic", "config"}
         unknown = set(data) - allowed
         if unknown:
             raise ConfigError(f"unknown field {sorted(unknown)[0]!r}; allowed: {', '.join(sorted(allowed))}")
         config = config_from_document(data.get("config"))
-        scalars = ("iterations", "seed_points", "active_set", "seed", "robust_samples", "confirm_samples",
-                   "classifier_every")
+        scalars = ("iterations", "seed_points", "active_set", "seed", "robust_samples", "confirm_samples")
         kwargs = {k: data[k] for k in scalars if k in data}
         return cls(**kwargs, bounds=data.get("bounds") or {}, config=config,
                    model_correction=data.get("model_correction", True), local_phase=data.get("local_phase"),

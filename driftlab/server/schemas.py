@@ -11,8 +11,7 @@ from pydantic import BaseModel, ConfigDict, Field, model_validator
 from driftlab.core.config import THETA_KEYS, check_json_types
 from driftlab.core.errors import ConfigError
 from driftlab.core.limits import JOB_LIMITS
-from driftlab.core.tuning import (CLASSIFIER_EVERY, DEFAULT_CONFIRM_SAMPLES, DEFAULT_ROBUST_SAMPLES,
-                                  DEFAULT_SEED_POINTS)
+from driftlab.core.tuning import DEFAULT_CONFIRM_SAMPLES, DEFAULT_ROBUST_SAMPLES, DEFAULT_SEED_POINTS
 
 MAX_ID = 2**63 - 1  # SQLite's INTEGER; larger ids cannot exist (and used to overflow into a 500)
 MAX_PAGE = 1000
@@ -76,9 +75,6 @@ class JobCreate(BaseModel):
                                      description="with model_correction: start near the uncorrected model (most of "
                                                  "the corrections' box fails) and widen the search as the models "
                                                  "learn; default: on for DriftLab's plants, off for others")
-    classifier_every: int = _limited("classifier_every", CLASSIFIER_EVERY,
-                                     "tells between two conditionings of the optimizer's failure classifier "
-                                     "once 40 evaluations are in (1: every ask)")
     deterministic: bool = Field(default=False, strict=True,
                                 description="ask the next theta only when every earlier evaluation is stored: the "
                                             "thetas then depend on the seed and settings only, not on how many "

@@ -72,30 +72,6 @@ def test_resume_from_history_gives_the_same_next_proposal():
         resumed.tell(b, branin(b))
 
 
-def test_a_classifier_conditioned_every_five_tells_resumes_to_the_same_proposals():
-    """From 40 evaluations on the failure classifier is conditioned on the last multiple of 5 tells: an optimizer
-    rebuilt between two conditionings (47 told) proposes what the uninterrupted one does, and the classifier in
-    between is the one conditioned at 45."""
-    def value(theta):
-        return branin(theta) if theta["x2"] < 11 else None
-
-    uninterrupted = BayesianOptimizer(BRANIN_BOUNDS, seed_points=8, seed=5, classifier_every=5)
-    history = []
-    for _ in range(47):
-        theta = uninterrupted.ask()
-        uninterrupted.tell(theta, value(theta))
-        history.append((theta, value(theta)))
-    resumed = BayesianOptimizer(BRANIN_BOUNDS, seed_points=8, seed=5, classifier_every=5)
-    for theta, v in history:
-        resumed.tell(theta, v)
-    for n in (47, 48, 49, 50):
-        a, b = uninterrupted.ask(), resumed.ask()
-        assert a == b
-        assert uninterrupted._conditioned_at[0] == resumed._conditioned_at[0] == (45 if n < 50 else 50)
-        uninterrupted.tell(a, value(a))
-        resumed.tell(b, value(b))
-
-
 def test_a_design_point_lost_in_a_crash_is_run_once_and_none_twice():
     """Two design points in flight, the later one stored, then a crash: the resumed optimizer runs the lost one
     and never the stored one again (it used to ask design[n_issued], i.e. the stored point a second time)."""

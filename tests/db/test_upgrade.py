@@ -82,7 +82,7 @@ def test_schema_1_database_upgrades_and_its_results_still_reproduce(tmp_path):
     with storage.transaction(factory) as session:
         job = session.get(Job, 1)
         evaluation = session.get(Evaluation, 1)
-        assert session.get(Meta, "schema_version").value == "11"
+        assert session.get(Meta, "schema_version").value == "10"
         spec = TuningSpec.from_dict(job.spec)
         assert spec.robust_samples == 1 and spec.confirm_samples == 0 and not spec.config.plant.varies
         assert not spec.config.mpc.feedback_in_model and spec.config.mpc.estimator_hold_s == 0.0  # pinned by 0005
@@ -100,7 +100,7 @@ def test_schema_1_database_upgrades_and_its_results_still_reproduce(tmp_path):
 
 def test_a_new_database_is_created_at_the_head_revision(tmp_path):
     factory = storage.open_database(f"sqlite:///{tmp_path / 'new.db'}")
-    assert schema.current_revision(storage.engine_of(factory)) == schema.head_revision() == "0011"
+    assert schema.current_revision(storage.engine_of(factory)) == schema.head_revision() == "0010"
     with storage.transaction(factory) as session:
         job = storage.create_job(session, name="fresh", spec=TuningSpec().to_dict(), seed=0)
         assert job.runner_id is None and job.heartbeat_at is None
@@ -150,7 +150,7 @@ def test_revision_0006_adds_studies_to_a_database_with_jobs(tmp_path):
         assert [c.settings for c in studies.cells(session, study_id=study.id)] == [{"plant.mass_scale": 1.0},
                                                                                   {"plant.mass_scale": 1.1}]
         assert [j.name for j in studies.study_jobs(session, study_id=study.id)] == ["member"]
-        assert session.get(Meta, "schema_version").value == "11"
+        assert session.get(Meta, "schema_version").value == "10"
 
 
 def _insert_old_rows(connection, rows) -> None:
@@ -239,29 +239,3 @@ def test_revision_0010_keeps_stored_jobs_asking_what_they_asked(tmp_path):
         assert not TuningSpec.from_dict(session.get(Study, 2).spec["spec"]).local_phase
         fresh = TuningSpec.from_dict(storage.create_job(session, name="new", spec=TuningSpec().to_dict(), seed=0).spec)
         assert fresh.local_phase and fresh.optimizer_options["local_points"] == 11
-
-
-def test_revision_0011_keeps_stored_jobs_conditioning_their_classifier_on_every_ask(tmp_path):
-    """Jobs and seeds studies stored before the classifier's schedule keep conditioning it on every ask; new jobs
-    condition it every CLASSIFIER_EVERY tells."""
-    from alembic import command
-    from sqlalchemy import create_engine
-
-    from driftlab.core.tuning import CLASSIFIER_EVERY
-    from driftlab.db.models import Job as JobRow
-    from driftlab.db.models import Study
-
-    url = f"sqlite:///{tmp_path / 'v10.db'}"
-    engine = create_engine(url)
-    job_spec = TuningSpec().to_dict()
-    del job_spec["classifier_every"]  # as revision 10 stored it
-    with engine.connect() as connection, connection.begin():
-        command.upgrade(schema._config(connection), "0010")
-        _insert_old_rows(connection, [("jobs", job_spec), ("studies", {"kind": "seeds", "spec": job_spec})])
-    factory = storage.open_database(url)
-    with storage.transaction(factory) as session:
-        old = TuningSpec.from_dict(session.get(JobRow, 1).spec)
-        assert old.classifier_every == 1 and old.optimizer_options["classifier_every"] == 1
-        assert TuningSpec.from_dict(session.get(Study, 2).spec["spec"]).classifier_every == 1
-        fresh = TuningSpec.from_dict(storage.create_job(session, name="new", spec=TuningSpec().to_dict(), seed=0).spec)
-        assert fresh.classifier_every == CLASSIFIER_EVERY > 1

@@ -74,24 +74,54 @@ def _open_study(factory, args: argparse.Namespace, tuning_spec, runner: str) -> 
 
 
 def _run_seeds_jobs(factory, study_id: int, executor, workers: int, runner: str) -> None:
+    """Runs the study's unfinished jobs at once, as the server's runner does: one thread and one optimizer per job,
+    the workers shared fairly (driftlab.worker.slots; at most as many jobs at once as workers, the next one
+    starting when one finishes). Ctrl-C: what is asked completes, then the jobs are paused."""
+    import threading
+
     from driftlab.db import lifecycle, storage, studies
     from driftlab.db.lifecycle import JobStatus
     from driftlab.worker.job_loop import claim_job, run_job
+    from driftlab.worker.slots import EpisodeSlots
 
     with storage.transaction(factory) as session:
-        jobs = [(j.id, j.name, j.status) for j in studies.study_jobs(session, study_id=study_id)]
-    for job_id, name, status in jobs:
-        if status == JobStatus.FINISHED:
-            continue
-        claim_job(factory, job_id, runner, from_statuses=(JobStatus.QUEUED, JobStatus.PAUSED, JobStatus.FAILED))
+        todo = [(j.id, j.name) for j in studies.study_jobs(session, study_id=study_id)
+                if j.status != JobStatus.FINISHED]
+    slots, stop, done = EpisodeSlots(workers), threading.Event(), threading.Semaphore(0)
+    statuses: dict[int, str] = {}
+
+    def run(job_id: int, name: str) -> None:
         started = time.perf_counter()
         try:
-            status = run_job(factory, job_id, executor, runner=runner, workers=workers)
-        except KeyboardInterrupt:
-            with storage.transaction(factory) as session:
-                lifecycle.release(session, job_id=job_id, runner=runner, status=JobStatus.PAUSED)
-            raise
-        sys.stderr.write(f"job {name}: {status} in {time.perf_counter() - started:.1f} s\n")
+            statuses[job_id] = run_job(factory, job_id, executor, runner=runner, slots=slots, owner=job_id,
+                                       should_stop=stop.is_set)
+            sys.stderr.write(f"job {name}: {statuses[job_id]} in {time.perf_counter() - started:.1f} s\n")
+        finally:
+            done.release()
+
+    threads: list[threading.Thread] = []
+    try:
+        for job_id, name in todo:
+            if len(threads) >= slots.capacity:
+                done.acquire()  # a job finished: its share goes to the next one
+            if stop.is_set():
+                break
+            claim_job(factory, job_id, runner, from_statuses=(JobStatus.QUEUED, JobStatus.PAUSED, JobStatus.FAILED))
+            slots.join(job_id)  # before its thread starts: every job claimed has its share before any asks
+            threads.append(threading.Thread(target=run, args=(job_id, name), name=f"driftlab-job-{job_id}"))
+            threads[-1].start()
+        while any(t.is_alive() for t in threads):
+            for thread in threads:
+                thread.join(timeout=0.2)
+    except KeyboardInterrupt:
+        stop.set()
+        for thread in threads:
+            thread.join()
+        with storage.transaction(factory) as session:
+            for job_id, status in statuses.items():
+                if status == JobStatus.QUEUED:  # stopped by us, not finished: paused, as `tune` leaves a job
+                    lifecycle.request_pause(session, job_id=job_id)
+        raise
 
 
 def _run_cells(factory, study_id: int, executor, workers: int, runner: str) -> None:

@@ -202,3 +202,31 @@ def test_a_robustness_study_still_runs_after_the_jobs(factory):
     assert _status(factory, job) == ("finished", None) and _indices(factory, job) == list(range(6))
     with storage.snapshot(factory) as session:
         assert all(c.status == "completed" for c in studies.cells(session, study_id=study_id))
+
+
+def test_the_cli_runs_a_seeds_studys_jobs_at_once_too(factory):
+    """`driftlab study seeds` runs the study's jobs as the server's runner does: side by side on the shared
+    workers, never more episodes in flight than workers, each job numbered once; a finished job is not rerun."""
+    from driftlab.cli.study import _run_seeds_jobs
+
+    with storage.transaction(factory) as session:
+        study = start_study(session, doc={"kind": "seeds", "seeds": [1, 2, 3], "spec": SPEC})
+        study_id = study.id
+        job_ids = [j.id for j in studies.study_jobs(session, study_id=study_id)]
+    cluster = FakeCluster(workers=4)
+    try:
+        _run_seeds_jobs(factory, study_id, cluster, cluster.workers, "cli-test")
+    finally:
+        cluster.shutdown()
+    assert cluster.opened_full, "the workers were never full with episodes of two jobs at once"
+    assert cluster.jobs_at_once >= 2 and cluster.peak <= cluster.workers
+    with storage.snapshot(factory) as session:
+        assert studies.study_status(session, studies.get_study(session, study_id=study_id)) == "finished"
+        for job_id in job_ids:
+            assert [e.index for e in storage.evaluations(session, job_id=job_id)] == list(range(SPEC["iterations"]))
+    again = FakeCluster(workers=4, gate_s=0.0)
+    try:
+        _run_seeds_jobs(factory, study_id, again, again.workers, "cli-test")
+    finally:
+        again.shutdown()
+    assert again.peak == 0  # every job was finished: nothing ran again

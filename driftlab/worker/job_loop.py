@@ -81,6 +81,18 @@ class _PendingEvaluation:
         return score, samples, ordered[score.representative]
 
 
+def _skip_unstarted(evaluation: _PendingEvaluation, waiting: list[tuple[_PendingEvaluation, int]]) -> None:
+    """One of the evaluation's seeds failed, so the evaluation fails whatever the others do (it completes only if
+    every seed does): its seeds not started yet are dropped, and it is scored and stored with the seeds that ran
+    (J: their mean). In the job default's 500-run 310 of 500 evaluations failed, 295 of them within their first
+    two seeds, and failed evaluations took 57 % of the workers' time. Not in a deterministic job: which seeds had
+    started when the failure came back depends on the workers' timing."""
+    skipped = {seed for queued, seed in waiting if queued is evaluation}
+    if skipped:
+        waiting[:] = [(queued, seed) for queued, seed in waiting if queued is not evaluation]
+        evaluation.seeds = [seed for seed in evaluation.seeds if seed not in skipped]
+
+
 STORED, OVER_BUDGET, LOST = "stored", "over_budget", "lost"
 
 
@@ -164,7 +176,8 @@ def run_job(factory: sessionmaker[Session], job_id: int, executor: EpisodeExecut
 
     Each evaluation runs one episode per seed of the job (``robust_samples`` of them, the same seeds for
     every theta) on the executor; one that completes every episode with a J better than the best so far
-    then runs ``confirm_samples`` more seeds, and is stored with all of them. The job keeps at most its share
+    then runs ``confirm_samples`` more seeds, and is stored with all of them. Once a seed fails, the seeds of
+    that evaluation not started yet are skipped (:func:`_skip_unstarted`; not in a deterministic job). The job keeps at most its share
     of ``slots`` episodes in flight (the executor's capacity shared with the other jobs running on it, see
     driftlab.worker.slots; ``workers`` alone when no ``slots`` are given; ``owner`` names the job there, if the
     caller joined it already); an evaluation's episodes wait for a slot, and a new theta is asked while at most one
@@ -237,6 +250,8 @@ def _run(factory: sessionmaker[Session], job_id: int, executor: EpisodeExecutor,
                 slots.give_back(owner)
                 outcome = future.result()
                 evaluation.outcomes[outcome.seed] = outcome
+                if not outcome.completed and not spec.deterministic:
+                    _skip_unstarted(evaluation, waiting)
             submit_waiting()  # the freed workers take what waits before this thread stores, tells and asks
             for evaluation in [e for e in evaluations if e.done]:
                 scored = evaluation.score()

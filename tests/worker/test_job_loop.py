@@ -118,3 +118,48 @@ def test_a_long_job_keeps_a_bounded_number_of_trajectories_and_every_best(tmp_pa
         dropped = next(e for e in stored if e.trajectory is None)
         with pytest.raises(storage.NotFound, match="was not kept"):
             storage.trajectory_array(session, evaluation_id=dropped.id)
+
+
+class FailingSeedExecutor:
+    """Runs episodes inline (one worker: each is back before the next is submitted); a theta with k > 0.06 fails
+    on every seed. Records the seeds it ran, per theta."""
+
+    def __init__(self) -> None:
+        self.ran: dict[float, list[int]] = {}
+
+    def submit(self, theta, config_doc, seed=0) -> Future:
+        self.ran.setdefault(theta["k"], []).append(seed)
+        fails = theta["k"] > 0.06
+        future: Future = Future()
+        future.set_result(EpisodeOutcome(theta=dict(theta), seed=seed, status="spun_out" if fails else "completed",
+                                         J=6.0 if fails else theta["k"] - 2.0,
+                                         metrics={"completed_fraction": 0.3 if fails else 1.0, "mean_abs_e_m": 0.1},
+                                         trigger_points=[], wall_ms=1.0, columns=["t_s"], trajectory=np.zeros((2, 1))))
+        return future
+
+    def shutdown(self) -> None:
+        pass
+
+
+@pytest.mark.parametrize("deterministic", [False, True])
+def test_a_failed_seed_ends_its_evaluation_unless_the_job_is_deterministic(tmp_path, deterministic):
+    """An evaluation fails once one seed fails, so its seeds not started yet are skipped and it is stored with
+    the seeds that ran; a deterministic job runs every seed (which ones had started would depend on timing)."""
+    factory = storage.open_database(f"sqlite:///{tmp_path / 'skip.db'}")
+    spec = TuningSpec(iterations=10, seed_points=10, seed=0, robust_samples=4, confirm_samples=0,
+                      deterministic=deterministic, bounds={"k": [0.0, 0.12]})
+    with storage.transaction(factory) as session:
+        job_id = storage.create_job(session, name="skip", spec=spec.to_dict(), seed=spec.seed).id
+    claim_job(factory, job_id, "runner")
+    executor = FailingSeedExecutor()
+    assert run_job(factory, job_id, executor, runner="runner", workers=1) == "finished"
+    with storage.snapshot(factory) as session:
+        stored = storage.evaluations(session, job_id=job_id)
+    failed = [e for e in stored if not e.completed]
+    assert failed and any(e.completed for e in stored)
+    for e in stored:
+        assert [s["seed"] for s in e.seeds] == executor.ran[e.theta["k"]]
+        if e.completed or deterministic:
+            assert len(e.seeds) == 4
+        else:  # the first seed failed: the other three never ran
+            assert len(e.seeds) == 1 and e.metrics["n_samples"] == 1 and e.J == pytest.approx(6.0)

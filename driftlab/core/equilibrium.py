@@ -63,12 +63,19 @@ class Equilibrium:
                 "delta": self.steer_rad, "Fxr": self.drive_force_n}
 
 
-def _residual(unknowns: np.ndarray, radius_m: float, sideslip_rad: float, p: np.ndarray) -> np.ndarray:
-    speed, steer, drive_kn = unknowns
-    speed = max(speed, 0.1)
-    derivs = drift_derivatives(speed, sideslip_rad, speed / radius_m, steer, drive_kn * 1e3, p)
+@njit(cache=True)
+def _residual(unknowns, radius_m, sideslip_rad, p):
+    """(Vdot, betadot V, rdot) at unknowns (V, delta, Fxr kN), r = V / R. Compiled: the 60 starts' solves of a
+    model call it ~1500 times, which in Python took ~11 ms of every new model (the same floating-point
+    operations, the same bits: tests/core/test_vehicle.py)."""
+    speed = unknowns[0]
+    if 0.1 > speed:  # max(speed, 0.1) as Python takes it: a NaN speed stays NaN
+        speed = 0.1
+    derivs = drift_derivatives(speed, sideslip_rad, speed / radius_m, unknowns[1], unknowns[2] * 1e3, p)
     # Scale each equation to ~O(1) at drift conditions so one tolerance fits all three.
-    return np.array([derivs[0], derivs[1] * speed, derivs[2]])
+    out = np.empty(3)
+    out[0], out[1], out[2] = derivs[0], derivs[1] * speed, derivs[2]
+    return out
 
 
 def peak_slip_rad(p: np.ndarray) -> float:

@@ -174,15 +174,15 @@ def run_job(factory: sessionmaker[Session], job_id: int, executor: EpisodeExecut
     (the lease is lost), or ``should_stop()`` (the runner shuts down: the job goes back to the queue). Returns
     the status it leaves the job in and releases the lease.
 
-    Each evaluation runs one episode per seed of the job (``robust_samples`` of them, the same seeds for
-    every theta) on the executor; one that completes every episode with a J better than the best so far
-    then runs ``confirm_samples`` more seeds, and is stored with all of them. Once a seed fails, the seeds of
-    that evaluation not started yet are skipped (:func:`_skip_unstarted`; not in a deterministic job). The job keeps at most its share
-    of ``slots`` episodes in flight (the executor's capacity shared with the other jobs running on it, see
+    Each evaluation runs one episode per seed of the job (``robust_samples`` of them, the same seeds for every
+    theta) on the executor; one that completes every episode with a J better than the best so far then runs
+    ``confirm_samples`` more seeds, and is stored with all of them. Once a seed fails, the seeds of that evaluation
+    not started yet are skipped (:func:`_skip_unstarted`; not in a deterministic job). The job keeps at most its
+    share of ``slots`` episodes in flight (the executor's capacity shared with the other jobs running on it, see
     driftlab.worker.slots; ``workers`` alone when no ``slots`` are given; ``owner`` names the job there, if the
     caller joined it already); an evaluation's episodes wait for a slot, and a new theta is asked while at most one
-    evaluation is unfinished, or while the share has room and none waits (:func:`_may_ask`), so with several
-    samples per evaluation the optimizer stays nearly sequential.
+    evaluation is unfinished, or while the share has room and none waits (:func:`_may_ask`), so with several samples
+    per evaluation the optimizer stays nearly sequential.
     """
     slots = slots or EpisodeSlots(workers)
     owner, wake = owner if owner is not None else object(), threading.Event()

@@ -65,3 +65,25 @@ def test_the_local_phase_is_on_for_driftlabs_plants_and_off_for_a_commonroad_car
     assert TuningSpec.from_dict(std.to_dict()).local_phase is False  # stored as what it resolved to
     with pytest.raises(ConfigError, match="local_phase must be true or false"):
         TuningSpec(local_phase="yes")
+
+
+def test_a_corrected_models_right_drift_is_its_left_drift_mirrored_bit_for_bit():
+    """Every evaluation's theta is a new model built in each worker: on equal radii with no per-side offsets its
+    right equilibrium is taken as the left one mirrored (one solve, not two), and it is exactly what the full
+    solve of the right side gives; with unequal radii both are solved."""
+    from driftlab.core.controller import _reference_equilibria
+    from driftlab.core.equilibrium import drift_equilibrium
+    from driftlab.core.vehicle import pack_params
+
+    config = EpisodeConfig()
+    scenario = config.scenario
+    for mu, c in ((0.87, 1.21), (1.13, 0.93)):
+        vehicle = Theta(model_mu_scale=mu, model_c_scale=c).model_vehicle(config.vehicle)
+        left, right = _reference_equilibria(vehicle, scenario.left_radius_m, scenario.right_radius_m,
+                                            scenario.sideslip_rad)
+        assert right == drift_equilibrium(scenario.right_radius_m, abs(scenario.sideslip_rad),
+                                          pack_params(vehicle, right=True))
+        assert right == left.mirrored()
+        left, right = _reference_equilibria(vehicle, 44.0, 36.0, scenario.sideslip_rad)
+        assert right == drift_equilibrium(36.0, abs(scenario.sideslip_rad), pack_params(vehicle, right=True))
+        assert right.speed_mps < left.speed_mps

@@ -93,3 +93,28 @@ def test_default_plant_has_its_own_drift_near_the_model(left_eq):
 def test_vehicle_validation_names_the_field():
     with pytest.raises(ConfigError, match="vehicle.friction"):
         VehicleParams(friction=-1.0)
+
+
+def test_the_compiled_equilibrium_residual_is_the_python_arithmetic_bit_for_bit():
+    """The equilibrium solver's residual runs compiled; on random unknowns (NaN included) it gives exactly what
+    the same operations give in Python, so every equilibrium, and every episode, keeps its bits."""
+    import math
+
+    from driftlab.core.config import EpisodeConfig
+    from driftlab.core.equilibrium import _residual
+    from driftlab.core.vehicle import drift_derivatives, pack_params
+
+    def in_python(unknowns, radius_m, sideslip_rad, p):
+        speed, steer, drive_kn = unknowns
+        speed = max(speed, 0.1)
+        d = drift_derivatives(speed, sideslip_rad, speed / radius_m, steer, drive_kn * 1e3, p)
+        return np.array([d[0], d[1] * speed, d[2]])
+
+    p = pack_params(EpisodeConfig().vehicle)
+    rng = np.random.default_rng(7)
+    for _ in range(3000):
+        unknowns = np.array([rng.uniform(-5.0, 40.0), rng.uniform(-1.0, 1.0), rng.uniform(-5.0, 15.0)])
+        radius, beta = rng.uniform(20.0, 80.0), rng.uniform(-0.7, -0.1)
+        assert np.array_equal(_residual(unknowns, radius, beta, p), in_python(unknowns, radius, beta, p))
+    nan = np.array([math.nan, 0.1, 1.0])
+    assert np.isnan(_residual(nan, 44.0, -0.4, p)).all() and np.isnan(in_python(nan, 44.0, -0.4, p)).all()

@@ -6,8 +6,8 @@ from __future__ import annotations
 import json
 import math
 from concurrent.futures import Future
-from functools import lru_cache
 from dataclasses import dataclass
+from functools import lru_cache
 from typing import Any, Protocol
 
 import numpy as np

@@ -99,17 +99,20 @@ def _run_seeds_jobs(factory, study_id: int, executor, workers: int, runner: str)
         finally:
             done.release()
 
-    threads: list[threading.Thread] = []
-    try:
-        for job_id, name in todo:
-            if len(threads) >= slots.capacity:
-                done.acquire()  # a job finished: its share goes to the next one
-            if stop.is_set():
-                break
+    def start(batch: list[tuple[int, str]]) -> None:
+        for job_id, _ in batch:  # every job of the batch has its share before any of them asks
             claim_job(factory, job_id, runner, from_statuses=(JobStatus.QUEUED, JobStatus.PAUSED, JobStatus.FAILED))
-            slots.join(job_id)  # before its thread starts: every job claimed has its share before any asks
+            slots.join(job_id)
+        for job_id, name in batch:
             threads.append(threading.Thread(target=run, args=(job_id, name), name=f"driftlab-job-{job_id}"))
             threads[-1].start()
+
+    threads: list[threading.Thread] = []
+    try:
+        start(todo[:slots.capacity])
+        for job in todo[slots.capacity:]:
+            done.acquire()  # a job finished: its share goes to the next one
+            start([job])
         while any(t.is_alive() for t in threads):
             for thread in threads:
                 thread.join(timeout=0.2)

@@ -50,7 +50,7 @@ class EpisodeExecutor(Protocol):
 @lru_cache(maxsize=16)
 def _config_of(config_json: str):
     """The validated config of a job's document, parsed once per worker process: every episode of a job sends the
-    same document, and parsing it (~1 ms) was a twentieth of a default episode. EpisodeConfig is frozen."""
+    same document (parsing it: ~0.4 ms of a ~17 ms default episode; the key: ~0.03 ms). EpisodeConfig is frozen."""
     from driftlab.core.config import config_from_dict
 
     return config_from_dict(json.loads(config_json))

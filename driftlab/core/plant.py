@@ -234,9 +234,10 @@ class PlantConfig:
         scaled = model_vehicle.scaled(friction=self.friction_scale, mass_kg=self.mass_scale,
                                       yaw_inertia_kgm2=self.yaw_inertia_scale, tyre_b=self.tyre_b_scale,
                                       tyre_c=self.tyre_c_scale)
-        # The plant's own car: a model's equilibrium offsets are the model's, not the car's.
+        # The plant's own car: a model's equilibrium offsets are the model's, not the car's, and the plant's tyre
+        # coupling is plant.friction_circle, not the model's.
         return replace(scaled, cg_height_m=self.cg_height_m, steer_offset_rad=0.0, drive_offset_n=0.0,
-                       steer_offset_right_rad=0.0, drive_offset_right_n=0.0)
+                       steer_offset_right_rad=0.0, drive_offset_right_n=0.0, rear_friction_circle=False)
 
     def packed_params(self, model_vehicle: VehicleParams) -> np.ndarray:
         """Parameter vector for the compiled dynamics of this plant."""

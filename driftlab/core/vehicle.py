@@ -70,6 +70,11 @@ class VehicleParams:
         front_grip_scale: the front tyre's peak force is friction x this x its load (1 in the paper): where
             on its curve the front tyre sits in the drift, hence how strongly the yaw rate answers the steering
             (fitted to a car's measured response, driftlab.core.commonroad.steering_gain).
+        rear_friction_circle: the rear drive force takes its share of the rear tyre's grip, the lateral peak
+            shrinking to sqrt((mu Fzr)^2 - Fxr^2) (off in the paper). A car whose rear wheels spin under the drive
+            (the multi-body car's) answers more drive with more yaw rate and sideslip; the paper's model answers
+            with less, and an MPC that uses the drive to hold the sideslip then pushes the wrong way
+            (driftlab.core.commonroad.model_fit).
     """
 
     mass_kg: float = 1844.7
@@ -86,6 +91,7 @@ class VehicleParams:
     steer_offset_right_rad: float = 0.0
     drive_offset_right_n: float = 0.0
     front_grip_scale: float = 1.0
+    rear_friction_circle: bool = False
 
     def __post_init__(self) -> None:
         limits = {
@@ -105,6 +111,9 @@ class VehicleParams:
             "front_grip_scale": (0.2, 5.0),
         }
         check_ranges(self, "vehicle", limits)
+        if not isinstance(self.rear_friction_circle, bool):
+            raise ConfigError(f"vehicle.rear_friction_circle must be true or false, got {self.rear_friction_circle!r}",
+                              field="vehicle.rear_friction_circle")
 
     @property
     def wheelbase_m(self) -> float:
@@ -131,9 +140,10 @@ def pack_params(
 ) -> np.ndarray:
     """The float64 parameter vector read by the compiled dynamics.
 
-    With both flags off this is the paper's 3-state model. ``right``: with the right-hand drift's offsets;
-    ``mirrored``: for states of a right-hand drift itself (the steering offset, given in the left-hand form,
-    flips sign), not for its mirror image, which drift_equilibrium solves.
+    With both flags off (and the vehicle's ``rear_friction_circle``) this is the paper's 3-state model.
+    ``right``: with the right-hand drift's offsets; ``mirrored``: for states of a right-hand drift itself (the
+    steering offset, given in the left-hand form, flips sign), not for its mirror image, which drift_equilibrium
+    solves.
     """
     p = np.zeros(N_PARAMS)
     p[P_MASS] = vehicle.mass_kg
@@ -145,7 +155,7 @@ def pack_params(
     p[P_TYRE_C] = vehicle.tyre_c
     p[P_GRAVITY] = vehicle.gravity_mps2
     p[P_CG_HEIGHT] = vehicle.cg_height_m
-    p[P_FRICTION_CIRCLE] = 1.0 if friction_circle else 0.0
+    p[P_FRICTION_CIRCLE] = 1.0 if (friction_circle or vehicle.rear_friction_circle) else 0.0
     p[P_LOAD_TRANSFER] = 1.0 if load_transfer else 0.0
     steer_offset = vehicle.steer_offset_right_rad if right else vehicle.steer_offset_rad
     p[P_STEER_OFFSET] = -steer_offset if mirrored else steer_offset

@@ -46,6 +46,9 @@ def fitted_model_vehicle(vehicle_id: int, radius_m: float, sideslip_rad: float,
     right = _main_drift(vehicle_id, radius_m, sideslip_rad, True, model)
     base = commonroad_model_vehicle(vehicle_id)
     if model == "commonroad_mb":
+        # The multi-body car's rear wheels spin up under more drive and its rear slides further: the model takes
+        # the drive's share of the rear grip, or it answers the drive with the opposite sign (VehicleParams).
+        base = replace(base, rear_friction_circle=True)
         base = replace(base, front_grip_scale=matched_front_grip(base, vehicle_id, radius_m, left, right, model))
     return _placed_at_drift(base, radius_m, sideslip_rad, left, right)
 
@@ -57,7 +60,7 @@ def matched_front_grip(base: VehicleParams, vehicle_id: int, radius_m: float, le
     from driftlab.core.commonroad.steering_gain import car_yaw_response, model_yaw_response
     from driftlab.core.plant import PlantConfig
 
-    car, steering = car_yaw_response(getattr(PlantConfig, model)(vehicle_id), left, radius_m)
+    car, steering, _ = car_yaw_response(getattr(PlantConfig, model)(vehicle_id), left, radius_m)
 
     def gap(grip: float) -> float:
         vehicle = _placed_at_drift(replace(base, front_grip_scale=grip), radius_m, left.sideslip_rad, left, right)

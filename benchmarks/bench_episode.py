@@ -32,10 +32,10 @@ CASES = {
     ("commonroad_std", "default"): Theta(c_lr=0.02262810577223354, c_rl=0.024522631460998034, dV=-0.09616088562347275,
                                          k=0.03917159665094941, model_mu_scale=1.013467793294224,
                                          model_c_scale=1.014977910718866),
-    # The best theta of a 500-iteration MB job (20 of 20 fresh seeds).
-    ("commonroad_mb", "default"): Theta(c_lr=0.016513828668805193, c_rl=0.03855163222080299, dV=-0.29711450987624244,
-                                        k=0.00038014933511630914, model_mu_scale=0.85,
-                                        model_c_scale=0.8609676448711481),
+    # The best theta of `driftlab tune --plant commonroad_mb --seed 0` (500 iterations; 20 of 20 fresh seeds).
+    ("commonroad_mb", "default"): Theta(c_lr=0.01725465363446671, c_rl=0.03769508713337872, dV=-0.28330247342060166,
+                                        k=0.0044283048858848135, model_mu_scale=1.0192568227741625,
+                                        model_c_scale=0.954932013685166),
 }
 
 

@@ -171,6 +171,23 @@ def test_the_multibody_cars_steady_drift_with_a_locked_differential():
     assert f[4] == pytest.approx(left.yaw_rate_radps) and np.hypot(f[0], f[1]) == pytest.approx(left.speed_mps)
 
 
+def test_the_multibody_drift_family_is_found_at_every_sideslip_where_it_is_continuous():
+    """Started from STD's drift, the solve misses MB's drift at 0.46, 0.48 and 0.55 rad; followed from a sideslip
+    where it converges, each is found, between its neighbours, and a steady state of the package's equations."""
+    from vehiclemodels.vehicle_dynamics_mb import vehicle_dynamics_mb
+
+    from driftlab.core.commonroad.mb_equilibrium import mb_main_drift, mb_steady_state
+
+    family = [mb_main_drift(2, 44.0, beta) for beta in (0.44, 0.46, 0.48, 0.5, 0.52, 0.55, 0.58)]
+    assert all(drift is not None and drift.countersteer for drift in family)
+    speeds = [drift.speed_mps for drift in family]
+    steers = [drift.steer_rad for drift in family]
+    assert all(np.diff(speeds) < 0) and all(np.diff(steers) < 0)  # faster and less countersteer at less sideslip
+    _, state, accel = mb_steady_state(2, 44.0, 0.55)
+    f = np.array(vehicle_dynamics_mb(list(state), [0.0, accel], package_parameters(2)))
+    assert np.max(np.abs(f[[3, 5, 10, 15, 20]])) < 1e-6
+
+
 def test_an_mb_episode_runs_in_the_same_loop_and_is_pure():
     config = EpisodeConfig.preset("commonroad_mb")
     first, again = (run_episode(Theta(), config, seed=1) for _ in range(2))

@@ -172,13 +172,13 @@ def test_the_multibody_cars_steady_drift_with_a_locked_differential():
 
 
 def test_the_multibody_drift_family_is_found_at_every_sideslip_where_it_is_continuous():
-    """Started from STD's drift, the solve misses MB's drift at 0.46, 0.48 and 0.55 rad; followed from a sideslip
-    where it converges, each is found, between its neighbours, and a steady state of the package's equations."""
+    """Started from STD's drift, the solve misses MB's drift at 0.46, 0.48 and 0.55 rad; followed from 0.5 rad,
+    each is found, between its neighbours, and a steady state of the package's equations."""
     from vehiclemodels.vehicle_dynamics_mb import vehicle_dynamics_mb
 
     from driftlab.core.commonroad.mb_equilibrium import mb_main_drift, mb_steady_state
 
-    family = [mb_main_drift(2, 44.0, beta) for beta in (0.44, 0.46, 0.48, 0.5, 0.52, 0.55, 0.58)]
+    family = [mb_main_drift(2, 44.0, beta) for beta in (0.3, 0.44, 0.46, 0.48, 0.5, 0.52, 0.55, 0.58, 0.7)]
     assert all(drift is not None and drift.countersteer for drift in family)
     speeds = [drift.speed_mps for drift in family]
     steers = [drift.steer_rad for drift in family]

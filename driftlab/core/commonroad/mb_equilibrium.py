@@ -84,27 +84,38 @@ def _solve_from_std(vehicle_id: int, radius_m: float, beta: float, cp, friction_
     return found
 
 
-def _continued(vehicle_id: int, radius_m: float, beta: float, cp, friction_scale: float, mass_scale: float,
-               right: bool) -> list[np.ndarray]:
-    """MB's drift at ``beta`` followed from the nearest sideslip (within 0.1 rad) where the start from STD's drift
-    converges, in steps of 0.005 rad: the family is continuous, but that start misses it at some sideslips (vehicle
-    2 at 44 m: 0.46, 0.48, 0.55), and "no drift" there would be false."""
-    for offset in (0.02, -0.02, 0.04, -0.04, 0.06, -0.06, 0.08, -0.08, 0.1, -0.1):
-        near = math.copysign(abs(beta) + offset, beta)
-        if abs(near) < 0.05:
-            continue
-        solutions = _solve_from_std(vehicle_id, radius_m, near, cp, friction_scale, mass_scale, right)
-        if not solutions:
-            continue
-        x = max(solutions, key=lambda s: s[0])
-        steps = max(1, round(abs(offset) / 0.005))
-        for k in range(1, steps + 1):
-            x = _solve(x, radius_m, near + (beta - near) * k / steps, cp)
-            if x is None:
-                break
-        if x is not None:
-            return [x]
-    return []
+# The sideslip MB's family is followed from where the start from STD's drift misses it (the paper's 0.5 rad),
+# and the step of that walk.
+_ANCHOR_RAD = 0.5
+_WALK_RAD = 0.01
+
+
+@lru_cache(maxsize=512)
+def _drift_unknowns(vehicle_id: int, radius_m: float, abs_sideslip_rad: float, right: bool, friction_scale: float,
+                    mass_scale: float) -> np.ndarray | None:
+    """The solved unknowns of MB's drift (see _state), or None.
+
+    Started from STD's drift at the same sideslip (the fastest physical solution found); where that start misses
+    it, followed from the neighbouring sideslip one _WALK_RAD nearer _ANCHOR_RAD, itself solved the same way. The
+    family is continuous, but the start from STD misses it at some sideslips (vehicle 2 at 44 m: 0.46, 0.48, 0.55,
+    0.6 rad), and "no drift" there would be false. Cached: a sweep over sideslips walks each step once.
+    """
+    cp = pack_mb(vehicle_id, friction_scale=friction_scale, mass_scale=mass_scale)
+    beta = abs_sideslip_rad if right else -abs_sideslip_rad
+    found = _solve_from_std(vehicle_id, radius_m, beta, cp, friction_scale, mass_scale, right)
+    if found:
+        return max(found, key=lambda s: s[0])
+    if abs(abs_sideslip_rad - _ANCHOR_RAD) < 0.5 * _WALK_RAD:
+        return None
+    nearer = round(abs_sideslip_rad + math.copysign(_WALK_RAD, _ANCHOR_RAD - abs_sideslip_rad), 6)
+    start = _drift_unknowns(vehicle_id, radius_m, nearer, right, friction_scale, mass_scale)
+    if start is None:
+        return None
+    for k in (1, 2):  # two half steps: hybr from a neighbour's state
+        start = _solve(start, radius_m, math.copysign(nearer + (abs_sideslip_rad - nearer) * k / 2, beta), cp)
+        if start is None:
+            return None
+    return start
 
 
 @lru_cache(maxsize=64)
@@ -114,12 +125,9 @@ def mb_steady_state(vehicle_id: int, radius_m: float, sideslip_rad: float, right
     """(the drift, MB's full 29-state vector in it, the acceleration input), or None."""
     cp = pack_mb(vehicle_id, friction_scale=friction_scale, mass_scale=mass_scale)
     beta = abs(sideslip_rad) if right else -abs(sideslip_rad)
-    found = _solve_from_std(vehicle_id, radius_m, beta, cp, friction_scale, mass_scale, right)
-    if not found:
-        found = _continued(vehicle_id, radius_m, beta, cp, friction_scale, mass_scale, right)
-    if not found:
+    x = _drift_unknowns(vehicle_id, radius_m, abs(sideslip_rad), right, friction_scale, mass_scale)
+    if x is None:
         return None
-    x = max(found, key=lambda s: s[0])
     speed, steer, accel = float(x[0]), float(x[1]), float(x[2])
     rear_slip = 1.0 - cp[R_W] * x[5] / (speed * math.cos(beta))
     drift = PlantDrift(speed, beta, -math.copysign(speed / radius_m, beta), steer, float(cp[M] * accel), accel,

@@ -111,8 +111,8 @@ def _drift_unknowns(vehicle_id: int, radius_m: float, abs_sideslip_rad: float, r
     start = _drift_unknowns(vehicle_id, radius_m, nearer, right, friction_scale, mass_scale)
     if start is None:
         return None
-    for k in (1, 2):  # two half steps: hybr from a neighbour's state
-        start = _solve(start, radius_m, math.copysign(nearer + (abs_sideslip_rad - nearer) * k / 2, beta), cp)
+    for k in range(1, 5):  # quarter steps: from 0.67 to 0.68 rad one step, or two, lands on a wheel at -7e9 rad/s
+        start = _solve(start, radius_m, math.copysign(nearer + (abs_sideslip_rad - nearer) * k / 4, beta), cp)
         if start is None:
             return None
     return start

@@ -161,6 +161,7 @@ def test_the_multibody_cars_steady_drift_with_a_locked_differential():
     std = commonroad_drifts(2, 44.0, 0.5)[0]
     assert abs(left.speed_mps - std.speed_mps) < 0.5 and left.steer_rad < std.steer_rad - 0.1
     assert left.rear_slip < 0 and left.acceleration_mps2 < std.acceleration_mps2
+    assert 50.0 < left.front_wheel_radps < 70.0  # rolling (V cos(beta) / wheel radius ~ 59 rad/s), not frozen
     # The drift is a steady state of the package's own equations, the rear wheels on one shaft.
     from vehiclemodels.vehicle_dynamics_mb import vehicle_dynamics_mb
 

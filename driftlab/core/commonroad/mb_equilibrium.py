@@ -132,5 +132,6 @@ def mb_steady_state(vehicle_id: int, radius_m: float, sideslip_rad: float, right
     rear_slip = 1.0 - cp[R_W] * x[5] / (speed * math.cos(beta))
     drift = PlantDrift(speed, beta, -math.copysign(speed / radius_m, beta), steer, float(cp[M] * accel), accel,
                        float(cp[M] * accel),
-                       float(1.0 - cp[R_W] * x[3] / (speed * math.cos(beta))), float(rear_slip))
+                       float(1.0 - cp[R_W] * x[3] / (speed * math.cos(beta))), float(rear_slip),
+                       front_wheel_radps=float(0.5 * (x[3] + x[4])))  # the two front wheels' mean
     return drift, _state(x, radius_m, beta, cp), accel

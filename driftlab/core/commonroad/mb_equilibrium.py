@@ -84,8 +84,8 @@ def _solve_from_std(vehicle_id: int, radius_m: float, beta: float, cp, friction_
     return found
 
 
-# The sideslip MB's family is followed from where the start from STD's drift misses it (the paper's 0.5 rad),
-# and the step of that walk.
+# Where the start from STD's drift misses MB's drift, the family is walked from this sideslip (the paper's), in
+# steps of _WALK_RAD.
 _ANCHOR_RAD = 0.5
 _WALK_RAD = 0.01
 

@@ -26,8 +26,8 @@ def mb_weights() -> MpcConfig:
     Then the speed weight 0.75 -> 2 and the disturbance estimate held 1.5 s after a flick (0.61): with the first
     set, the fresh seeds a tuned theta lost gripped up after the second flick, the car out of it up to 3.7 m/s
     faster than its reference and the MPC cutting the drive that would have slid its rear out. With these, three
-    jobs' best thetas complete 19, 18, 18 of 20 fresh seeds (before 14, 10, 19), and six 150-iteration jobs' (job
-    seeds 0-5) 20, 20, 18, 19, 20, 20 (before 20, 20, 20, 15, 19, 15).
+    jobs' best thetas complete 19, 18, 18 of episode seeds 0-19 (before 14, 10, 19), and six 150-iteration jobs'
+    (job seeds 0-5) 20, 20, 18, 19, 20, 20 of 20 fresh seeds (before 20, 20, 20, 15, 19, 15).
     A second search round (80 sets within x1/2..x2 of the first set, 12 of 16 at best) tracked the path closer and
     was less robust: 19, 20, 19, 18, 14, 18, and 13 of 20 after 500 iterations."""
     return MpcConfig(q_sideslip=107.2345, q_yaw_rate=75.5064, q_steer=0.5356, q_drive_kn=1.2568, r_steer_step=30.2087,

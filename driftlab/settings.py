@@ -31,6 +31,8 @@ class Settings(BaseSettings):
             and an episode re-runs bit for bit from its theta, config and seed.
         what_if_per_minute: what-if episodes one browser tab may start a minute (DRIFTLAB_WHAT_IF_PER_MINUTE,
             default 60, bursts of 5): one open tab cannot keep the what-if worker busy for everyone.
+        max_rescore_episodes: episodes that queued and running rescores may wait for, all jobs together
+            (DRIFTLAB_MAX_RESCORE_EPISODES, default 5000): rescores share the job runner's workers.
     """
 
     model_config = SettingsConfigDict(env_prefix="DRIFTLAB_", extra="ignore")
@@ -45,6 +47,7 @@ class Settings(BaseSettings):
     max_queued_jobs: int = 100
     max_trajectories_per_job: int = Field(default=5000, ge=1)
     what_if_per_minute: float = Field(default=60.0, gt=0.0, le=6000.0)
+    max_rescore_episodes: int = Field(default=5000, ge=1)
 
     def allowed_host_names(self) -> frozenset[str]:
         return frozenset(h.strip() for h in self.allowed_hosts.split(",") if h.strip())

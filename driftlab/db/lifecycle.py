@@ -17,7 +17,7 @@ from sqlalchemy.orm import Session
 
 from driftlab.db import lease
 from driftlab.db.lease import HEARTBEAT_S, LEASE_TIMEOUT_S, new_runner_id
-from driftlab.db.models import Evaluation, Job, JobStatus, Study, Trajectory, utcnow
+from driftlab.db.models import Evaluation, Job, JobStatus, Rescore, Study, Trajectory, utcnow
 from driftlab.db.storage import count_evaluations, get_job
 
 __all__ = ["HEARTBEAT_S", "LEASE_TIMEOUT_S", "JobStatus", "LeaseHeld", "TransitionError", "claim", "delete_job",
@@ -137,6 +137,7 @@ def delete_job(session: Session, *, job_id: int, with_its_study: bool = False) -
         raise TransitionError(f"job {job_id} is running; pause it first")
     ids = select(Evaluation.id).where(Evaluation.job_id == job_id)
     session.execute(delete(Trajectory).where(Trajectory.evaluation_id.in_(ids)))
+    session.execute(delete(Rescore).where(Rescore.job_id == job_id))
     session.execute(delete(Evaluation).where(Evaluation.job_id == job_id))
     session.execute(delete(Job).where(Job.id == job_id))
 

@@ -26,6 +26,16 @@ class JobStatus(StrEnum):
     FAILED = "failed"
 
 
+class RescoreStatus(StrEnum):
+    """A rescore's status: queued until a runner takes it, running (leased) until every seed is back."""
+
+    QUEUED = "queued"
+    RUNNING = "running"
+    FINISHED = "finished"
+    FAILED = "failed"
+    CANCELLED = "cancelled"
+
+
 class Base(DeclarativeBase):
     pass
 
@@ -136,3 +146,26 @@ class StudyCell(Base):
     completed_at: Mapped[datetime | None] = mapped_column(default=None)
 
     study: Mapped[Study] = relationship(back_populates="cells")
+
+
+class Rescore(Base):
+    """A job's stored theta under fresh seeds (POST /api/jobs/{id}/rescore): queued, run by a runner under a lease
+    like a job, each seed's result stored as it comes back, so that a restart resumes it where it stopped."""
+
+    __tablename__ = "rescores"
+    __table_args__ = {"sqlite_autoincrement": True}
+
+    id: Mapped[int] = mapped_column(primary_key=True)
+    job_id: Mapped[int] = mapped_column(ForeignKey("jobs.id"), index=True)
+    evaluation_id: Mapped[int] = mapped_column(Integer)  # the evaluation whose theta is rescored
+    theta: Mapped[dict[str, float]] = mapped_column(JSON)
+    config: Mapped[dict[str, Any]] = mapped_column(JSON)  # the job's config document, as the episodes run it
+    seeds: Mapped[list[int]] = mapped_column(JSON)  # driftlab.core.robust.rescore_seeds(samples)
+    samples: Mapped[list[dict[str, Any]]] = mapped_column(JSON, default=list)  # one per seed back, in any order
+    result: Mapped[dict[str, Any] | None] = mapped_column(JSON, default=None)
+    status: Mapped[str] = mapped_column(String(20), default=RescoreStatus.QUEUED)
+    error: Mapped[str | None] = mapped_column(String(2000), default=None)
+    runner_id: Mapped[str | None] = mapped_column(String(100), default=None)
+    heartbeat_at: Mapped[datetime | None] = mapped_column(default=None)
+    created_at: Mapped[datetime] = mapped_column(default=utcnow)
+    updated_at: Mapped[datetime] = mapped_column(default=utcnow, onupdate=utcnow)

@@ -19,13 +19,13 @@ from driftlab.server.edge import EdgeGuard
 from driftlab.server.evaluation_pages import EvaluationPages
 from driftlab.server.openapi import document_edge
 from driftlab.server.routes import analysis, evaluations, jobs, pages, studies
+from driftlab.server.security_headers import SecurityHeaders
 from driftlab.server.view import RecordingCache, add_view_routes
 from driftlab.services.search_space import SearchSpaceCache
 from driftlab.settings import Settings
 from driftlab.web.dashboard import Dashboard
 from driftlab.worker.executors import LocalProcessExecutor
 from driftlab.worker.job_runner import JobRunner
-from driftlab.worker.rescoring import RescoreRunner
 
 
 def _start_view(app: FastAPI, factory) -> None:
@@ -80,7 +80,6 @@ def create_app(db_url: str, *, workers: int | None = 2, start_worker: bool = Tru
             runner.stop()
         if start_view:
             _stop_view(app)
-        app.state.rescores.stop()
 
     app = FastAPI(title="DriftLab", version="0.1.0", lifespan=lifespan,
                   description="Learning-based inertia drift: tuning jobs, evaluations, trajectories.")
@@ -88,12 +87,12 @@ def create_app(db_url: str, *, workers: int | None = 2, start_worker: bool = Tru
     # Outermost: hosts, origins, the token and the body size are checked before anything else runs.
     app.add_middleware(EdgeGuard, token=settings.token, allowed_hosts=settings.allowed_host_names(),
                        max_body_bytes=settings.max_body_bytes)
+    app.add_middleware(SecurityHeaders)  # outside the edge: its refusals carry the headers too
     app.state.factory = factory
     app.state.evaluation_pages = EvaluationPages()
     app.state.runner = runner
     app.state.recordings = RecordingCache(factory)
     app.state.search_spaces = SearchSpaceCache()
-    app.state.rescores = RescoreRunner(factory)
     app.include_router(pages.router)
     pages.mount_static(app)
     app.include_router(jobs.router)

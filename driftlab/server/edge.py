@@ -3,8 +3,8 @@ middleware, so nothing is buffered first):
 
 - the Host header names this machine (127.0.0.1, localhost, ::1) or a host of ``DRIFTLAB_ALLOWED_HOSTS``: a page
   on another site cannot reach the API through DNS rebinding (400 otherwise);
-- a mutating API request (POST, PUT, PATCH, DELETE under /api) carries the token when one is set (401 before its
-  body is read); without a token, one sent by a browser from another origin is refused (403): body-less POSTs
+- a mutating API request (POST, PUT, PATCH, DELETE under /api) carries the token when one is set, as a bearer
+  header or, from this origin, as the cookie a page opened with ``?token=`` got (401 before its body is read); without a token, one sent by a browser from another origin is refused (403): body-less POSTs
   are "simple" cross-site requests that no CORS preflight stops;
 - a request body larger than ``DRIFTLAB_MAX_BODY_BYTES`` is refused (413), by its Content-Length or, for a
   chunked body, as soon as the bytes read pass the limit;
@@ -32,6 +32,11 @@ def host_name(host_header: str) -> str:
     return host.rsplit(":", 1)[0] if host.count(":") == 1 else host
 
 
+def same_secret(given: str, expected: str) -> bool:
+    """Constant-time comparison of any text a client sent (a non-ASCII token is a wrong token, never an error)."""
+    return secrets.compare_digest(given.encode("utf-8", "surrogateescape"), expected.encode("utf-8", "surrogateescape"))
+
+
 class EdgeGuard:
     def __init__(self, app, *, token: str | None, allowed_hosts: frozenset[str], max_body_bytes: int) -> None:
         self.app = app
@@ -57,7 +62,8 @@ class EdgeGuard:
             return await self.app(scope, receive, send)
         if scope["method"] in MUTATING and scope["path"].startswith("/api"):
             if self.token:
-                if not secrets.compare_digest(headers.get("authorization", ""), f"Bearer {self.token}"):
+                if not (same_secret(headers.get("authorization", ""), f"Bearer {self.token}")
+                        or (not foreign and self._cookie_token_ok(headers))):
                     return await self._refuse(scope, send, 401,
                                               "this endpoint needs 'Authorization: Bearer <DRIFTLAB_TOKEN>'")
             elif foreign:
@@ -73,12 +79,14 @@ class EdgeGuard:
         return parts.netloc.lower() == host.strip().lower() or (
             parts.hostname or "").lower() in (self.allowed_hosts - LOCAL_HOSTS)
 
+    def _cookie_token_ok(self, headers) -> bool:
+        """The HttpOnly cookie that a page opened with ``?token=`` got (driftlab.server.token_cookie)."""
+        cookie = SimpleCookie(headers.get("cookie", ""))
+        return TOKEN_COOKIE in cookie and same_secret(cookie[TOKEN_COOKIE].value, self.token)
+
     def _websocket_token_ok(self, scope, headers) -> bool:
         given = parse_qs(scope.get("query_string", b"").decode("latin-1")).get("token", [""])[0]
-        cookie = SimpleCookie(headers.get("cookie", ""))
-        if TOKEN_COOKIE in cookie:
-            given = given or cookie[TOKEN_COOKIE].value
-        return bool(given) and secrets.compare_digest(given, self.token)
+        return (bool(given) and same_secret(given, self.token)) or self._cookie_token_ok(headers)
 
     def _too_large(self) -> str:
         return f"body: larger than {self.max_body_bytes} bytes (DRIFTLAB_MAX_BODY_BYTES)"

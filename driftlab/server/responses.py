@@ -218,7 +218,8 @@ class Rescore(BaseModel):
     """A job's rescore: its best theta on ``samples`` fresh seeds (as ``driftlab rescore``)."""
 
     job_id: int
-    status: Literal["none", "running", "finished", "failed"]
+    id: int | None = Field(default=None, description="the rescore's id (none before the first)")
+    status: Literal["none", "queued", "running", "finished", "failed", "cancelled"]
     samples: int | None = None
     done: int | None = Field(default=None, description="episodes finished so far")
     theta: dict[str, float] | None = None

@@ -9,7 +9,6 @@ from __future__ import annotations
 
 import asyncio
 import gzip
-import secrets
 import threading
 from collections import OrderedDict
 from collections.abc import Callable
@@ -22,9 +21,9 @@ from fastapi.responses import HTMLResponse, RedirectResponse, Response
 from sqlalchemy.orm import Session, sessionmaker
 
 from driftlab.db import storage
-from driftlab.server.edge import TOKEN_COOKIE
 from driftlab.server.responses import ViewStatus, errors, media
 from driftlab.server.schemas import EvaluationId
+from driftlab.server.token_cookie import token_to_cookie
 from driftlab.web.recording import EpisodeRecorder
 from driftlab.web.sources import frames_of_evaluation, track_of_spec
 
@@ -78,15 +77,12 @@ def add_view_routes(app: FastAPI, upstream_port: Callable[[], int | None], recor
 
     @app.get("/viser/", include_in_schema=False)
     def view_page(request: Request) -> Response:
+        given = request.query_params.get("token")
+        if given is not None:
+            return token_to_cookie(request, given)
         if "gzip" in request.headers.get("accept-encoding", ""):
-            response = Response(page_gzip, media_type="text/html", headers={"Content-Encoding": "gzip"})
-        else:
-            response = HTMLResponse(page)
-        token, given = request.app.state.settings.token, request.query_params.get("token")
-        if token and given and secrets.compare_digest(given, token):
-            # The view's websocket carries it from now on (see driftlab.server.edge).
-            response.set_cookie(TOKEN_COOKIE, given, httponly=True, samesite="strict")
-        return response
+            return Response(page_gzip, media_type="text/html", headers={"Content-Encoding": "gzip"})
+        return HTMLResponse(page)
 
     @app.websocket("/viser")
     async def view_socket(websocket: WebSocket) -> None:

@@ -18,6 +18,7 @@ import viser
 
 from driftlab.core.study import grid_table
 from driftlab.web.heatmap import heatmap_html
+from driftlab.web.markup import plain
 from driftlab.web.player import CAR_COLOR, GHOST_COLOR, MORE_GHOST_COLORS
 from driftlab.web.plots import padded_range, series
 
@@ -67,8 +68,8 @@ def config_diff_markdown(diff: dict[str, Any]) -> str:
         return ""
     if not diff["differences"]:
         return "**Config diff**: the jobs' settings are the same (they differ in seed only, if at all)."
-    header = "| setting | " + " | ".join(f"{j['name']} (id {j['id']})" for j in jobs) + " |"
-    rows = [f"| {d['key']} | " + " | ".join(_shown(v) for v in d["values"]) + " |" for d in diff["differences"]]
+    header = "| setting | " + " | ".join(f"{plain(j['name'])} (id {j['id']})" for j in jobs) + " |"
+    rows = [f"| {plain(d['key'])} | " + " | ".join(plain(_shown(v)) for v in d["values"]) + " |" for d in diff["differences"]]
     return "\n".join(["**Config diff** (settings that differ)", "", header, "|---" * (len(jobs) + 1) + "|", *rows])
 
 
@@ -164,7 +165,7 @@ class ComparePanel:
             try:
                 self._read_selection()
             except (ValueError, LookupError) as exc:
-                self.text.content = f"**error**: {exc}"
+                self.text.content = f"**error**: {plain(exc)}"
                 return
             self.active = True
             self._show()
@@ -199,7 +200,7 @@ class ComparePanel:
             self.heatmap.visible = True
             self.plot.visible = False
             self.gui_play.visible = False
-            self.text.content = (f"**{study['name']}** (robustness, {study['status']}): {study['n_done']} of "
+            self.text.content = (f"**{plain(study['name'])}** (robustness, {study['status']}): {study['n_done']} of "
                                  f"{study['n_cells']} cells run")
             self.config_diff.content = ""
             return
@@ -237,12 +238,12 @@ class ComparePanel:
             final = study.get("final_best_J") or []
             spread = (f"; final best J from {min(final):.4g} to {max(final):.4g}, median {np.median(final):.4g}"
                       if final else "")
-            lines.append(f"**{study['name']}** (seeds, {study['status']}){spread}")
+            lines.append(f"**{plain(study['name'])}** (seeds, {study['status']}){spread}")
         lines += ["| colour | job | seed | done | best J |", "|---|---|---|---|---|"]
         for n, job in enumerate(self.jobs):
             best = job["best"]
             value = "-" if best is None or not math.isfinite(best["J"]) else f"{best['J']:.4g} ({best['status']})"
-            lines.append(f"| {COLOR_NAMES[n % len(COLOR_NAMES)]} | {job['name']} (id {job['id']}) | {job['seed']} | "
+            lines.append(f"| {COLOR_NAMES[n % len(COLOR_NAMES)]} | {plain(job['name'])} (id {job['id']}) | {job['seed']} | "
                          f"{job['n_done']} / {job['iterations']} | {value} |")
         return "\n".join(lines)
 
@@ -254,7 +255,7 @@ class ComparePanel:
                 return
             # Cars in the order played: the first is the red car, the next the ghosts (the plot's colours when
             # every job has an evaluation).
-            captions = [f"{COLOR_NAMES[k]}{' car' if k == 0 else ' ghost'}: {j['name']}, best J "
+            captions = [f"{COLOR_NAMES[k]}{' car' if k == 0 else ' ghost'}: {plain(j['name'])}, best J "
                         f"{j['best']['J']:.4g}, evaluation id {j['best']['id']}"
                         for k, (_, j) in enumerate(chosen)]
             self.play_together([j["best"]["id"] for _, j in chosen], captions)

@@ -18,6 +18,7 @@ import viser.uplot
 
 from driftlab.db.storage import NotFound
 from driftlab.web.frames import EpisodeFrames
+from driftlab.web.markup import plain
 from driftlab.web.player import EpisodePlayer
 from driftlab.web.plots import padded_range, series
 from driftlab.web.scene import set_chase_camera, set_overview_camera
@@ -239,7 +240,7 @@ class Playback:
         frames = self.player.frames
         history = self.history()
         if frames is None:
-            name = f" of job **{history.name}**" if history is not None else ""
+            name = f" of job **{plain(history.name)}**" if history is not None else ""
             self.hud.content = f"Waiting for the first evaluation{name}..."
             return
         # The player runs to the longest episode shown (a ghost may outlast the car's): the car's clock stops at
@@ -252,14 +253,14 @@ class Playback:
         if lap is not None:
             lines.append(lap)
         if self.stale is not None:
-            lines.insert(0, f"**What-if not run**: {self.stale}. The episode below is the previous one (stale), "
+            lines.insert(0, f"**What-if not run**: {plain(self.stale)}. The episode below is the previous one (stale), "
                             "paused.")
         if self.mode == "compare":
             lines += self.compare_captions
         else:
-            lines.append(frames.caption())
+            lines.append(plain(frames.caption()))
             if self.player.ghost_frames is not None:
-                lines.append(f"ghost (blue): {self.player.ghost_frames.caption()}")
+                lines.append(f"ghost (blue): {plain(self.player.ghost_frames.caption())}")
         if self.mode == "live" and history is not None and history.n_done:
             lines.append(f"newest: evaluation id {history.ids[-1]} (index {history.n_done - 1})")
         self.hud.content = "\n\n".join(lines)

@@ -20,6 +20,7 @@ from driftlab.core.compiled import episode_kernels_cached
 from driftlab.db.models import JobStatus
 from driftlab.web.compare import ComparePanel
 from driftlab.web.frames import EpisodeFrames
+from driftlab.web.markup import plain
 from driftlab.web.playback import Playback
 from driftlab.web.plots import padded_range, series
 from driftlab.web.scene import set_overview_camera
@@ -153,7 +154,7 @@ class ClientSession:
             f"(index {best_pos})")
         compiling = " (**compiling the simulation**: numba, once after an install)" if (
             history.status == JobStatus.RUNNING and episode_kernels_cached() is False) else ""
-        self.job_text.content = (f"**{history.name}**: {history.status}{compiling}, {history.n_done} / "
+        self.job_text.content = (f"**{plain(history.name)}**: {history.status}{compiling}, {history.n_done} / "
                                  f"{history.iterations} evaluations, {sum(history.completed)} completed; "
                                  f"best J {best_text}")
 

@@ -20,6 +20,7 @@ from driftlab.db.models import Evaluation
 from driftlab.services import studies as study_views
 from driftlab.services.job_documents import spec_diff
 from driftlab.web.frames import EpisodeFrames
+from driftlab.web.markup import plain
 
 
 def frames_of_evaluation(factory: sessionmaker[Session], evaluation_id: int) -> EpisodeFrames:
@@ -64,7 +65,7 @@ def _drift_window_text(config_json: str) -> str:
     try:
         config = config_from_dict(json.loads(config_json))
     except ConfigError as exc:
-        return f"**Drift window**: none to show ({exc})."
+        return f"**Drift window**: none to show ({plain(exc)})."
     scenario = config.scenario
     radii = dict.fromkeys((scenario.left_radius_m, scenario.right_radius_m))
     parts = []

@@ -19,6 +19,7 @@ import viser
 from driftlab.core.config import Theta, config_from_dict, config_to_dict
 from driftlab.core.tuning import DEFAULT_BOUNDS, MODEL_BOUNDS
 from driftlab.web.frames import EpisodeFrames
+from driftlab.web.markup import plain
 from driftlab.web.sources import JobHistory
 
 # What-if plant sliders: (config key, label, min, max, step).
@@ -108,7 +109,7 @@ class WhatIfPanel:
         self.request(theta, self.history.spec.get("config", {}), overrides, seed)
 
     def show_error(self, error: str) -> None:
-        self.text.content = f"**error**: {error}"
+        self.text.content = f"**error**: {plain(error)}"
 
     def show_result(self, frames: EpisodeFrames, worker_ms: float) -> None:
         """Called once the episode plays: its status, J and how long after the slider it started."""
@@ -120,6 +121,6 @@ class WhatIfPanel:
         if self.ghost is not None:
             ghost = (f"ghost (evaluation id {self.ghost.evaluation_id}, same seed): J **{self.ghost.episode_J:.4g}**"
                      f" (its mean over {self.ghost.n_seeds} seeds: {self.ghost.J:.4g})")
-        plant = ", ".join(f"{k.split('.', 1)[1]} {v:.4g}" for k, v in frames.plant.items()) or "the job's"
+        plant = ", ".join(f"{plain(k.split('.', 1)[1])} {v:.4g}" for k, v in frames.plant.items()) or "the job's"
         self.text.content = (f"what-if: {frames.status}, J **{frames.J:.4g}** (one episode, seed {frames.seed}); "
                              f"{ghost}; plant: {plant}; episode {worker_ms:.0f} ms in the worker{latency}")

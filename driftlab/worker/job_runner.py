@@ -1,6 +1,6 @@
 """The server's background job runner: one thread that claims claimable jobs (queued, or held by a dead runner)
 and runs each on a thread of its own, as many at once as the executor has workers, or else (when no job runs or
-waits) the next claimable robustness study. Every episode runs on the one executor, whose capacity the running jobs
+waits) the next claimable robustness study; and beside them one rescore at a time (driftlab.worker.rescoring). Every episode runs on the one executor, whose capacity the running jobs
 share (driftlab.worker.slots): a seeds study's jobs run side by side, each with its own optimizer.
 
 Exactly one runner runs a job at a time (the lease in driftlab.db.lifecycle): a `driftlab tune` on the same
@@ -15,10 +15,11 @@ import threading
 from sqlalchemy import select
 from sqlalchemy.orm import Session, sessionmaker
 
-from driftlab.db import lifecycle, storage, studies
+from driftlab.db import lifecycle, rescores, storage, studies
 from driftlab.db.models import Job, Study
 from driftlab.worker.executors import EpisodeExecutor, open_executor
 from driftlab.worker.job_loop import EXECUTOR_LOST, claim_job, run_job
+from driftlab.worker.rescoring import run_rescore
 from driftlab.worker.slots import EpisodeSlots
 from driftlab.worker.study_runner import run_study
 
@@ -38,6 +39,7 @@ class JobRunner:
         self._slots: EpisodeSlots | None = None
         self._jobs: dict[int, threading.Thread] = {}  # the jobs running now, each on its thread
         self._jobs_lock = threading.Lock()
+        self._rescore: threading.Thread | None = None  # the rescore running now, if any
         self.current_study_id: int | None = None
 
     @property
@@ -139,9 +141,30 @@ class JobRunner:
             thread.start()
         return bool(claimed)
 
+    def _start_claimable_rescore(self) -> None:
+        """One rescore at a time, on its share of the slots beside the jobs (it never waits for the queue)."""
+        if self._rescore is not None and self._rescore.is_alive():
+            return
+        with storage.transaction(self.factory) as session:
+            rescore_id = rescores.next_claimable(session)
+            if rescore_id is None or not rescores.claim(session, rescore_id=rescore_id, runner=self.runner_id):
+                self._rescore = None
+                return
+        self._rescore = threading.Thread(target=self._run_rescore, args=(rescore_id,), daemon=True,
+                                         name=f"driftlab-rescore-{rescore_id}")
+        self._rescore.start()
+
+    def _run_rescore(self, rescore_id: int) -> None:
+        try:
+            run_rescore(self.factory, rescore_id, self._executor, runner=self.runner_id, slots=self._slots,
+                        owner=("rescore", rescore_id), should_stop=self._stop.is_set)
+        finally:
+            self._wake.set()
+
     def _loop(self) -> None:
         try:
             while not self._stop.is_set():
+                self._start_claimable_rescore()
                 if self._start_claimable_jobs():
                     continue
                 if not self.running_job_ids and self._run_next_study():
@@ -151,5 +174,7 @@ class JobRunner:
         finally:
             with self._jobs_lock:
                 threads = list(self._jobs.values())
+            if self._rescore is not None:
+                threads.append(self._rescore)
             for thread in threads:  # each stops after its episodes in flight (should_stop)
                 thread.join(timeout=30)

@@ -1,86 +1,90 @@
-"""Rescoring from the server (POST /api/jobs/{id}/rescore): a job's best theta, exactly as stored, under fresh seeds
-(the same episodes as ``driftlab rescore``), on a worker process of its own so that it never waits behind a job's
-evaluations and a job never waits behind it. Progress and the result are kept while the server runs.
+"""Runs one stored rescore (driftlab.db.rescores): a job's best theta, exactly as stored, under fresh seeds (the
+same episodes as ``driftlab rescore``), on the runner's executor and its share of the episode slots, like a job.
+
+Each seed's result is committed as it comes back, so a rescore interrupted by a restart continues with the seeds
+still missing; a cancelled one (``DELETE /api/jobs/{id}/rescore``) stops at the next heartbeat, its episodes in
+flight dropped.
 """
 
 from __future__ import annotations
 
 import threading
-from collections.abc import Callable
+import time
+from collections.abc import Callable, Hashable
 from concurrent.futures import Future
-from typing import Any
 
 from sqlalchemy.orm import Session, sessionmaker
 
-from driftlab.core.robust import rescore_seeds, summarize
-from driftlab.core.tuning import TuningSpec
-from driftlab.db import storage
-from driftlab.worker.executors import EpisodeExecutor, LocalProcessExecutor
+from driftlab.core.robust import SampleResult, summarize
+from driftlab.db import lease, rescores, storage
+from driftlab.db.models import Rescore, RescoreStatus
+from driftlab.worker.executors import EpisodeExecutor, EpisodeOutcome
+from driftlab.worker.slots import EpisodeSlots
 
 
-class RescoreBusy(Exception):
-    """A rescore of this job is already running."""
+def run_rescore(factory: sessionmaker[Session], rescore_id: int, executor: EpisodeExecutor, *, runner: str,
+                slots: EpisodeSlots, owner: Hashable, should_stop: Callable[[], bool] = lambda: False) -> str:
+    """Runs a rescore whose lease ``runner`` holds until every seed is back (finished), it is cancelled, or
+    ``should_stop()`` (the runner shuts down: back to the queue, its samples kept). Returns its status."""
+    wake = threading.Event()
+    slots.join(owner, wake)
+    try:
+        return _run(factory, rescore_id, executor, runner, slots, owner, wake, should_stop)
+    finally:
+        slots.leave(owner)
 
 
-class RescoreRunner:
-    def __init__(self, factory: sessionmaker[Session],
-                 open_executor: Callable[[], EpisodeExecutor] = lambda: LocalProcessExecutor(1)) -> None:
-        self.factory = factory
-        self._open_executor = open_executor
-        self._executor: EpisodeExecutor | None = None
-        self._lock = threading.Lock()
-        self._state: dict[int, dict[str, Any]] = {}
+def _run(factory, rescore_id, executor, runner, slots, owner, wake, should_stop) -> str:
+    with storage.snapshot(factory) as session:
+        rescore = session.get(Rescore, rescore_id)
+        theta, config, seeds = dict(rescore.theta), dict(rescore.config), list(rescore.seeds)
+        back = {s["seed"] for s in rescore.samples}
+    waiting = [seed for seed in seeds if seed not in back]
+    in_flight: dict[Future[EpisodeOutcome], int] = {}
+    held, last_beat = True, time.monotonic()
+    try:
+        while held and (waiting or in_flight):
+            if should_stop():
+                return _release(factory, rescore_id, runner, RescoreStatus.QUEUED)
+            while waiting and slots.try_take(owner):
+                future = executor.submit(theta, config, waiting.pop(0))
+                future.add_done_callback(lambda _: wake.set())
+                in_flight[future] = 0
+            wake.wait(timeout=lease.HEARTBEAT_S)
+            wake.clear()
+            for future in [f for f in in_flight if f.done()]:
+                del in_flight[future]
+                slots.give_back(owner)
+                sample = future.result().sample().as_dict()
+                with storage.transaction(factory) as session:
+                    held = rescores.add_sample(session, rescore_id=rescore_id, runner=runner, sample=sample)
+            if time.monotonic() - last_beat >= lease.HEARTBEAT_S:
+                with storage.transaction(factory) as session:
+                    held = held and lease.renew(session, Rescore, row_id=rescore_id, runner=runner)
+                last_beat = time.monotonic()
+    except Exception as exc:  # a worker that died mid-episode: the rescore failed, its samples stay
+        return _release(factory, rescore_id, runner, RescoreStatus.FAILED, error=f"{type(exc).__name__}: {exc}")
+    for future in in_flight:
+        future.cancel()
+    if not held:  # cancelled, or taken over by another runner
+        with storage.snapshot(factory) as session:
+            rescore = session.get(Rescore, rescore_id)
+            return rescore.status if rescore is not None else RescoreStatus.CANCELLED
+    return _finish(factory, rescore_id, runner)
 
-    def start(self, job_id: int, samples: int) -> dict[str, Any]:
-        """Submit the best theta's episodes; returns the state at once.
 
-        Raises:
-            storage.NotFound: no such job, or no completed evaluation to rescore.
-            RescoreBusy: one is running for this job.
-        """
-        with storage.snapshot(self.factory) as session:
-            job = storage.get_job(session, job_id=job_id)
-            best = storage.best_evaluation(session, job_id=job_id)
-            if best is None:
-                raise storage.NotFound(f"job {job_id} has no evaluation to rescore yet")
-            theta, config = dict(best.theta), TuningSpec.from_dict(job.spec).to_dict()["config"]
-            stored = {"evaluation_id": best.id, "J_stored": best.J, "status_stored": best.status}
-        seeds = rescore_seeds(samples)
-        with self._lock:
-            if self._state.get(job_id, {}).get("status") == "running":
-                raise RescoreBusy(f"job {job_id}: a rescore is running ({self._state[job_id]['done']} / "
-                                  f"{self._state[job_id]['samples']} episodes)")
-            if self._executor is None:
-                self._executor = self._open_executor()
-            state = {"job_id": job_id, "status": "running", "samples": samples, "done": 0, "theta": theta, **stored,
-                     "result": None, "error": None}
-            self._state[job_id] = state
-            futures = [self._executor.submit(theta, config, seed) for seed in seeds]
-        for future in futures:
-            future.add_done_callback(lambda f, s=state, fs=futures: self._one_done(s, fs))
-        return self.status(job_id)
+def _finish(factory, rescore_id: int, runner: str) -> str:
+    with storage.transaction(factory) as session:
+        rescore = session.get(Rescore, rescore_id)
+        order = {seed: i for i, seed in enumerate(rescore.seeds)}
+        samples = sorted(rescore.samples, key=lambda s: order[s["seed"]])
+        result = {**summarize([SampleResult(**s) for s in samples]), "seeds": [s["seed"] for s in samples]}
+        rescores.finish(session, rescore_id=rescore_id, runner=runner, status=RescoreStatus.FINISHED, result=result)
+    return RescoreStatus.FINISHED
 
-    def _one_done(self, state: dict[str, Any], futures: list[Future]) -> None:
-        with self._lock:
-            state["done"] += 1
-            if state["done"] < len(futures):
-                return
-        try:
-            result = summarize([f.result().sample() for f in futures])
-            with self._lock:
-                state.update(status="finished", result={**result, "seeds": [f.result().seed for f in futures]})
-        except Exception as exc:  # a dead worker: the rescore failed, the server goes on
-            with self._lock:
-                state.update(status="failed", error=f"{type(exc).__name__}: {exc}")
 
-    def status(self, job_id: int) -> dict[str, Any]:
-        """The job's rescore: running (with ``done`` of ``samples``), finished (with ``result``), failed, or none."""
-        with self._lock:
-            state = self._state.get(job_id)
-            return {"job_id": job_id, "status": "none"} if state is None else dict(state)
-
-    def stop(self) -> None:
-        with self._lock:
-            executor, self._executor = self._executor, None
-        if executor is not None:
-            executor.shutdown()
+def _release(factory, rescore_id: int, runner: str, status: RescoreStatus, error: str | None = None) -> str:
+    with storage.transaction(factory) as session:
+        rescores.finish(session, rescore_id=rescore_id, runner=runner, status=status,
+                        error=None if error is None else error[:2000])
+    return status

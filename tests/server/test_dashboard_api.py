@@ -1,14 +1,16 @@
 """What the dashboard page asks of the API beyond jobs: notes, the search space, rescoring with progress."""
 
-import time
 from concurrent.futures import ThreadPoolExecutor
 
 import numpy as np
 
 from driftlab.core.config import Theta
+from driftlab.core.robust import rescore_seeds
+from driftlab.db import rescores as db_rescores
 from driftlab.db import storage
 from driftlab.worker.executors import evaluate_episode
-from driftlab.worker.rescoring import RescoreRunner
+from driftlab.worker.rescoring import run_rescore
+from driftlab.worker.slots import EpisodeSlots
 from tests.server.conftest import in_process_client
 
 
@@ -68,27 +70,85 @@ def test_bad_search_space_requests_name_the_field(api):
     assert api.get("/api/jobs/999/search-space").status_code == 404
 
 
-def test_rescore_reports_progress_and_the_result(api):
-    job = api.post("/api/jobs", json={"name": "r", "iterations": 5}).json()
-    assert api.post(f"/api/jobs/{job['id']}/rescore", json={}).status_code == 404  # nothing to rescore yet
-    assert api.get(f"/api/jobs/{job['id']}/rescore").json()["status"] == "none"
+def _with_a_best(api, name="r"):
+    job = api.post("/api/jobs", json={"name": name, "iterations": 5}).json()
     with storage.transaction(api.app.state.factory) as session:
         storage.add_evaluation(session, job_id=job["id"], theta=Theta().as_dict(), J=-1.0, status="completed",
                                metrics={}, trigger_points=[], wall_ms=1.0, columns=["t_s"],
                                trajectory=np.zeros((1, 1)))
-    pool = ThreadPoolExecutor(1)
-    api.app.state.rescores = RescoreRunner(api.app.state.factory, open_executor=lambda: _InThread(pool))
-    r = api.post(f"/api/jobs/{job['id']}/rescore", json={"samples": 2})
-    assert r.status_code == 202 and r.json()["samples"] == 2
-    assert api.post(f"/api/jobs/{job['id']}/rescore", json={"samples": 2}).status_code in (202, 409)
-    deadline = time.time() + 120
-    while (state := api.get(f"/api/jobs/{job['id']}/rescore").json())["status"] == "running":
-        assert time.time() < deadline, state
-        time.sleep(0.1)
+    return job["id"]
+
+
+def _run_queued(api, executor, should_stop=lambda: False):
+    """What the server's runner does with the next queued rescore (driftlab.worker.job_runner)."""
+    factory = api.app.state.factory
+    with storage.transaction(factory) as session:
+        rescore_id = db_rescores.next_claimable(session)
+        assert db_rescores.claim(session, rescore_id=rescore_id, runner="test-runner")
+    return run_rescore(factory, rescore_id, executor, runner="test-runner", slots=EpisodeSlots(1),
+                       owner=("rescore", rescore_id), should_stop=should_stop)
+
+
+def test_rescore_is_queued_stored_and_reports_the_result(api):
+    job = api.post("/api/jobs", json={"name": "none", "iterations": 5}).json()
+    assert api.post(f"/api/jobs/{job['id']}/rescore", json={}).status_code == 404  # nothing to rescore yet
+    assert api.get(f"/api/jobs/{job['id']}/rescore").json()["status"] == "none"
+    job_id = _with_a_best(api)
+    r = api.post(f"/api/jobs/{job_id}/rescore", json={"samples": 2})
+    assert r.status_code == 202 and r.json()["samples"] == 2 and r.json()["status"] == "queued"
+    busy = api.post(f"/api/jobs/{job_id}/rescore", json={"samples": 2})
+    assert busy.status_code == 409 and "DELETE /api/jobs" in busy.json()["detail"]
+    with ThreadPoolExecutor(1) as pool:
+        assert _run_queued(api, _InThread(pool)) == "finished"
+    state = api.get(f"/api/jobs/{job_id}/rescore").json()
     assert state["status"] == "finished" and state["done"] == 2, state
-    assert state["result"]["samples"] == 2 and len(state["result"]["seeds"]) == 2
-    assert api.post(f"/api/jobs/{job['id']}/rescore", json={"samples": 0}).json()["errors"][0]["field"] == "samples"
-    pool.shutdown()
+    assert state["result"]["samples"] == 2 and state["result"]["seeds"] == rescore_seeds(2)
+    assert state["J_stored"] == -1.0
+    assert api.post(f"/api/jobs/{job_id}/rescore", json={"samples": 0}).json()["errors"][0]["field"] == "samples"
+
+
+def test_a_stopped_rescore_resumes_with_the_seeds_still_missing(api):
+    job_id = _with_a_best(api)
+    api.post(f"/api/jobs/{job_id}/rescore", json={"samples": 3})
+    with ThreadPoolExecutor(1) as pool:
+        executor = _InThread(pool)
+        stop = lambda: executor.submitted >= 1  # noqa: E731  # the runner shuts down after the first episode
+        assert _run_queued(api, executor, should_stop=stop) == "queued"
+        first = api.get(f"/api/jobs/{job_id}/rescore").json()
+        assert first["status"] == "queued" and first["done"] == 1, first
+        resumed = _InThread(pool)
+        assert _run_queued(api, resumed) == "finished"
+    assert resumed.submitted == 2  # only the missing seeds ran again
+    state = api.get(f"/api/jobs/{job_id}/rescore").json()
+    assert state["done"] == 3 and state["result"]["seeds"] == rescore_seeds(3)
+
+
+def test_a_rescore_can_be_cancelled_and_then_started_again(api):
+    job_id = _with_a_best(api)
+    assert api.delete(f"/api/jobs/{job_id}/rescore").status_code == 404  # none to cancel
+    api.post(f"/api/jobs/{job_id}/rescore", json={"samples": 4})
+    r = api.delete(f"/api/jobs/{job_id}/rescore")
+    assert r.status_code == 200 and r.json()["status"] == "cancelled"
+    with storage.snapshot(api.app.state.factory) as session:
+        assert db_rescores.next_claimable(session) is None  # no runner takes it
+    assert api.post(f"/api/jobs/{job_id}/rescore", json={"samples": 1}).status_code == 202
+
+
+def test_rescores_share_a_global_episode_budget(tmp_path):
+    with in_process_client(tmp_path / "budget.db", max_rescore_episodes=5) as client:
+        a, b = _with_a_best(client, "a"), _with_a_best(client, "b")
+        assert client.post(f"/api/jobs/{a}/rescore", json={"samples": 4}).status_code == 202
+        r = client.post(f"/api/jobs/{b}/rescore", json={"samples": 2})
+        assert r.status_code == 422 and "DRIFTLAB_MAX_RESCORE_EPISODES" in r.json()["detail"], r.text
+        assert r.json()["detail"].startswith("samples: rescores already wait for 4 episodes")
+
+
+def test_deleting_a_job_deletes_its_rescores(api):
+    job_id = _with_a_best(api)
+    api.post(f"/api/jobs/{job_id}/rescore", json={"samples": 2})
+    assert api.delete(f"/api/jobs/{job_id}").status_code == 204
+    with storage.snapshot(api.app.state.factory) as session:
+        assert db_rescores.episodes_outstanding(session) == 0
 
 
 def test_a_rescore_counts_against_the_episodes_per_job_limit(tmp_path):
@@ -104,8 +164,10 @@ class _InThread:
 
     def __init__(self, pool):
         self.pool = pool
+        self.submitted = 0
 
     def submit(self, theta, config_doc, seed=0):
+        self.submitted += 1
         return self.pool.submit(evaluate_episode, theta, config_doc, seed)
 
     def shutdown(self):

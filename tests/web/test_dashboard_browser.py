@@ -142,7 +142,13 @@ def test_with_a_token_the_page_changes_nothing_without_it(tmp_path, browser):
         expect(page.locator("#message")).to_contain_text("Authorization: Bearer")
         assert httpx.get(f"{url}/api/jobs").json() == []
         page.close()
-        page, _ = _page(browser, f"{url}/dashboard/?token=s3cret")
+        page, _ = _page(browser, f"{url}/dashboard/?token=s3cret&job=1")
+        # The token left the address (a 303 without it) for an HttpOnly cookie; no script can read a copy.
+        assert page.url == f"{url}/dashboard/?job=1"
+        assert page.evaluate("JSON.stringify(sessionStorage) + JSON.stringify(localStorage) + document.cookie") \
+            == "{}{}"
+        cookie = next(c for c in page.context.cookies() if c["name"] == "driftlab_token")
+        assert cookie["httpOnly"] and cookie["sameSite"] == "Strict" and not cookie["secure"]  # http: not Secure
         page.get_by_role("button", name="New job").click()
         page.locator("#job-form input[name=iterations]").fill("2")
         page.get_by_role("button", name="Start job").click()

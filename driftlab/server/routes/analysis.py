@@ -14,11 +14,11 @@ from driftlab.core.search_space import MAX_GRID
 from driftlab.db import storage
 from driftlab.server import quotas
 from driftlab.server.responses import Rescore, SearchSpace, errors
-from driftlab.server.routes.deps import factory, require_token
+from driftlab.server.routes.deps import factory, require_token, wake_runner
 from driftlab.server.schemas import JobId
+from driftlab.services import rescores
 from driftlab.services.job_documents import job_form
 from driftlab.services.search_space import search_space
-from driftlab.worker.rescoring import RescoreBusy
 
 router = APIRouter(tags=["jobs"])
 Factory = Annotated[sessionmaker[Session], Depends(factory)]
@@ -46,23 +46,34 @@ def get_search_space(job_id: JobId, db: Factory, request: Request,
 
 @router.post("/api/jobs/{job_id}/rescore", status_code=202, dependencies=[Depends(require_token)],
              response_model=Rescore, responses=errors(404, 409, 422, 503))
-def start_rescore(job_id: JobId, body: RescoreCreate, request: Request) -> dict[str, Any]:
-    """Run the best theta, exactly as stored, on ``samples`` fresh seeds (in a worker process); follow it with
-    GET. 404 without a completed evaluation, 409 while one runs for this job."""
-    quotas.check_rescore(request.app.state.settings, body.samples)
+def start_rescore(job_id: JobId, body: RescoreCreate, db: Factory, request: Request) -> dict[str, Any]:
+    """Queue the best theta, exactly as stored, on ``samples`` fresh seeds; the job runner runs it beside the jobs
+    (stored as it goes: it survives a restart). Follow it with GET, stop it with DELETE. 404 without a completed
+    evaluation, 409 while one is queued or running for this job, 422 past the global rescore budget."""
+    settings = request.app.state.settings
+    quotas.check_rescore(settings, body.samples)
     try:
-        return request.app.state.rescores.start(job_id, body.samples)
-    except RescoreBusy as exc:
+        state = rescores.queue(db, job_id, body.samples, settings.max_rescore_episodes)
+    except rescores.RescoreBusy as exc:
         raise HTTPException(409, str(exc)) from None
+    except rescores.RescoreBudget as exc:
+        raise HTTPException(422, str(exc)) from None
+    wake_runner(request)
+    return state
 
 
 @router.get("/api/jobs/{job_id}/rescore", response_model=Rescore, responses=errors(404, 422, 503))
-def rescore_status(job_id: JobId, db: Factory, request: Request) -> dict[str, Any]:
-    """The job's latest rescore since the server started: running (``done`` of ``samples``), finished
-    (``result``), failed (``error``), or none."""
-    with storage.snapshot(db) as session:
-        storage.get_job(session, job_id=job_id)
-    return request.app.state.rescores.status(job_id)
+def rescore_status(job_id: JobId, db: Factory) -> dict[str, Any]:
+    """The job's latest rescore: queued, running (``done`` of ``samples``), finished (``result``), failed
+    (``error``), cancelled, or none."""
+    return rescores.status(db, job_id)
+
+
+@router.delete("/api/jobs/{job_id}/rescore", dependencies=[Depends(require_token)], response_model=Rescore,
+               responses=errors(404, 422, 503))
+def cancel_rescore(job_id: JobId, db: Factory) -> dict[str, Any]:
+    """Cancel the job's queued or running rescore (the samples back so far stay); 404 if none is."""
+    return rescores.cancel(db, job_id)
 
 
 @router.get("/api/config/job-form", responses=errors(503))

@@ -2,11 +2,11 @@
 
 from __future__ import annotations
 
-import secrets
 
 from fastapi import HTTPException, Request
 from sqlalchemy.orm import Session, sessionmaker
 
+from driftlab.server.edge import same_secret
 from driftlab.server.evaluation_pages import EvaluationPages
 from driftlab.settings import Settings
 
@@ -32,5 +32,5 @@ def require_token(request: Request) -> None:
     settings: Settings = request.app.state.settings
     token = settings.token
     authorization = request.headers.get("authorization")
-    if token and not (authorization and secrets.compare_digest(authorization, f"Bearer {token}")):
+    if token and not (authorization and same_secret(authorization, f"Bearer {token}")):
         raise HTTPException(401, "this endpoint needs 'Authorization: Bearer <DRIFTLAB_TOKEN>'")

@@ -7,10 +7,11 @@ import html
 from pathlib import Path
 
 from fastapi import APIRouter, FastAPI, Request
-from fastapi.responses import FileResponse, HTMLResponse, RedirectResponse
+from fastapi.responses import FileResponse, HTMLResponse, RedirectResponse, Response
 from fastapi.staticfiles import StaticFiles
 
 from driftlab.server.responses import Health
+from driftlab.server.token_cookie import token_to_cookie
 
 router = APIRouter()
 STATIC = Path(__file__).resolve().parent.parent / "static"
@@ -49,7 +50,10 @@ def dashboard_redirect(request: Request) -> RedirectResponse:
 
 
 @router.get("/dashboard/", include_in_schema=False)
-def dashboard() -> FileResponse:
+def dashboard(request: Request) -> Response:
+    given = request.query_params.get("token")
+    if given is not None:
+        return token_to_cookie(request, given)
     return FileResponse(STATIC / "dashboard.html", media_type="text/html")
 
 

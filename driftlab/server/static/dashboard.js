@@ -1,6 +1,7 @@
 // The researcher's dashboard: jobs (start, pause, resume, extend, clone, delete, rescore, notes) through the REST
 // API, and the selected job's convergence and search space, read again every second.
-// With a token set, open the page as /dashboard/?token=<DRIFTLAB_TOKEN>: every change sends it as a bearer token.
+// With a token set, open the page as /dashboard/?token=<DRIFTLAB_TOKEN>: the server keeps it in an HttpOnly cookie,
+// takes it out of the address, and every change from this page carries the cookie (never a script's copy).
 "use strict";
 import { formBody, openForm as fillForm } from "./jobform.js";
 import { renderSpace } from "./searchspace.js";
@@ -9,8 +10,6 @@ import { el, extent, fmt, frame, line, parallel, points, ramp, RAMPS } from "./s
 const POLL_MS = 1000;
 const $ = (id) => document.getElementById(id);
 const params = new URLSearchParams(location.search);
-if (params.get("token")) sessionStorage.setItem("driftlab_token", params.get("token"));
-const TOKEN = sessionStorage.getItem("driftlab_token");
 
 const state = {
   jobs: [], form: null, selected: null, job: null,
@@ -23,8 +22,7 @@ const state = {
 // ----- the API ------------------------------------------------------------------------------------------------
 async function api(method, path, body) {
   const headers = { "content-type": "application/json" };
-  if (TOKEN) headers.authorization = `Bearer ${TOKEN}`;
-  const r = await fetch(path, { method, headers, body: body === undefined ? undefined : JSON.stringify(body) });
+  const r = await fetch(path, { method, headers, credentials: "same-origin", body: body === undefined ? undefined : JSON.stringify(body) });
   if (r.status === 204) return null;
   const data = parseJson(await r.text()) ?? { detail: `${r.status} ${r.statusText}` };
   if (!r.ok) {
@@ -116,7 +114,7 @@ function renderJob() {
   $("resume").disabled = !["paused", "failed"].includes(j.status);
   if (document.activeElement !== $("extend-to")) $("extend-to").value = j.iterations;
   if (!$("notes").dataset.loaded) { $("notes").value = j.notes || ""; $("notes").dataset.loaded = "1"; }
-  $("view-link").href = `/viser/${TOKEN ? `?token=${encodeURIComponent(TOKEN)}` : ""}`;
+  $("view-link").href = "/viser/";
 }
 
 function paramNames() {
@@ -253,15 +251,16 @@ async function pollRescore() {
   bar.hidden = r.status === "none";
   bar.max = r.samples || 1;
   bar.value = r.done || 0;
-  if (r.status === "running") {
-    $("rescore-text").textContent = `rescoring: ${r.done} / ${r.samples} episodes`;
+  if (r.status === "running" || r.status === "queued") {
+    $("rescore-text").textContent = `rescore ${r.status}: ${r.done} / ${r.samples} episodes`;
   } else if (r.status === "finished") {
     const res = r.result;
     $("rescore-text").textContent = `rescore: ${res.completed} / ${res.samples} completed, J mean ${fmt(res.J_mean)} ` +
       `± ${fmt(res.J_std)}, worst ${fmt(res.J_worst)} (stored J ${fmt(r.J_stored)})`;
     state.rescoring = false;
-  } else if (r.status === "failed") {
-    $("rescore-text").textContent = `rescore failed: ${r.error}`;
+  } else if (r.status === "failed" || r.status === "cancelled") {
+    $("rescore-text").textContent = `rescore ${r.status}${r.error ? `: ${r.error}` : ""} (${r.done} / ${r.samples} ` +
+      "episodes back)";
     state.rescoring = false;
   }
 }

@@ -1,0 +1,71 @@
+"""Rescores on a real server: run by the job runner (not a request thread), stored as they go, so ordinary
+traffic cannot break them, a restart resumes them and a DELETE cancels them."""
+
+import threading
+import time
+
+import httpx
+import pytest
+
+from tests.server_process import free_port, start_server, wait_for, wait_status
+
+pytestmark = pytest.mark.e2e  # real processes: servers, browsers, Dask, the CLI
+
+
+def _finished_job(url) -> int:
+    job = httpx.post(f"{url}/api/jobs", json={"name": "tuned", "iterations": 1, "robust_samples": 1,
+                                              "confirm_samples": 0}).json()
+    wait_status(url, job["id"], {"finished"}, timeout_s=300)
+    return job["id"]
+
+
+def _burst(url, job_id, clients=8, seconds=3.0):
+    """``clients`` threads reading as fast as they can for ``seconds`` (the request threads come and go)."""
+    stop = time.monotonic() + seconds
+
+    def read():
+        with httpx.Client(base_url=url, timeout=30) as client:
+            while time.monotonic() < stop:
+                client.get("/api/jobs")
+                client.get(f"/api/jobs/{job_id}/rescore")
+
+    threads = [threading.Thread(target=read) for _ in range(clients)]
+    for thread in threads:
+        thread.start()
+    for thread in threads:
+        thread.join()
+
+
+def test_a_rescore_outlives_a_burst_a_restart_and_can_be_cancelled(tmp_path):
+    db = tmp_path / "driftlab.db"
+    proc, url = start_server(db, free_port(), extra_args=("--workers", "1"))
+    try:
+        job_id = _finished_job(url)
+        rescore = f"{url}/api/jobs/{job_id}/rescore"
+        assert httpx.post(rescore, json={"samples": 6}).status_code == 202
+        _burst(url, job_id)
+        state = wait_for(rescore, lambda r: r["status"] not in ("queued", "running"), timeout_s=300, poll_s=0.5)
+        assert state["status"] == "finished" and state["done"] == 6, state
+        assert httpx.post(rescore, json={"samples": 0}).status_code == 422
+
+        assert httpx.post(rescore, json={"samples": 12}).status_code == 202
+        wait_for(rescore, lambda r: r["done"] >= 1, timeout_s=300)
+        proc.terminate()
+        proc.wait(timeout=60)
+        proc, url = start_server(db, free_port(), extra_args=("--workers", "1"))
+        rescore = f"{url}/api/jobs/{job_id}/rescore"
+        state = wait_for(rescore, lambda r: r["status"] not in ("queued", "running"), timeout_s=300, poll_s=0.5)
+        assert state["status"] == "finished" and state["done"] == 12, state
+        assert state["result"]["samples"] == 12 and len(set(state["result"]["seeds"])) == 12
+
+        assert httpx.post(rescore, json={"samples": 500}).status_code == 202
+        cancelled = httpx.delete(rescore)
+        assert cancelled.status_code == 200 and cancelled.json()["status"] == "cancelled"
+        assert httpx.delete(rescore).status_code == 404
+        # The runner runs one rescore at a time: the next one finishing means the cancelled one let go.
+        assert httpx.post(rescore, json={"samples": 1}).status_code == 202
+        state = wait_for(rescore, lambda r: r["status"] not in ("queued", "running"), timeout_s=300, poll_s=0.5)
+        assert state["status"] == "finished" and state["done"] == 1, state
+    finally:
+        proc.terminate()
+        proc.wait(timeout=60)

@@ -19,6 +19,7 @@ from driftlab.cli.options import (
     dask_address,
     db_url,
     int_in,
+    name_text,
 )
 from driftlab.cli.serve import cmd_serve
 from driftlab.cli.tune import cmd_report, cmd_rescore, cmd_tune, tuning_spec
@@ -61,7 +62,7 @@ def build_parser() -> argparse.ArgumentParser:
     add_job_options(tu)
     tu.add_argument("--seed", type=int, default=0, help="optimizer seed; also picks the episode seeds")
     tu.add_argument("--db", help=DB_HELP)
-    tu.add_argument("--name", help="job name; an existing name resumes that job")
+    tu.add_argument("--name", type=name_text, help="job name; an existing name resumes that job")
     tu.add_argument("--dask", metavar="ADDRESS", help=DASK_HELP)
     tu.add_argument("--workers", type=int_in(1, 1024), metavar="N",
                     help="episodes in flight at once, 1..1024 (default: 1 locally, the cluster's threads with --dask)")

@@ -12,6 +12,7 @@ from driftlab.core.config import PLANT_PRESETS, EpisodeConfig, apply_overrides
 from driftlab.core.errors import ConfigError
 from driftlab.core.robust import MAX_ROBUST_SAMPLES
 from driftlab.core.tuning import DEFAULT_CONFIRM_SAMPLES, DEFAULT_ROBUST_SAMPLES
+from driftlab.names import name_problem
 
 DB_HELP = ("SQLite file or SQLAlchemy URL (default: DRIFTLAB_DATABASE_URL, else the shared "
            "~/.local/share/driftlab/driftlab.db)")
@@ -40,6 +41,14 @@ class Parser(argparse.ArgumentParser):
     def error(self, message: str) -> None:  # type: ignore[override]
         sys.stderr.write(f"driftlab: error: {message}\n")
         sys.exit(2)
+
+
+def name_text(text: str) -> str:
+    """A job's or a study's name, as the REST API takes it (driftlab.names)."""
+    problem = name_problem(text)
+    if problem is not None:
+        raise argparse.ArgumentTypeError(problem)
+    return text
 
 
 def finite(value: Any) -> Any:

@@ -13,7 +13,7 @@ import sys
 import time
 from typing import Any
 
-from driftlab.cli.options import key_values
+from driftlab.cli.options import key_values, name_text
 from driftlab.core.errors import ConfigError
 
 
@@ -226,7 +226,8 @@ def add_study_parser(sub, db_help: str, dask_help: str, int_in, tune_options) ->
     rob.add_argument("--set", action="append", metavar="KEY=VALUE", help="base config override")
     show = kinds.add_parser("show", help="print a stored study's summary")
     for parser in (seeds, rob, show):
-        parser.add_argument("--name", required=parser is show, help="study name; an existing name continues it")
+        parser.add_argument("--name", type=name_text, required=parser is show,
+                            help="study name; an existing name continues it")
         parser.add_argument("--db", help=db_help)
         parser.add_argument("--every", type=int_in(1, 5000), default=10, metavar="N",
                             help="print the band every N iterations (default 10)")

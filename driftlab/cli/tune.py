@@ -113,6 +113,7 @@ def cmd_tune(args: argparse.Namespace) -> int:
         out = {"job": name, "id": job_id, "status": str(status), "wall_s": round(time.perf_counter() - started, 2),
                "n_done": storage.count_evaluations(session, job_id=job_id),
                "best": storage.best_summary(best)}
+    storage.close_database(factory)
     sys.stderr.write("\n")
     print(json.dumps(out))
     return 0 if status != lifecycle.JobStatus.FAILED else 1

@@ -43,6 +43,16 @@ def open_database(url: str) -> sessionmaker[Session]:
     return sessionmaker(engine, expire_on_commit=False)
 
 
+def close_database(factory: sessionmaker[Session]) -> None:
+    """A clean stop: SQLite's write-ahead log copied into the database file and every connection closed (the last
+    close removes the -wal file), so that the database file alone, copied after the stop, holds every evaluation."""
+    engine = engine_of(factory)
+    if engine.dialect.name == "sqlite":
+        with engine.connect() as connection:
+            connection.exec_driver_sql("PRAGMA wal_checkpoint(TRUNCATE)")
+    engine.dispose()
+
+
 def _sqlite_pragmas(dbapi_connection, _record) -> None:
     dbapi_connection.isolation_level = None  # SQLAlchemy emits BEGIN itself: _sqlite_begin
     cursor = dbapi_connection.cursor()

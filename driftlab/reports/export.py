@@ -12,6 +12,7 @@ from __future__ import annotations
 import csv
 import io
 import json
+import re
 from typing import Any
 
 import numpy as np
@@ -43,9 +44,19 @@ def trajectory_json(columns: list[str], rows: np.ndarray, metadata: dict[str, An
     return json.dumps({"metadata": metadata, "columns": list(columns), "rows": _typed_rows(list(columns), rows)})
 
 
+_JSON_STRING = re.compile(r'"(?:[^"\\]|\\.)*"')
+
+
+def one_cell_json(value: Any) -> str:
+    """JSON whose string literals hold no comma (written as the escape \\u002c, which reads back the same): a
+    spreadsheet that splits the metadata line at commas keeps it in one cell starting with '#', so a name such
+    as '=cmd|...' never becomes a formula cell of its own (OWASP's CSV injection)."""
+    return _JSON_STRING.sub(lambda m: m.group(0).replace(",", "\\u002c"), json.dumps(value))
+
+
 def trajectory_csv(columns: list[str], rows: np.ndarray, metadata: dict[str, Any]) -> str:
     buffer = io.StringIO()
-    buffer.write("# driftlab: " + json.dumps(metadata) + "\n")
+    buffer.write("# driftlab: " + one_cell_json(metadata) + "\n")
     writer = csv.writer(buffer, lineterminator="\n")
     writer.writerow(columns)
     writer.writerows(_typed_rows(list(columns), rows))

@@ -14,6 +14,7 @@ from driftlab.core.track import FigureEight
 from driftlab.core.tuning import TuningSpec
 from driftlab.core.vehicle import pack_params
 from driftlab.db import storage
+from driftlab.markup import plain
 from driftlab.reports.plotting import plot_convergence, plot_episode
 from driftlab.worker.executors import open_executor
 from driftlab.worker.scoring import score_thetas
@@ -67,7 +68,7 @@ def write_report(*, db_url: str, name: str, out_dir: str, baseline_samples: int 
 
     eq = drift_equilibrium(config.scenario.left_radius_m, -abs(config.scenario.sideslip_rad),
                            pack_params(config.vehicle)).as_dict()
-    lines = [f"# DriftLab report: {name}", "",
+    lines = [f"# DriftLab report: {plain(name)}", "",
              f"{len(evals)} evaluations ({int((~failed).sum())} completed), {spec.robust_samples} seeded episodes "
              f"per evaluation, seed points {spec.seed_points}, active set {spec.active_set}, bounds {spec.bounds}. "
              "Lower J is better.", "",

@@ -50,7 +50,7 @@ def plot_episode(result: EpisodeResult, track: FigureEight, path: str | Path, ti
     ax_xy.set_ylabel("y [m]")
     ax_xy.legend(loc="upper right", fontsize=8)
     # Over the whole figure: a long title (theta at full precision) above the narrow x-y axes ran off its left.
-    fig.suptitle(title or f"{result.status}, J = {result.J:.3f}", fontsize=9)
+    fig.suptitle(title or f"{result.status}, J = {result.J:.3f}", fontsize=9, parse_math=False)
     t = result.column("t_s")
     panels = (("V_mps", "V_ref_mps", "V [m/s]"), ("beta_rad", "beta_ref_rad", "beta [rad]"),
               ("r_radps", "r_ref_radps", "r [rad/s]"), ("delta_rad", "delta_ref_rad", "delta [rad]"))
@@ -80,7 +80,7 @@ def plot_convergence(values: np.ndarray, failed: np.ndarray, path: str | Path, t
     ax.plot(index, best, "-", color="k", lw=1.5, label="best so far")
     ax.set_xlabel("iteration")
     ax.set_ylabel("J")
-    ax.set_title(title)
+    ax.set_title(title, parse_math=False)  # a name's '$...$' is text, not mathtext
     ax.legend()
     fig.tight_layout()
     fig.savefig(path, dpi=110)
@@ -99,7 +99,7 @@ def plot_band(curves: list[list[float | None]], band: dict[str, list], labels: l
     ax.plot(band["iterations"], band["median"], "-", color="k", lw=2, drawstyle="steps-post", label="median")
     ax.set_xlabel("iteration")
     ax.set_ylabel("best J so far (completed)")
-    ax.set_title(title)
+    ax.set_title(title, parse_math=False)  # a name's '$...$' is text, not mathtext
     ax.legend(fontsize=8)
     fig.tight_layout()
     fig.savefig(path, dpi=110)
@@ -125,7 +125,7 @@ def plot_heatmap(table, path: str | Path, title: str = "") -> None:
     ax.set_xticks(range(len(table.column_labels)), table.column_labels, rotation=30, ha="right", fontsize=8)
     ax.set_xlabel(table.column_key)
     fig.colorbar(image, ax=ax, label="J (completed cells; lower is better)")
-    ax.set_title(title, fontsize=9)
+    ax.set_title(title, fontsize=9, parse_math=False)
     fig.tight_layout()
     fig.savefig(path, dpi=110)
     plt.close(fig)

@@ -8,6 +8,7 @@ from pathlib import Path
 
 from driftlab.core.study import grid_table
 from driftlab.db import storage, studies
+from driftlab.markup import plain
 from driftlab.reports.plotting import plot_band, plot_heatmap
 from driftlab.services import studies as study_views
 
@@ -21,7 +22,7 @@ def _seeds_lines(summary: dict, session, out: Path) -> list[str]:
     lines = ["| job | seed | status | evaluations | best J |", "|---|---|---|---|---|"]
     for j in jobs:
         best = "-" if j["best"] is None else f"{j['best']['J']:.4f} ({j['best']['status']})"
-        lines.append(f"| {j['name']} | {j['seed']} | {j['status']} | {j['n_done']} | {best} |")
+        lines.append(f"| {plain(j['name'])} | {j['seed']} | {j['status']} | {j['n_done']} | {best} |")
     final = summary["final_best_J"]
     if final:
         lines += ["", f"Final best J over seeds: median {statistics.median(final):.4f}, "
@@ -55,7 +56,7 @@ def write_study_report(*, db_url: str, name: str, out_dir: str) -> Path:
     out.mkdir(parents=True, exist_ok=True)
     with storage.snapshot(factory) as session:
         summary = study_views.study_summary(session, studies.get_study_by_name(session, name=name))
-        header = [f"# DriftLab study report: {name}", "", f"A {summary['kind']} study, {summary['status']}. "
+        header = [f"# DriftLab study report: {plain(name)}", "", f"A {summary['kind']} study, {summary['status']}. "
                   "Lower J is better.", ""]
         if summary["kind"] == "seeds":
             lines = _seeds_lines(summary, session, out)

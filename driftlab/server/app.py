@@ -80,6 +80,7 @@ def create_app(db_url: str, *, workers: int | None = 2, start_worker: bool = Tru
             runner.stop()
         if start_view:
             _stop_view(app)
+        storage.close_database(factory)
 
     app = FastAPI(title="DriftLab", version="0.1.0", lifespan=lifespan,
                   description="Learning-based inertia drift: tuning jobs, evaluations, trajectories.")

@@ -4,8 +4,9 @@ middleware, so nothing is buffered first):
 - the Host header names this machine (127.0.0.1, localhost, ::1) or a host of ``DRIFTLAB_ALLOWED_HOSTS``: a page
   on another site cannot reach the API through DNS rebinding (400 otherwise);
 - a mutating API request (POST, PUT, PATCH, DELETE under /api) carries the token when one is set, as a bearer
-  header or, from this origin, as the cookie a page opened with ``?token=`` got (401 before its body is read); without a token, one sent by a browser from another origin is refused (403): body-less POSTs
-  are "simple" cross-site requests that no CORS preflight stops;
+  header or, from this origin, as the cookie a page opened with ``?token=`` got (401 before its body is read);
+  without a token, one sent by a browser from another origin is refused (403): body-less POSTs are "simple"
+  cross-site requests that no CORS preflight stops;
 - a request body larger than ``DRIFTLAB_MAX_BODY_BYTES`` is refused (413), by its Content-Length or, for a
   chunked body, as soon as the bytes read pass the limit;
 - the /viser websocket (the 3D view, whose what-if panel runs episodes) opens only from this origin, and with the

@@ -6,12 +6,13 @@ from __future__ import annotations
 from typing import Annotated, Any, Literal
 
 from fastapi import Path, Query
-from pydantic import BaseModel, ConfigDict, Field, model_validator
+from pydantic import AfterValidator, BaseModel, ConfigDict, Field, model_validator
 
 from driftlab.core.config import THETA_KEYS, check_json_types
 from driftlab.core.errors import ConfigError
 from driftlab.core.limits import JOB_LIMITS
 from driftlab.core.tuning import DEFAULT_CONFIRM_SAMPLES, DEFAULT_ROBUST_SAMPLES, DEFAULT_SEED_POINTS
+from driftlab.names import MAX_NAME_LENGTH, name_problem
 
 MAX_ID = 2**63 - 1  # SQLite's INTEGER; larger ids cannot exist (and used to overflow into a 500)
 MAX_PAGE = 1000
@@ -20,6 +21,17 @@ JobId = Annotated[int, Path(ge=1, le=MAX_ID, description="a job's id")]
 EvaluationId = Annotated[int, Path(ge=1, le=MAX_ID, description="an evaluation's id (global, as in the API)")]
 After = Annotated[int, Query(ge=-1, le=MAX_ID, description="only evaluations with index > after")]
 Limit = Annotated[int, Query(ge=1, le=MAX_PAGE, description="at most this many evaluations")]
+
+
+def _checked_name(name: str) -> str:
+    problem = name_problem(name)
+    if problem is not None:
+        raise ValueError(problem)
+    return name
+
+
+# A job's or a study's name: printable text that reads as typed (driftlab.names).
+Name = Annotated[str, Field(min_length=1, max_length=MAX_NAME_LENGTH), AfterValidator(_checked_name)]
 
 
 def _limited(name: str, default: int | None = None, description: str = "") -> Any:
@@ -56,7 +68,7 @@ def check_document_types(doc: dict[str, Any]) -> None:
 class JobCreate(BaseModel):
     model_config = ConfigDict(extra="forbid")
 
-    name: str | None = Field(default=None, min_length=1, max_length=200)
+    name: Name | None = None
     iterations: int = _limited("iterations", description="evaluations in total")
     seed_points: int = _limited("seed_points", DEFAULT_SEED_POINTS)
     active_set: int = _limited("active_set", 400)
@@ -115,7 +127,7 @@ class StudyCreate(BaseModel):
     model_config = ConfigDict(extra="forbid")
 
     kind: Literal["seeds", "robustness"]
-    name: str | None = Field(default=None, min_length=1, max_length=200)
+    name: Name | None = None
     seeds: list[Annotated[int, Field(strict=True)]] | None = Field(
         default=None, description="seeds study: one job per seed, distinct, 1 to 32 of them")
     spec: dict[str, Any] | None = Field(default=None, description="seeds study: a job spec as POST /api/jobs takes")

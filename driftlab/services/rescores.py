@@ -28,7 +28,8 @@ def document(session: Session, rescore: Rescore | None, job_id: int) -> dict[str
     stored = session.get(Evaluation, rescore.evaluation_id)
     return {"job_id": job_id, "id": rescore.id, "status": rescore.status, "samples": len(rescore.seeds),
             "done": len(rescore.samples), "theta": rescore.theta, "evaluation_id": rescore.evaluation_id,
-            "J_stored": None if stored is None else stored.J, "status_stored": None if stored is None else stored.status,
+            "J_stored": None if stored is None else stored.J,
+            "status_stored": None if stored is None else stored.status,
             "result": rescore.result, "error": rescore.error}
 
 

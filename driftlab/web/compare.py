@@ -17,8 +17,8 @@ import numpy as np
 import viser
 
 from driftlab.core.study import grid_table
+from driftlab.markup import plain
 from driftlab.web.heatmap import heatmap_html
-from driftlab.web.markup import plain
 from driftlab.web.player import CAR_COLOR, GHOST_COLOR, MORE_GHOST_COLORS
 from driftlab.web.plots import padded_range, series
 
@@ -69,7 +69,8 @@ def config_diff_markdown(diff: dict[str, Any]) -> str:
     if not diff["differences"]:
         return "**Config diff**: the jobs' settings are the same (they differ in seed only, if at all)."
     header = "| setting | " + " | ".join(f"{plain(j['name'])} (id {j['id']})" for j in jobs) + " |"
-    rows = [f"| {plain(d['key'])} | " + " | ".join(plain(_shown(v)) for v in d["values"]) + " |" for d in diff["differences"]]
+    rows = [f"| {plain(d['key'])} | " + " | ".join(plain(_shown(v)) for v in d["values"]) + " |"
+            for d in diff["differences"]]
     return "\n".join(["**Config diff** (settings that differ)", "", header, "|---" * (len(jobs) + 1) + "|", *rows])
 
 
@@ -243,8 +244,8 @@ class ComparePanel:
         for n, job in enumerate(self.jobs):
             best = job["best"]
             value = "-" if best is None or not math.isfinite(best["J"]) else f"{best['J']:.4g} ({best['status']})"
-            lines.append(f"| {COLOR_NAMES[n % len(COLOR_NAMES)]} | {plain(job['name'])} (id {job['id']}) | {job['seed']} | "
-                         f"{job['n_done']} / {job['iterations']} | {value} |")
+            lines.append(f"| {COLOR_NAMES[n % len(COLOR_NAMES)]} | {plain(job['name'])} (id {job['id']}) | "
+                         f"{job['seed']} | {job['n_done']} / {job['iterations']} | {value} |")
         return "\n".join(lines)
 
     def play(self) -> None:

@@ -17,8 +17,8 @@ import viser
 import viser.uplot
 
 from driftlab.db.storage import NotFound
+from driftlab.markup import plain
 from driftlab.web.frames import EpisodeFrames
-from driftlab.web.markup import plain
 from driftlab.web.player import EpisodePlayer
 from driftlab.web.plots import padded_range, series
 from driftlab.web.scene import set_chase_camera, set_overview_camera

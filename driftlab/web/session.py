@@ -18,9 +18,9 @@ import viser.uplot
 
 from driftlab.core.compiled import episode_kernels_cached
 from driftlab.db.models import JobStatus
+from driftlab.markup import plain
 from driftlab.web.compare import ComparePanel
 from driftlab.web.frames import EpisodeFrames
-from driftlab.web.markup import plain
 from driftlab.web.playback import Playback
 from driftlab.web.plots import padded_range, series
 from driftlab.web.scene import set_overview_camera

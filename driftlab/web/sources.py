@@ -17,10 +17,10 @@ from driftlab.core.drivability import drift_window
 from driftlab.core.track import FigureEight
 from driftlab.db import storage, studies
 from driftlab.db.models import Evaluation
+from driftlab.markup import plain
 from driftlab.services import studies as study_views
 from driftlab.services.job_documents import spec_diff
 from driftlab.web.frames import EpisodeFrames
-from driftlab.web.markup import plain
 
 
 def frames_of_evaluation(factory: sessionmaker[Session], evaluation_id: int) -> EpisodeFrames:

@@ -18,8 +18,8 @@ import viser
 
 from driftlab.core.config import Theta, config_from_dict, config_to_dict
 from driftlab.core.tuning import DEFAULT_BOUNDS, MODEL_BOUNDS
+from driftlab.markup import plain
 from driftlab.web.frames import EpisodeFrames
-from driftlab.web.markup import plain
 from driftlab.web.sources import JobHistory
 
 # What-if plant sliders: (config key, label, min, max, step).

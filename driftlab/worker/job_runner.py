@@ -1,7 +1,8 @@
 """The server's background job runner: one thread that claims claimable jobs (queued, or held by a dead runner)
 and runs each on a thread of its own, as many at once as the executor has workers, or else (when no job runs or
-waits) the next claimable robustness study; and beside them one rescore at a time (driftlab.worker.rescoring). Every episode runs on the one executor, whose capacity the running jobs
-share (driftlab.worker.slots): a seeds study's jobs run side by side, each with its own optimizer.
+waits) the next claimable robustness study; and beside them one rescore at a time (driftlab.worker.rescoring).
+Every episode runs on the one executor, whose capacity the running jobs and the rescore share
+(driftlab.worker.slots): a seeds study's jobs run side by side, each with its own optimizer.
 
 Exactly one runner runs a job at a time (the lease in driftlab.db.lifecycle): a `driftlab tune` on the same
 job is refused while this one holds it, and a job this server held when it died is taken over by the next

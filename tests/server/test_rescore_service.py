@@ -1,6 +1,8 @@
 """Rescores on a real server: run by the job runner (not a request thread), stored as they go, so ordinary
 traffic cannot break them, a restart resumes them and a DELETE cancels them."""
 
+import shutil
+import sqlite3
 import threading
 import time
 
@@ -69,3 +71,21 @@ def test_a_rescore_outlives_a_burst_a_restart_and_can_be_cancelled(tmp_path):
     finally:
         proc.terminate()
         proc.wait(timeout=60)
+
+
+def test_after_a_clean_stop_the_database_file_alone_holds_every_evaluation(tmp_path):
+    db = tmp_path / "driftlab.db"
+    proc, url = start_server(db, free_port(), extra_args=("--workers", "1"))
+    try:
+        job_id = _finished_job(url)
+        n_done = httpx.get(f"{url}/api/jobs/{job_id}").json()["n_done"]
+    finally:
+        proc.terminate()
+        proc.wait(timeout=60)
+    assert not (tmp_path / "driftlab.db-wal").exists() or (tmp_path / "driftlab.db-wal").stat().st_size == 0
+    copy = tmp_path / "copy" / "driftlab.db"
+    copy.parent.mkdir()
+    shutil.copyfile(db, copy)  # the file alone: no -wal, no -shm beside it
+    with sqlite3.connect(copy) as connection:
+        assert connection.execute("SELECT count(*) FROM evaluations WHERE job_id = ?", (job_id,)).fetchone() \
+            == (n_done,)

@@ -11,7 +11,6 @@ from sqlalchemy.orm import Session, sessionmaker
 
 from driftlab.core.config import THETA_KEYS
 from driftlab.core.search_space import MAX_GRID
-from driftlab.db import storage
 from driftlab.server import quotas
 from driftlab.server.responses import Rescore, SearchSpace, errors
 from driftlab.server.routes.deps import factory, require_token, wake_runner

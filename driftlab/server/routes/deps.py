@@ -2,7 +2,6 @@
 
 from __future__ import annotations
 
-
 from fastapi import HTTPException, Request
 from sqlalchemy.orm import Session, sessionmaker
 

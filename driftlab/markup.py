@@ -1,6 +1,7 @@
-"""Text a user typed (job and study names) or the service wrote (error messages), made safe to put into the
-view's markdown: viser renders markdown with raw HTML enabled, so a name is stored XSS unless every such string
-passes through :func:`plain` (OWASP's contextual output encoding: HTML first, then markdown's own syntax)."""
+"""Text a user typed (job and study names) or the service wrote (error messages), made safe to put into
+markdown: the view's (viser renders markdown with raw HTML enabled, so a name would be stored XSS) and the
+reports' report.md. Every such string passes through :func:`plain` (OWASP's contextual output encoding: HTML
+first, then markdown's own syntax)."""
 
 from __future__ import annotations
 

@@ -29,23 +29,14 @@ def cmd_equilibrium(args: argparse.Namespace) -> int:
         sys.stderr.write(f"driftlab: error: {exc}\n")
         return 2
     out: dict[str, Any] = eq.as_dict()
-    if args.plant and config.plant.model != "driftlab":
-        from driftlab.core.commonroad.family import family_summary
-
-        plant = family_summary(config.plant, args.radius, args.beta)
-        if "V" in plant:
+    if args.plant:
+        plant = config.plant.plant_type.equilibrium_summary(config.plant, config.vehicle, args.radius, args.beta)
+        if plant is not None and "V" in plant:
+            # The drive the car applies: a CommonRoad car's through its wheel (drive_n), DriftLab's its Fxr.
             plant["mismatch"] = {"dV": plant["V"] - eq.speed_mps, "ddelta": plant["delta"] - eq.steer_rad,
-                                 "dFxr": plant["drive_n"] - eq.drive_force_n}
-        out["plant"] = plant
-    elif args.plant:
-        try:
-            plant_eq = drift_equilibrium(args.radius, args.beta, config.plant.packed_params(config.vehicle))
-            out["plant"] = plant_eq.as_dict()
-            out["plant"]["mismatch"] = {"dV": plant_eq.speed_mps - eq.speed_mps,
-                                        "ddelta": plant_eq.steer_rad - eq.steer_rad,
-                                        "dFxr": plant_eq.drive_force_n - eq.drive_force_n}
-        except NoEquilibriumError as exc:
-            out["plant"] = {"error": str(exc)}
+                                 "dFxr": plant.get("drive_n", plant["Fxr"]) - eq.drive_force_n}
+        out["plant"] = plant if plant is not None else {"error": f"plant.model {config.plant.model!r}: its own "
+                                                                  "drift is not known to DriftLab"}
     print(json.dumps(out))
     return 0
 

@@ -172,35 +172,36 @@ class EpisodeConfig:
         """Preset by name. plant: "default" (mismatched), "nominal" (equals the controller's model) or
         "commonroad_std" (CommonRoad's STD, vehicle 2, with the controller's model of that car);
         controller: "default" (DriftLab's extended MPC) or "paper" (the paper's formulation)."""
-        controllers = {"default": MpcConfig, "paper": MpcConfig.paper}
-        if plant != "default" and plant != "nominal":  # the default controller's weights for that car
-            from driftlab.core.commonroad.weights import WEIGHTS
-
-            controllers["default"] = WEIGHTS[plant]
         if plant not in PLANT_PRESETS:
             raise ConfigError(f"plant must be one of {', '.join(PLANT_PRESETS)}, got {plant!r}")
+        plant_config = PLANT_PRESETS[plant]()
+        controllers = {"default": plant_config.plant_type.controller, "paper": MpcConfig.paper}
         if controller not in controllers:
             raise ConfigError(f"controller must be 'default' or 'paper', got {controller!r}")
-        plant_config = PLANT_PRESETS[plant]()
-        # A CommonRoad car countersteers only from ~0.45 rad at 44 m (its drift family): its preset drifts at 0.5.
-        scenario = ScenarioConfig() if plant_config.model == "driftlab" else ScenarioConfig(sideslip_rad=0.5)
+        sideslip_rad = plant_config.plant_type.default_sideslip_rad
+        scenario = ScenarioConfig() if sideslip_rad is None else ScenarioConfig(sideslip_rad=sideslip_rad)
         return cls(plant=plant_config, vehicle=model_vehicle_for(plant_config, scenario), scenario=scenario,
                    mpc=controllers[controller]())
 
 
-PLANT_PRESETS = {"default": PlantConfig, "nominal": PlantConfig.nominal, "commonroad_std": PlantConfig.commonroad_std,
-                 "commonroad_mb": PlantConfig.commonroad_mb}
+def _plant_presets() -> dict[str, Any]:
+    """``--plant`` presets: DriftLab's plant as it is ("default") and equal to its model ("nominal"), then each
+    catalog entry that has one (driftlab.core.plants)."""
+    from driftlab.core.plants import preset_types
+
+    return {"default": PlantConfig, "nominal": PlantConfig.nominal,
+            **{name: entry.preset for name, entry in preset_types().items() if name != "default"}}
+
+
+PLANT_PRESETS = _plant_presets()
 
 
 def model_vehicle_for(plant: PlantConfig, scenario: ScenarioConfig) -> VehicleParams:
-    """The controller's vehicle a plant comes with: the paper's Table I for DriftLab's plants; for a CommonRoad
-    plant the car's own mass, geometry and tyre shape, placed at its drift at the scenario's (left) radius and
-    sideslip (raises ConfigError naming scenario.sideslip_rad where the car has no countersteer drift)."""
-    if plant.model == "driftlab":
-        return VehicleParams()
-    from driftlab.core.commonroad.model_fit import fitted_model_vehicle
-
-    return fitted_model_vehicle(plant.commonroad_vehicle, scenario.left_radius_m, scenario.sideslip_rad, plant.model)
+    """The controller's vehicle a plant comes with (its catalog entry's): the paper's Table I for DriftLab's
+    plants; for a CommonRoad plant the car's own mass, geometry and tyre shape, placed at its drift at the
+    scenario's (left) radius and sideslip (raises ConfigError naming scenario.sideslip_rad where the car has no
+    countersteer drift)."""
+    return plant.plant_type.model_vehicle(plant, scenario.left_radius_m, scenario.sideslip_rad)
 
 
 def _coerce(section: str, name: str, current: Any, raw: Any) -> Any:
@@ -262,12 +263,13 @@ def _switch_plant_model(sections: dict[str, Any], changes: dict[str, dict[str, A
     current = sections["plant"]
     model = plant_changes.get("model", current.model)
     vehicle_id = plant_changes.get("commonroad_vehicle", current.commonroad_vehicle)
-    if model == current.model and (model == "driftlab" or vehicle_id == current.commonroad_vehicle):
+    if model == current.model and (not current.plant_type.own_car or vehicle_id == current.commonroad_vehicle):
         return
-    if model == "driftlab":
-        sections["plant"] = PlantConfig()
-    elif model in PLANT_PRESETS and isinstance(vehicle_id, int) and not isinstance(vehicle_id, bool):
-        sections["plant"] = PLANT_PRESETS[model](vehicle_id)
+    from driftlab.core.plants import plant_type
+
+    entry = plant_type(model)
+    if entry is not None and isinstance(vehicle_id, int) and not isinstance(vehicle_id, bool):
+        sections["plant"] = entry.preset(vehicle_id)
     # else: PlantConfig refuses the value, naming it
 
 
@@ -279,12 +281,10 @@ def _refit_model_vehicle(config: EpisodeConfig, changes: dict[str, dict[str, Any
     or the scenario changes (driftlab.core.commonroad.model_fit), unless ``vehicle.*`` keys are given."""
     plant_switched = "model" in changes.get("plant", {}) or "commonroad_vehicle" in changes.get("plant", {})
     if plant_switched and "mpc" not in changes:  # and the default controller's weights for that car
-        from driftlab.core.commonroad.weights import WEIGHTS
-
-        config = replace(config, mpc=WEIGHTS.get(config.plant.model, MpcConfig)())
+        config = replace(config, mpc=config.plant.plant_type.controller())
     if "vehicle" in changes or not ({"plant", "scenario"} & set(changes)):
         return config
-    if config.plant.model == "driftlab" and not plant_switched:
+    if not config.plant.plant_type.own_car and not plant_switched:
         return config
     return replace(config, vehicle=model_vehicle_for(config.plant, config.scenario))
 

@@ -15,10 +15,10 @@ from functools import lru_cache
 import numpy as np
 
 from driftlab.core.config import EpisodeConfig
-from driftlab.core.equilibrium import drift_equilibrium
-from driftlab.core.errors import ConfigError, NoEquilibriumError
+from driftlab.core.errors import ConfigError
 from driftlab.core.plant import PlantConfig
-from driftlab.core.vehicle import VehicleParams, pack_params
+from driftlab.core.plants import model_reason
+from driftlab.core.vehicle import VehicleParams
 
 
 class NotDrivableError(ConfigError):
@@ -45,49 +45,18 @@ def drivable_reason(config: EpisodeConfig) -> str | None:
 @lru_cache(maxsize=256)
 def _reason(vehicle: VehicleParams, plant: PlantConfig, left_radius_m: float, right_radius_m: float,
             sideslip_rad: float) -> str | None:
-    # A right-hand drift mirrors a left-hand one (same V, delta, Fxr): one solve per radius is enough.
-    if plant.model != "driftlab":
-        reason = _model_reason(vehicle, left_radius_m, right_radius_m, sideslip_rad)
-        if reason is not None or plant.model not in ("commonroad_std", "commonroad_mb"):
-            return reason  # a registered plant's own drift is not known here
-        return _commonroad_reason(plant, left_radius_m, right_radius_m, sideslip_rad)
-    for label, params in (("the controller's model", pack_params(vehicle)),
-                          ("the plant", plant.packed_params(vehicle))):
-        for circle, radius in (("left", left_radius_m), ("right", right_radius_m)):
-            try:
-                drift_equilibrium(radius, -abs(sideslip_rad), params)
-            except NoEquilibriumError:
-                return (f"config is not drivable: {label} has no countersteer drift equilibrium on the {circle} circle "
-                        f"(scenario radius {radius:g} m, sideslip {abs(sideslip_rad):g} rad); change the plant "
-                        f"(e.g. plant.friction_scale, plant.tyre_c_scale, plant.cg_height_m) or the scenario")
-            if left_radius_m == right_radius_m:
-                break
-    return None
-
-
-def _model_reason(vehicle: VehicleParams, left_radius_m: float, right_radius_m: float,
-                  sideslip_rad: float) -> str | None:
-    for circle, radius in (("left", left_radius_m), ("right", right_radius_m)):
-        try:
-            drift_equilibrium(radius, -abs(sideslip_rad), pack_params(vehicle))
-        except NoEquilibriumError:
-            return (f"config is not drivable: the controller's model has no countersteer drift equilibrium on the "
-                    f"{circle} circle (scenario radius {radius:g} m, sideslip {abs(sideslip_rad):g} rad)")
-    return None
-
-
-def _commonroad_reason(plant: PlantConfig, left_radius_m: float, right_radius_m: float,
-                       sideslip_rad: float) -> str | None:
-    from driftlab.core.commonroad.family import describe_family, drift_family
-
-    for circle, radius in (("left", left_radius_m), ("right", right_radius_m)):
-        family = drift_family(plant.model, plant.commonroad_vehicle, radius, sideslip_rad, circle == "right",
-                              plant.friction_scale, plant.mass_scale)
-        why = describe_family(family)
-        if why is not None:
-            return (f"config is not drivable on the {circle} circle (scenario radius {radius:g} m, sideslip "
-                    f"{abs(sideslip_rad):g} rad): {why}; try another scenario.sideslip_rad (`driftlab equilibrium "
-                    f"--plant {plant.model}` prints where the car countersteers)")
+    """The controller's model on each circle, then the plant's own drift (its catalog entry's check). A right-hand
+    drift mirrors a left-hand one (same V, delta, Fxr): one solve per radius is enough."""
+    entry = plant.plant_type
+    circles = [("left", left_radius_m)] + ([("right", right_radius_m)] if right_radius_m != left_radius_m else [])
+    for circle, radius in circles:
+        reason = model_reason(vehicle, radius, sideslip_rad, circle)
+        if reason is not None:
+            return reason + entry.not_drivable_hint
+    for circle, radius in circles:
+        reason = entry.plant_reason(plant, vehicle, radius, sideslip_rad, circle)
+        if reason is not None:
+            return reason
     return None
 
 

@@ -18,8 +18,6 @@ error against a 0.5 ms reference (4e-8 on [V, beta, r] over 5 s for the default 
 
 from __future__ import annotations
 
-import importlib
-from collections.abc import Callable
 from dataclasses import dataclass, replace
 
 import numpy as np
@@ -50,52 +48,18 @@ PLANT_LIMITS: dict[str, tuple[float, float]] = {
 # Actuator parameter layout: [steer lag s, steer rate rad/s, drive lag s, drive rate N/s].
 A_STEER_LAG, A_STEER_RATE, A_DRIVE_LAG, A_DRIVE_RATE = range(4)
 
-# Which plant an episode steps (plant.model): DriftLab's own, CommonRoad's models, or a plant registered by name.
-PLANT_MODELS = ("driftlab", "commonroad_std", "commonroad_mb")
-# Where the episode loop steps a plant (a plant's ``kind``): inside its compiled kernel (DriftLab's own, CommonRoad's
+# Where the episode loop steps a plant (a stepper's ``kind``): inside its compiled kernel (DriftLab's own, CommonRoad's
 # STD), or, for any other (MB, a user's own car), by calling the plant's ``step`` once a control step. The episode
-# loop, planner, controller, failure rules and J are the same code either way.
+# loop, planner, controller, failure rules and J are the same code either way. Which plants exist, and what each
+# one brings, is the plant catalog's (driftlab.core.plants).
 PLANT_DRIFTLAB, PLANT_COMMONROAD_STD, PLANT_EXTERNAL = range(3)
 
-# Plants by plant.model, built from "module:factory" on first use (so this module imports none of them). More are
-# registered in Python (register_plant) or by an installed package under the entry-point group "driftlab.plants",
-# never from a request: a REST client can only name what is installed.
-_FACTORIES: dict[str, Callable[[PlantConfig], object]] = {}
-_BUILT_IN = {"commonroad_std": "driftlab.core.commonroad.plant:CommonRoadStdPlant",
-             "commonroad_mb": "driftlab.core.commonroad.plant:CommonRoadMbPlant",
-             "commonroad_std_reference": "driftlab.core.commonroad.reference:ReferenceStdPlant"}
 
+def register_plant(name: str, plant) -> None:
+    """Register a plant under ``plant.model`` = ``name`` (see driftlab.core.plants.register_plant)."""
+    from driftlab.core.plants import register_plant as register
 
-def register_plant(name: str, factory: Callable[[PlantConfig], object]) -> None:
-    """``factory(config)`` returns an object with ``kind = PLANT_EXTERNAL``, ``start_state(loop_state)`` (the
-    full state from the loop's eight, X_POS ... DRIVE; own states appended) and ``step(state, steer_cmd_rad,
-    drive_cmd_n, duration_s)`` (a new state, the loop's eight first)."""
-    if name == "driftlab" or name in _BUILT_IN:
-        raise ConfigError(f"plant.model {name!r} is built in")
-    _FACTORIES[name] = factory
-
-
-def _plant_factory(name: str) -> Callable[[PlantConfig], object] | None:
-    if name in _FACTORIES:
-        return _FACTORIES[name]
-    target = _BUILT_IN.get(name)
-    if target is None:
-        from importlib.metadata import entry_points
-
-        found = [e for e in entry_points(group="driftlab.plants") if e.name == name]
-        target = found[0].value if found else None
-    if target is None:
-        return None
-    module_name, _, attribute = target.partition(":")
-    factory = getattr(importlib.import_module(module_name), attribute)
-    _FACTORIES[name] = factory
-    return factory
-
-
-# Settings that shape DriftLab's own car and tyres; a CommonRoad plant has its own (PAC2002 tyres, load transfer,
-# combined slip) and keeps these at 1 / off.
-_DRIFTLAB_ONLY = {"yaw_inertia_scale": 1.0, "tyre_b_scale": 1.0, "tyre_c_scale": 1.0, "friction_circle": False,
-                  "load_transfer": False}
+    register(name, plant)
 
 
 @dataclass(frozen=True)
@@ -182,20 +146,7 @@ class PlantConfig:
 
     def __post_init__(self) -> None:
         check_ranges(self, "plant", PLANT_LIMITS)
-        if self.model != "driftlab" and _plant_factory(self.model) is None:
-            raise ConfigError(f"plant.model must be one of {', '.join(PLANT_MODELS)} or a registered plant, got "
-                              f"{self.model!r}", field="plant.model")
-        if self.model.startswith("commonroad"):
-            from driftlab.core.commonroad.parameters import check_vehicle
-
-            check_vehicle(self.commonroad_vehicle)
-            for name, value in _DRIFTLAB_ONLY.items():
-                if getattr(self, name) != value:
-                    raise ConfigError(f"plant.{name} shapes DriftLab's own plant; a CommonRoad plant has its own "
-                                      f"tyres and loads (keep it at {value!r})", field=f"plant.{name}")
-            if self.steer_lag_s <= 0.0:
-                raise ConfigError("plant.steer_lag_s must be > 0 for a CommonRoad plant (the steering servo's time "
-                                  "constant)", field="plant.steer_lag_s")
+        self.plant_type.check(self)
         if self.steer_lag_spread_s > self.steer_lag_s:
             raise ConfigError(f"plant.steer_lag_spread_s must be in [0, plant.steer_lag_s = {self.steer_lag_s}], "
                               f"got {self.steer_lag_spread_s!r}")
@@ -212,17 +163,33 @@ class PlantConfig:
 
     @classmethod
     def commonroad_std(cls, vehicle_id: int = 2) -> PlantConfig:
-        """CommonRoad's STD with vehicle ``vehicle_id``: its own car and tyres, DriftLab's actuators (30 ms / 8
-        rad/s steering servo, 50 ms drive), RK4 at 2 ms, the default plant's per-episode variation."""
-        return cls(model="commonroad_std", commonroad_vehicle=vehicle_id, friction_scale=1.0, substep_s=0.002,
-                   **_DRIFTLAB_ONLY)
+        """CommonRoad's STD with vehicle ``vehicle_id`` (its catalog preset: RK4 at 2 ms)."""
+        from driftlab.core.plants import plant_type
+
+        return plant_type("commonroad_std").preset(vehicle_id)
 
     @classmethod
     def commonroad_mb(cls, vehicle_id: int = 2) -> PlantConfig:
-        """CommonRoad's multi-body model with vehicle ``vehicle_id``, as :meth:`commonroad_std` (RK4 at 1 ms: its
-        suspension and axle compliance are stiffer than STD's wheel-speed mode)."""
-        return cls(model="commonroad_mb", commonroad_vehicle=vehicle_id, friction_scale=1.0, substep_s=0.001,
-                   **_DRIFTLAB_ONLY)
+        """CommonRoad's multi-body model with vehicle ``vehicle_id`` (its catalog preset: RK4 at 1 ms, its
+        suspension and axle compliance being stiffer than STD's wheel-speed mode)."""
+        from driftlab.core.plants import plant_type
+
+        return plant_type("commonroad_mb").preset(vehicle_id)
+
+    @property
+    def plant_type(self):
+        """This plant's entry in the plant catalog (driftlab.core.plants.PlantType).
+
+        Raises:
+            ConfigError: ``model`` names no plant (built in, registered or installed).
+        """
+        from driftlab.core.plants import built_in_names, plant_type
+
+        found = plant_type(self.model)
+        if found is None:
+            raise ConfigError(f"plant.model must be one of {', '.join(built_in_names())} or a registered plant, "
+                              f"got {self.model!r}", field="plant.model")
+        return found
 
     @property
     def varies(self) -> bool:
@@ -327,6 +294,4 @@ class Plant:
 
 def make_plant(config: PlantConfig, model_vehicle: VehicleParams) -> Plant:
     """The plant ``config.model`` names (DriftLab's own, a CommonRoad model, a registered one)."""
-    if config.model == "driftlab":
-        return Plant(config, model_vehicle)
-    return _plant_factory(config.model)(config)
+    return config.plant_type.build(config, model_vehicle)

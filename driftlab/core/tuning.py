@@ -132,7 +132,7 @@ class TuningSpec:
             raise ConfigError(f"model_correction must be true or false, got {self.model_correction!r}",
                               field="model_correction")
         if self.local_phase is None:
-            object.__setattr__(self, "local_phase", self.config.plant.model == "driftlab")
+            object.__setattr__(self, "local_phase", self.config.plant.plant_type.local_phase)
         if not isinstance(self.local_phase, bool):
             raise ConfigError(f"local_phase must be true or false, got {self.local_phase!r}", field="local_phase")
         if not isinstance(self.deterministic, bool):

@@ -67,7 +67,7 @@ def draw_variation(plant: PlantConfig, seed: int, n_steps: int) -> EpisodeVariat
         mass_scale=_within("mass_scale", plant.mass_scale * mass_factor),
         # (A CommonRoad plant scales its yaw inertia with mass_scale itself.)
         yaw_inertia_scale=_within("yaw_inertia_scale", plant.yaw_inertia_scale * mass_factor)
-        if not plant.model.startswith("commonroad") else plant.yaw_inertia_scale,
+        if not plant.plant_type.own_car else plant.yaw_inertia_scale,
         steer_lag_s=_within("steer_lag_s", steer_lag_s),
         **{name: 0.0 for name in VARIATION_LIMITS},
     )

@@ -10,19 +10,18 @@ from driftlab.core.config import PLANT_PRESETS, EpisodeConfig, config_to_dict, d
 from driftlab.core.limits import JOB_LIMITS
 from driftlab.core.tuning import DEFAULT_BOUNDS, MODEL_BOUNDS, TuningSpec
 
-# A CommonRoad preset as the keys POST /api/jobs takes: switching plant.model loads that car's preset and fits the
-# controller's model to it (driftlab.core.config), at the sideslip EpisodeConfig.preset drifts it at.
-_COMMONROAD_SIDESLIP_RAD = 0.5
-
 
 @lru_cache(maxsize=1)
 def plant_preset_sets() -> dict[str, dict[str, Any]]:
     """Each plant preset (``driftlab --plant``) as the dotted ``config`` keys that turn the default into it."""
     default = dotted_config(config_to_dict(EpisodeConfig()))
     out: dict[str, dict[str, Any]] = {}
-    for name in PLANT_PRESETS:
-        if name.startswith("commonroad"):
-            out[name] = {"plant.model": name, "scenario.sideslip_rad": _COMMONROAD_SIDESLIP_RAD}
+    for name, make in PLANT_PRESETS.items():
+        entry = make().plant_type
+        if entry.own_car:
+            # Switching plant.model loads that car's preset and fits the controller's model to it
+            # (driftlab.core.config), at the sideslip EpisodeConfig.preset drifts it at.
+            out[name] = {"plant.model": name, "scenario.sideslip_rad": entry.default_sideslip_rad}
             continue
         preset = dotted_config(config_to_dict(EpisodeConfig.preset(name)))
         out[name] = {k: v for k, v in preset.items() if default.get(k) != v}

@@ -125,11 +125,27 @@ def test_the_view_websocket_needs_the_token_when_one_is_set(token_server):
     _, url = token_server
     with pytest.raises(InvalidStatus):
         _ws(url, origin=url)
-    page = httpx.get(f"{url}/viser/", params={"token": TOKEN})
+    page = httpx.get(f"{url}/viser/", params={"token": TOKEN, "playbackPath": "/x.viser"})
     cookie = page.cookies.get("driftlab_token")
-    assert page.status_code == 200 and cookie == TOKEN
+    # The token moves into an HttpOnly cookie and out of the address: a 303 to the page without it.
+    assert page.status_code == 303 and cookie == TOKEN and page.headers["location"] == "/viser/?playbackPath=%2Fx.viser"
+    assert "httponly" in page.headers["set-cookie"].lower() and "samesite=strict" in page.headers["set-cookie"].lower()
+    assert "secure" not in page.headers["set-cookie"].lower()  # plain http on loopback
+    behind_https = httpx.get(f"{url}/viser/", params={"token": TOKEN}, headers={"x-forwarded-proto": "https"})
+    assert "secure" in behind_https.headers["set-cookie"].lower()
+    wrong = httpx.get(f"{url}/viser/", params={"token": "wrong"})
+    assert wrong.status_code == 303 and "set-cookie" not in wrong.headers
     with _ws(url, origin=url, additional_headers={"cookie": f"driftlab_token={cookie}"}) as socket:
         assert socket.recv(timeout=10)
+
+
+def test_a_malformed_token_is_a_401_never_a_500(token_server):
+    _, url = token_server
+    for given in ("Bearer \u00e9t\u00e9", "Bearer " + "x" * 5000, "Basic abc", ""):
+        r = httpx.post(f"{url}/api/jobs", json={}, headers={"authorization": given.encode("utf-8")})
+        assert r.status_code == 401, (given[:20], r.status_code)
+    r = httpx.post(f"{url}/api/jobs", json={}, headers={"cookie": "driftlab_token=\u00e9".encode()})
+    assert r.status_code == 401
 
 
 def test_serving_beyond_this_machine_needs_a_token(tmp_path):

@@ -80,7 +80,8 @@ def test_the_view_shows_names_as_typed_and_runs_none_of_them(server, browser):
     page.get_by_role("option", name=f"{ids[0]} · {NAMES[0]} · finished").click()
     page.get_by_text(NAMES[0], exact=True).wait_for(timeout=30_000)  # the job line: **name**, read as typed
     page.get_by_text("Compare", exact=True).click()
-    page.locator("input.mantine-TextInput-input").last.fill(",".join(str(i) for i in ids))  # "Job ids" (viser labels no input)
+    # "Job ids" (viser's text input has no label of its own)
+    page.locator("input.mantine-TextInput-input").last.fill(",".join(str(i) for i in ids))
     page.get_by_role("button", name="Show comparison").click()
     for job_id, name in zip(ids, NAMES, strict=True):
         page.get_by_text(f"{name} (id {job_id})", exact=True).first.wait_for(timeout=30_000)  # table and diff

@@ -74,9 +74,12 @@ def test_the_config_diff_table_shows_each_differing_setting_to_4_significant_dig
     diff = {"jobs": [{"id": 1, "name": "a"}, {"id": 2, "name": "b"}],
             "differences": [{"key": "bounds.k", "values": [[0.0, 0.12], [0.0, 0.123456]]},
                             {"key": "config.plant.steer_lag_s", "values": [0.03, None]}]}
-    table = config_diff_markdown(diff)
+    from driftlab.markup import plain
+
+    table = config_diff_markdown(diff)  # every cell escaped for markdown (driftlab.markup): it reads as below
     assert "| setting | a (id 1) | b (id 2) |" in table
-    assert "| bounds.k | [0, 0.12] | [0, 0.1235] |" in table and "| config.plant.steer_lag_s | 0.03 | - |" in table
+    row = " | ".join(plain(cell) for cell in ("bounds.k", "[0, 0.12]", "[0, 0.1235]"))
+    assert f"| {row} |" in table and f"| {plain('config.plant.steer_lag_s')} | 0\\.03 | \\- |" in table
     assert config_diff_markdown({"jobs": [{"id": 1, "name": "a"}], "differences": []}) == ""
 
 

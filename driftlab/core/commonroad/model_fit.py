@@ -14,6 +14,7 @@ from __future__ import annotations
 
 from dataclasses import replace
 from functools import lru_cache
+from typing import Any
 
 from scipy.optimize import brentq
 
@@ -32,20 +33,28 @@ def _speed_gap(friction: float, base: VehicleParams, radius_m: float, sideslip_r
     return eq.speed_mps - target_mps
 
 
-@lru_cache(maxsize=64)
 def fitted_model_vehicle(vehicle_id: int, radius_m: float, sideslip_rad: float,
-                         model: str = "commonroad_std") -> VehicleParams:
+                         model: Any = "commonroad_std") -> VehicleParams:
     """The model of CommonRoad vehicle ``vehicle_id`` whose drift at (radius, sideslip) is the car's main drift
-    (the STD car's, or with ``model`` "commonroad_mb" the multi-body car's); the multi-body car's model also
-    answers the steering as strongly as the car does (its front grip, :func:`matched_front_grip`).
+    (``model``: the car's catalog entry or its ``plant.model`` name; a multi-body car's model also answers the
+    steering as strongly as the car does, its front grip, :func:`matched_front_grip`).
 
     Raises:
         ConfigError: the car has no countersteer drift there, or no friction of the model reaches its speed.
     """
+    if isinstance(model, str):
+        from driftlab.core.plants import plant_type
+
+        model = plant_type(model)
+    return _fitted(vehicle_id, radius_m, sideslip_rad, model)
+
+
+@lru_cache(maxsize=64)
+def _fitted(vehicle_id: int, radius_m: float, sideslip_rad: float, model: Any) -> VehicleParams:
     left = _main_drift(vehicle_id, radius_m, sideslip_rad, False, model)
     right = _main_drift(vehicle_id, radius_m, sideslip_rad, True, model)
     base = commonroad_model_vehicle(vehicle_id)
-    if model == "commonroad_mb":
+    if model.multibody:
         # The multi-body car's rear wheels spin up under more drive and its rear slides further: the model takes
         # the drive's share of the rear grip, or it answers the drive with the opposite sign (VehicleParams).
         base = replace(base, rear_friction_circle=True)
@@ -53,14 +62,13 @@ def fitted_model_vehicle(vehicle_id: int, radius_m: float, sideslip_rad: float,
     return _placed_at_drift(base, radius_m, sideslip_rad, left, right)
 
 
-def matched_front_grip(base: VehicleParams, vehicle_id: int, radius_m: float, left, right, model: str) -> float:
+def matched_front_grip(base: VehicleParams, vehicle_id: int, radius_m: float, left, right, model: Any) -> float:
     """The front grip scale in [1, 3] at which the model's yaw rate answers a steering step from the drift as the
     car's does (driftlab.core.commonroad.steering_gain); 1 when the car answers more weakly than the model read
     off its tyre (STD's saturated front axle does). Each candidate is placed at the car's drift first."""
     from driftlab.core.commonroad.steering_gain import car_yaw_response, model_yaw_response
-    from driftlab.core.plant import PlantConfig
 
-    car, steering, _ = car_yaw_response(getattr(PlantConfig, model)(vehicle_id), left, radius_m)
+    car, steering, _ = car_yaw_response(model.preset(vehicle_id), left, radius_m)
 
     def gap(grip: float) -> float:
         vehicle = _placed_at_drift(replace(base, front_grip_scale=grip), radius_m, left.sideslip_rad, left, right)
@@ -97,12 +105,12 @@ def _placed_at_drift(base: VehicleParams, radius_m: float, sideslip_rad: float, 
                    drive_offset_right_n=float(eq.drive_force_n - mass * right.acceleration_mps2))
 
 
-def _main_drift(vehicle_id: int, radius_m: float, sideslip_rad: float, right: bool, model: str):
+def _main_drift(vehicle_id: int, radius_m: float, sideslip_rad: float, right: bool, model: Any):
     family = drift_family(model, vehicle_id, radius_m, sideslip_rad, right)
     why = describe_family(family)
     if why is not None:
         side = "right" if right else "left"
-        raise ConfigError(f"the controller's model cannot be fitted to CommonRoad vehicle {vehicle_id} ({model}) at "
-                          f"radius {radius_m:g} m, sideslip {abs(sideslip_rad):g} rad ({side}-hand drift): {why}",
+        raise ConfigError(f"the controller's model cannot be fitted to CommonRoad vehicle {vehicle_id} ({model.name}) "
+                          f"at radius {radius_m:g} m, sideslip {abs(sideslip_rad):g} rad ({side}-hand drift): {why}",
                           field="scenario.sideslip_rad")
     return family[0]

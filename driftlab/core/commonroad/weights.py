@@ -34,5 +34,3 @@ def mb_weights() -> MpcConfig:
                      r_drive_step_kn=0.0007, steer_rate_radps=13.6521, q_speed=2.0, q_lateral_error=0.3233,
                      q_course_error=0.1319, estimator_hold_s=1.5)
 
-
-WEIGHTS = {"commonroad_std": std_weights, "commonroad_mb": mb_weights}

@@ -1,0 +1,70 @@
+"""The plant catalog: every plant an episode can step, one :class:`PlantType` each (its stepper, presets, start,
+drift family, the controller's model and weights fitted to it). Built in: DriftLab's own plant (``driftlab``,
+presets ``default`` and ``nominal``) and CommonRoad's STD and MB; more are registered in Python
+(:func:`register_plant`) or by an installed package under the entry-point group ``driftlab.plants`` (a
+:class:`PlantType` instance or subclass, or a factory ``config -> stepper``), never from a request: a REST client
+can only name what is installed.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Callable
+from importlib.metadata import entry_points
+
+from driftlab.core.errors import ConfigError
+from driftlab.core.plants.commonroad import DRIFTLAB_ONLY, CommonRoadPlantType
+from driftlab.core.plants.driftlab_plant import DriftLabPlantType
+from driftlab.core.plants.plant_type import ExternalPlantType, PlantType, model_reason
+
+__all__ = ["DRIFTLAB_ONLY", "CommonRoadPlantType", "ExternalPlantType", "PlantType", "built_in_names", "model_reason",
+           "plant_type", "preset_types", "register_plant"]
+
+_BUILT_IN: dict[str, PlantType] = {entry.name: entry for entry in (
+    DriftLabPlantType(),
+    CommonRoadPlantType("commonroad_std", "driftlab.core.commonroad.plant:CommonRoadStdPlant", substep_s=0.002,
+                        weights="driftlab.core.commonroad.weights:std_weights", preset_name="commonroad_std"),
+    CommonRoadPlantType("commonroad_mb", "driftlab.core.commonroad.plant:CommonRoadMbPlant", multibody=True,
+                        substep_s=0.001, weights="driftlab.core.commonroad.weights:mb_weights",
+                        preset_name="commonroad_mb"),
+    # The package's own Python functions behind the same actuators: the reference STD is checked against.
+    CommonRoadPlantType("commonroad_std_reference", "driftlab.core.commonroad.reference:ReferenceStdPlant"),
+)}
+_REGISTERED: dict[str, PlantType] = {}
+
+
+def built_in_names() -> tuple[str, ...]:
+    return tuple(_BUILT_IN)
+
+
+def register_plant(name: str, plant: PlantType | Callable) -> None:
+    """``plant``: a :class:`PlantType`, or a factory ``config -> stepper`` with ``kind = PLANT_EXTERNAL``,
+    ``start_state(loop_state)`` (the full state from the loop's eight, X_POS ... DRIVE; own states appended) and
+    ``step(state, steer_cmd_rad, drive_cmd_n, duration_s)`` (a new state, the loop's eight first)."""
+    if name in _BUILT_IN:
+        raise ConfigError(f"plant.model {name!r} is built in")
+    _REGISTERED[name] = _as_type(name, plant)
+
+
+def _as_type(name: str, plant: object) -> PlantType:
+    if isinstance(plant, type) and issubclass(plant, PlantType):
+        plant = plant()
+    if isinstance(plant, PlantType):
+        if not plant.name:
+            plant.name = name
+        return plant
+    return ExternalPlantType(name, plant)
+
+
+def plant_type(name: str) -> PlantType | None:
+    """The plant type ``plant.model`` names: built in, registered, or an installed entry point; None if none is."""
+    kind = _BUILT_IN.get(name) or _REGISTERED.get(name)
+    if kind is None:
+        found = [e for e in entry_points(group="driftlab.plants") if e.name == name]
+        if found:
+            kind = _REGISTERED[name] = _as_type(name, found[0].load())
+    return kind
+
+
+def preset_types() -> dict[str, PlantType]:
+    """The kinds that a ``--plant`` preset starts from, by preset name."""
+    return {entry.preset_name: entry for entry in _BUILT_IN.values() if entry.preset_name is not None}

@@ -1,0 +1,110 @@
+"""CommonRoad's vehicle models in the catalog (driftlab.core.commonroad): STD stepped inside the compiled loop, MB
+and the package's own STD functions stepped from Python. Each car is a CommonRoad parameter set (2 BMW 320i, 3 VW
+Vanagon), its controller's model fitted to the car's own drift (driftlab.core.commonroad.model_fit)."""
+
+from __future__ import annotations
+
+import importlib
+from typing import Any
+
+from driftlab.core.errors import ConfigError
+from driftlab.core.mpc import MpcConfig
+from driftlab.core.plant import PlantConfig
+from driftlab.core.plants.plant_type import PlantType
+from driftlab.core.vehicle import VehicleParams
+
+# Settings that shape DriftLab's own car and tyres; a CommonRoad plant has its own (PAC2002 tyres, load transfer,
+# combined slip) and keeps these at 1 / off.
+DRIFTLAB_ONLY = {"yaw_inertia_scale": 1.0, "tyre_b_scale": 1.0, "tyre_c_scale": 1.0, "friction_circle": False,
+                 "load_transfer": False}
+
+
+class CommonRoadPlantType(PlantType):
+    """A CommonRoad model.
+
+    Attributes:
+        stepper: "module:Class" of what the loop steps (built on first use: this module imports none of them).
+        multibody: the multi-body model (MB): its drift family is MB's own (driftlab.core.commonroad.mb_equilibrium),
+            and its controller's model takes the rear friction circle and the car's steering answer.
+        substep_s: RK4 step of its preset.
+        weights: "module:function" of its default controller's weights (driftlab.core.commonroad.weights), if any.
+    """
+
+    own_car = True
+    default_sideslip_rad = 0.5  # a CommonRoad car countersteers only from ~0.45 rad at 44 m (its drift family)
+
+    def __init__(self, name: str, stepper: str, *, multibody: bool = False, substep_s: float = 0.002,
+                 weights: str | None = None, preset_name: str | None = None) -> None:
+        self.name = name
+        self.stepper = stepper
+        self.multibody = multibody
+        self.substep_s = substep_s
+        self.weights = weights
+        self.preset_name = preset_name
+
+    def __repr__(self) -> str:
+        return f"CommonRoadPlantType({self.name!r})"
+
+    def preset(self, vehicle_id: int | None = None) -> PlantConfig:
+        """Its own car and tyres, DriftLab's actuators (30 ms / 8 rad/s steering servo, 50 ms drive), the default
+        plant's per-episode variation."""
+        return PlantConfig(model=self.name, commonroad_vehicle=2 if vehicle_id is None else vehicle_id,
+                           friction_scale=1.0, substep_s=self.substep_s, **DRIFTLAB_ONLY)
+
+    def check(self, config: PlantConfig) -> None:
+        from driftlab.core.commonroad.parameters import check_vehicle
+
+        check_vehicle(config.commonroad_vehicle)
+        for name, value in DRIFTLAB_ONLY.items():
+            if getattr(config, name) != value:
+                raise ConfigError(f"plant.{name} shapes DriftLab's own plant; a CommonRoad plant has its own "
+                                  f"tyres and loads (keep it at {value!r})", field=f"plant.{name}")
+        if config.steer_lag_s <= 0.0:
+            raise ConfigError("plant.steer_lag_s must be > 0 for a CommonRoad plant (the steering servo's time "
+                              "constant)", field="plant.steer_lag_s")
+
+    def build(self, config: PlantConfig, model_vehicle: VehicleParams) -> Any:
+        module_name, _, attribute = self.stepper.partition(":")
+        return getattr(importlib.import_module(module_name), attribute)(config)
+
+    def model_vehicle(self, config: PlantConfig, radius_m: float, sideslip_rad: float) -> VehicleParams:
+        from driftlab.core.commonroad.model_fit import fitted_model_vehicle
+
+        return fitted_model_vehicle(config.commonroad_vehicle, radius_m, sideslip_rad, self)
+
+    def controller(self) -> MpcConfig:
+        if self.weights is None:
+            return MpcConfig()
+        module_name, _, attribute = self.weights.partition(":")
+        return getattr(importlib.import_module(module_name), attribute)()
+
+    def drifts(self, vehicle_id: int, radius_m: float, sideslip_rad: float, right: bool = False,
+               friction_scale: float = 1.0, mass_scale: float = 1.0) -> tuple:
+        """The car's steady drifts at (radius, |sideslip|), left- or ``right``-hand, the main one first."""
+        if self.multibody:
+            from driftlab.core.commonroad.mb_equilibrium import mb_main_drift
+
+            main = mb_main_drift(vehicle_id, radius_m, sideslip_rad, right, friction_scale, mass_scale)
+            return () if main is None else (main,)
+        from driftlab.core.commonroad.equilibrium import commonroad_drifts
+
+        return commonroad_drifts(vehicle_id, radius_m, sideslip_rad, friction_scale, mass_scale, right=right)
+
+    def plant_reason(self, config: PlantConfig, vehicle: VehicleParams, radius_m: float, sideslip_rad: float,
+                     circle: str) -> str | None:
+        from driftlab.core.commonroad.family import describe_family
+
+        family = self.drifts(config.commonroad_vehicle, radius_m, sideslip_rad, circle == "right",
+                             config.friction_scale, config.mass_scale)
+        why = describe_family(family)
+        if why is None:
+            return None
+        return (f"config is not drivable on the {circle} circle (scenario radius {radius_m:g} m, sideslip "
+                f"{abs(sideslip_rad):g} rad): {why}; try another scenario.sideslip_rad (`driftlab equilibrium "
+                f"--plant {config.model}` prints where the car countersteers)")
+
+    def equilibrium_summary(self, config: PlantConfig, vehicle: VehicleParams, radius_m: float,
+                            beta_rad: float) -> dict[str, Any] | None:
+        from driftlab.core.commonroad.family import family_summary
+
+        return family_summary(self, config, radius_m, beta_rad)

@@ -1,0 +1,90 @@
+"""What DriftLab knows of one plant model (``plant.model``): one object per model, the one place that says how
+to step it, where it starts, which controller's model and weights it comes with, and where it can drift. The
+episode loop, the config parser, the drivability check and the CLI ask the plant's kind (driftlab.core.plants)
+and never test its name.
+"""
+
+from __future__ import annotations
+
+from typing import Any
+
+from driftlab.core.equilibrium import drift_equilibrium
+from driftlab.core.errors import NoEquilibriumError
+from driftlab.core.mpc import MpcConfig
+from driftlab.core.plant import PlantConfig
+from driftlab.core.vehicle import VehicleParams, pack_params
+
+
+class PlantType:
+    """A plant model. Subclasses override what differs; the defaults fit a plant that steps on its own (a user's
+    registered plant): the paper's Table I car as the controller's model, the default weights, and a drift known
+    only through that model.
+
+    Attributes:
+        name: its ``plant.model``.
+        own_car: it brings its own tyres, loads and yaw inertia (a CommonRoad car): DriftLab's tyre and load
+            settings stay off, and its mass scale carries its yaw inertia.
+        preset_name: the ``--plant`` preset that starts from it (None: reached only through ``plant.model``).
+        default_sideslip_rad: the sideslip its preset drifts at, or None for the scenario's default.
+        local_phase: new jobs start their seed points near the uncorrected model (TuningSpec.local_phase).
+        not_drivable_hint: what to change, appended to the message when the controller's model cannot drift.
+    """
+
+    name: str = ""
+    own_car: bool = False
+    preset_name: str | None = None
+    default_sideslip_rad: float | None = None
+    local_phase: bool = False
+    not_drivable_hint: str = ""
+
+    def preset(self, vehicle_id: int | None = None) -> PlantConfig:
+        """Its configuration as ``--plant NAME`` starts it (``vehicle_id``: a parameter set, where it has them)."""
+        return PlantConfig(model=self.name)
+
+    def check(self, config: PlantConfig) -> None:
+        """Raise ConfigError naming the field for a setting this plant cannot take."""
+
+    def build(self, config: PlantConfig, model_vehicle: VehicleParams) -> Any:
+        """What the episode loop steps (see :class:`driftlab.core.plant.Plant` for the interface)."""
+        raise NotImplementedError
+
+    def model_vehicle(self, config: PlantConfig, radius_m: float, sideslip_rad: float) -> VehicleParams:
+        """The controller's vehicle for this plant driving (radius, sideslip)."""
+        return VehicleParams()
+
+    def controller(self) -> MpcConfig:
+        """The default controller's weights for this plant."""
+        return MpcConfig()
+
+    def plant_reason(self, config: PlantConfig, vehicle: VehicleParams, radius_m: float, sideslip_rad: float,
+                     circle: str) -> str | None:
+        """Why the plant itself cannot hold a countersteer drift on this circle, or None (unknown counts as
+        drivable: only the controller's model is checked then)."""
+        return None
+
+    def equilibrium_summary(self, config: PlantConfig, vehicle: VehicleParams, radius_m: float,
+                            beta_rad: float) -> dict[str, Any] | None:
+        """The plant's own drift at (radius, beta) as `driftlab equilibrium --plant` prints it (None: unknown)."""
+        return None
+
+
+def model_reason(vehicle: VehicleParams, radius_m: float, sideslip_rad: float, circle: str) -> str | None:
+    """Why the controller's model has no countersteer drift equilibrium on this circle, or None."""
+    try:
+        drift_equilibrium(radius_m, -abs(sideslip_rad), pack_params(vehicle))
+    except NoEquilibriumError:
+        return (f"config is not drivable: the controller's model has no countersteer drift equilibrium on the "
+                f"{circle} circle (scenario radius {radius_m:g} m, sideslip {abs(sideslip_rad):g} rad)")
+    return None
+
+
+class ExternalPlantType(PlantType):
+    """A plant registered by a factory (``register_plant``, or an installed package's entry point in the group
+    ``driftlab.plants`` that names a factory rather than a :class:`PlantType`)."""
+
+    def __init__(self, name: str, factory) -> None:
+        self.name = name
+        self._factory = factory
+
+    def build(self, config: PlantConfig, model_vehicle: VehicleParams) -> Any:
+        return self._factory(config)

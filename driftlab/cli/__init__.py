@@ -33,6 +33,12 @@ def cmd_study(args: argparse.Namespace) -> int:
     return cmd_study(args, tuning_spec, db_url(args.db), dask)
 
 
+def cmd_calibrate(args: argparse.Namespace) -> int:
+    from driftlab.cli.calibrate import cmd_calibrate
+
+    return cmd_calibrate(args)
+
+
 def build_parser() -> argparse.ArgumentParser:
     parser = Parser(prog="driftlab", description="Learning-based inertia drift (Zhou et al. 2025).")
     sub = parser.add_subparsers(dest="command", required=True, parser_class=Parser)
@@ -86,7 +92,10 @@ def build_parser() -> argparse.ArgumentParser:
                     help="episodes in flight, 1..1024 (default: 2 local processes, the cluster's threads with --dask)")
     rs.add_argument("--dask", metavar="ADDRESS", help=DASK_HELP)
     rs.set_defaults(func=cmd_rescore)
+    from driftlab.cli.calibrate import add_calibrate_parser
     from driftlab.cli.study import add_study_parser
+
+    add_calibrate_parser(sub, DB_HELP, DASK_HELP, int_in, PLANT_CHOICES).set_defaults(func=cmd_calibrate)
 
     st = add_study_parser(sub, DB_HELP, DASK_HELP, int_in, add_job_options)
     st.set_defaults(func=cmd_study, seed=0)
@@ -107,6 +116,7 @@ def build_parser() -> argparse.ArgumentParser:
 
 def main(argv: list[str] | None = None) -> int:
     args = build_parser().parse_args(argv)
+    args.argv = list(sys.argv[1:] if argv is None else argv)
     try:
         return args.func(args)
     except Exception as exc:

@@ -8,7 +8,7 @@ import os
 import sys
 import time
 
-from driftlab.cli.options import dask_address, db_url, episode_config, finite
+from driftlab.cli.options import dask_address, db_url, episode_config, finite, key_values
 from driftlab.cli.shutdown import stop_on_sigterm
 from driftlab.core.drivability import check_drivable
 from driftlab.core.errors import ConfigError
@@ -48,9 +48,14 @@ def open_tuning_job(factory, args: argparse.Namespace, runner: str) -> tuple[int
     with storage.transaction(factory) as session:
         job = storage.find_job(session, name=args.name) if args.name else None
         if job is None:
+            from driftlab.services.profiles import with_profile
+
             spec = tuning_spec(args)
             name = args.name or storage.unique_job_name(session, "tune")
-            job = storage.create_job(session, name=name, spec=spec.to_dict(), seed=spec.seed)
+            profile_id = None
+            if args.controller != "paper":
+                spec, profile_id = with_profile(session, spec, key_values(args.set or [], "--set"))
+            job = storage.create_job(session, name=name, spec=spec.to_dict(), seed=spec.seed, profile_id=profile_id)
             message = f"job {job.name} (id {job.id}): {spec.iterations} iterations"
         else:
             if lifecycle.lease_is_live(job):  # refuse before changing anything

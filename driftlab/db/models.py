@@ -58,6 +58,7 @@ class Job(Base):
     heartbeat_at: Mapped[datetime | None] = mapped_column(default=None)
     study_id: Mapped[int | None] = mapped_column(Integer, default=None, index=True)  # a seeds study's job
     notes: Mapped[str] = mapped_column(Text, default="", server_default="")  # a researcher's, free text
+    profile_id: Mapped[int | None] = mapped_column(Integer, default=None)  # the car profile its weights came from
 
     evaluations: Mapped[list[Evaluation]] = relationship(back_populates="job", order_by="Evaluation.index")
 
@@ -169,3 +170,18 @@ class Rescore(Base):
     heartbeat_at: Mapped[datetime | None] = mapped_column(default=None)
     created_at: Mapped[datetime] = mapped_column(default=utcnow)
     updated_at: Mapped[datetime] = mapped_column(default=utcnow, onupdate=utcnow)
+
+
+class CarProfile(Base):
+    """A car's calibration (``driftlab calibrate``): the MPC weights found for one plant and parameter set, with
+    the points and figures they were found on and the command that found them. A new calibration adds a version;
+    jobs of that car take the newest unless their config gives ``mpc.*`` keys, and record which they took."""
+
+    __tablename__ = "car_profiles"
+    __table_args__ = {"sqlite_autoincrement": True}
+
+    id: Mapped[int] = mapped_column(primary_key=True)
+    plant_model: Mapped[str] = mapped_column(String(100), index=True)
+    vehicle_id: Mapped[int] = mapped_column(Integer)  # plant.commonroad_vehicle (a CommonRoad parameter set)
+    document: Mapped[dict[str, Any]] = mapped_column(JSON)  # driftlab.core.calibration's profile document
+    created_at: Mapped[datetime] = mapped_column(default=utcnow)

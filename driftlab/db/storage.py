@@ -88,8 +88,9 @@ def snapshot(factory: sessionmaker[Session]) -> Iterator[Session]:
 
 
 # -- jobs --------------------------------------------------------------------------------------------------
-def create_job(session: Session, *, name: str, spec: dict[str, Any], seed: int, study_id: int | None = None) -> Job:
-    job = Job(name=name, spec=spec, seed=seed, status=JobStatus.QUEUED, study_id=study_id)
+def create_job(session: Session, *, name: str, spec: dict[str, Any], seed: int, study_id: int | None = None,
+               profile_id: int | None = None) -> Job:
+    job = Job(name=name, spec=spec, seed=seed, status=JobStatus.QUEUED, study_id=study_id, profile_id=profile_id)
     session.add(job)
     session.flush()
     return job

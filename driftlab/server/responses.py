@@ -98,6 +98,8 @@ class Job(BaseModel):
     best: BestSummary | None
     runner_id: str | None
     study_id: int | None
+    profile_id: int | None = Field(default=None, description="the car profile (driftlab calibrate) whose MPC weights "
+                                                             "the job took, if any")
     spec: dict[str, Any] = Field(description="the validated job document (POST /api/jobs), config in full")
     notes: str = Field(description="free text kept with the job (PATCH /api/jobs/{id} with notes)")
     created_at: Timestamp

@@ -51,7 +51,8 @@ def job_dict(session, job: Job) -> dict[str, Any]:
             "seed": job.seed, "n_done": n_done,
             "iterations": iterations, "progress": n_done / iterations, "eta_s": eta, "error": job.error,
             "best": storage.best_summary(best),
-            "runner_id": job.runner_id, "study_id": job.study_id, "spec": job.spec, "notes": job.notes or "",
+            "runner_id": job.runner_id, "study_id": job.study_id, "profile_id": job.profile_id, "spec": job.spec,
+            "notes": job.notes or "",
             "created_at": job.created_at.replace(tzinfo=UTC).isoformat()}
 
 

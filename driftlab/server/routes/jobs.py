@@ -16,6 +16,7 @@ from driftlab.server.responses import Evaluation, Job, errors, media
 from driftlab.server.routes.deps import evaluation_pages, factory, require_token, wake_runner
 from driftlab.server.schemas import After, JobCreate, JobId, JobPatch, Limit, check_document_types
 from driftlab.server.serialize import evaluation_dict, evaluations_csv, job_dict
+from driftlab.services.profiles import with_profile
 
 router = APIRouter(prefix="/api/jobs", tags=["jobs"])
 Factory = Annotated[sessionmaker[Session], Depends(factory)]
@@ -42,7 +43,9 @@ def create_job(body: JobCreate, db: Factory, request: Request) -> dict[str, Any]
             raise HTTPException(409, f"name: a job named {body.name!r} exists")
         quotas.check_queue(settings, session, 1)
         name = body.name or storage.unique_job_name(session, "job")
-        out = job_dict(session, storage.create_job(session, name=name, spec=spec.to_dict(), seed=spec.seed))
+        spec, profile_id = with_profile(session, spec, doc.get("config"))
+        out = job_dict(session, storage.create_job(session, name=name, spec=spec.to_dict(), seed=spec.seed,
+                                                   profile_id=profile_id))
     wake_runner(request)
     return out
 

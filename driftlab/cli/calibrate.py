@@ -1,0 +1,130 @@
+"""`driftlab calibrate`: a car's MPC weights found by DriftLab's optimizer over points of its drift window
+(driftlab.core.calibration), stored as a new version of the car's profile (driftlab.db.profiles) that new jobs of
+that car take, and written as a JSON file."""
+
+from __future__ import annotations
+
+import argparse
+import json
+import shlex
+import sys
+import time
+from dataclasses import asdict
+from importlib.metadata import version
+from typing import Any
+
+from driftlab.cli.options import dask_address, db_url, episode_config, finite
+from driftlab.core.calibration import CalibrationPoint, calibrate, default_points, split_drivable
+from driftlab.core.config import config_to_dict
+from driftlab.core.drivability import drift_window
+from driftlab.core.errors import ConfigError
+
+
+def parse_points(text: str | None) -> list[CalibrationPoint] | None:
+    """'0.45@44,0.5@30' -> points (sideslip rad @ radius m)."""
+    if not text:
+        return None
+    points = []
+    for item in text.split(","):
+        beta, _, radius = item.partition("@")
+        try:
+            points.append(CalibrationPoint(abs(float(beta)), float(radius)))
+        except ValueError:
+            raise ConfigError(f"--points: {item.strip()!r} is not SIDESLIP@RADIUS (e.g. 0.5@44)") from None
+    return points
+
+
+def _run_batch(executor):
+    def run(batch):
+        futures = [executor.submit(theta, doc, seed) for theta, doc, seed in batch]
+        out = []
+        for future in futures:
+            outcome = future.result()
+            error = outcome.metrics.get("mean_abs_e_m")
+            out.append((outcome.status, float(outcome.J), float(outcome.metrics.get("completed_fraction", 0.0)),
+                        None if error is None else float(error)))
+        return out
+    return run
+
+
+def _progress(calibration) -> None:
+    n = len(calibration.tried)
+    if n % 10 and n != 1:
+        return
+    best = calibration.best
+    last = calibration.tried[-1]
+    sys.stderr.write(f"[{n}] best score {best.score:.3f} ({best.completed}/{len(best.episodes)} completed), "
+                     f"last {last.score:.3f} ({last.completed}/{len(last.episodes)})\n")
+    sys.stderr.flush()
+
+
+def cmd_calibrate(args: argparse.Namespace) -> int:
+    from driftlab.db import profiles, storage
+    from driftlab.worker.executors import open_executor
+
+    base = episode_config(args)
+    points = parse_points(args.points) or default_points(base)
+    started = time.perf_counter()
+    inside, outside = split_drivable(base, points)
+    for point, reason in outside:
+        sys.stderr.write(f"skipped {point.label()}: {reason}\n")
+    if not inside:
+        raise ConfigError("--points: none of the points is inside the car's drift window (`driftlab equilibrium "
+                          f"--window --plant {args.plant}` prints it)")
+    radii = sorted({p.radius_m for p, _ in inside})
+    window = [drift_window(config, config.scenario.left_radius_m, 0.2, 1.0).as_dict()
+              for config in (next(c for p, c in inside if p.radius_m == r) for r in radii)]
+    factory = storage.open_database(db_url(args.db))
+    executor, _ = open_executor(args.workers, dask_address(args))
+    try:
+        calibration = calibrate(base, inside, _run_batch(executor), iterations=args.iterations, seeds=args.seeds,
+                                seed=args.seed, on_progress=_progress)
+    finally:
+        executor.shutdown()
+    best, start = calibration.best, calibration.tried[0]
+    document: dict[str, Any] = {
+        "plant_model": base.plant.model, "vehicle_id": base.plant.commonroad_vehicle,
+        "plant": config_to_dict(base)["plant"], "weights": best.weights,
+        "mpc": {**config_to_dict(base)["mpc"], **best.weights},
+        "score": best.score, "completed": best.completed, "episodes": len(best.episodes),
+        "per_point": best.per_point(calibration.points),
+        "start": {"weights": start.weights, "score": start.score, "completed": start.completed,
+                  "per_point": start.per_point(calibration.points)},
+        "points": [asdict(p) for p in calibration.points],
+        "skipped": [{**asdict(p), "reason": reason} for p, reason in outside],
+        "window": window, "seeds": calibration.seeds, "iterations": args.iterations, "theta": "untuned",
+        "command": "driftlab calibrate " + " ".join(shlex.quote(a) for a in args.argv),
+        "driftlab_version": version("driftlab"), "wall_s": round(time.perf_counter() - started, 1)}
+    with storage.transaction(factory) as session:
+        profile = profiles.add_profile(session, plant_model=base.plant.model,
+                                       vehicle_id=base.plant.commonroad_vehicle, document=document)
+        document = {"profile_id": profile.id, **document}
+    storage.close_database(factory)
+    if args.out:
+        with open(args.out, "w") as handle:
+            json.dump(finite(document), handle, indent=1)
+    print(json.dumps(finite({k: document[k] for k in ("profile_id", "plant_model", "vehicle_id", "score",
+                                                      "completed", "episodes", "per_point", "start", "window",
+                                                      "weights", "wall_s")})))
+    return 0
+
+
+def add_calibrate_parser(sub, db_help: str, dask_help: str, int_in, plant_choices) -> argparse.ArgumentParser:
+    cal = sub.add_parser("calibrate", help="find a car's MPC weights over points of its drift window; store them "
+                         "as the car's profile (new jobs of that car take it)")
+    cal.add_argument("--plant", choices=plant_choices, required=True)
+    cal.add_argument("--set", action="append", metavar="KEY=VALUE",
+                     help="config override, e.g. plant.commonroad_vehicle=3, scenario.sideslip_rad=0.55")
+    cal.add_argument("--points", help="SIDESLIP@RADIUS,... (default: the scenario's sideslip and 0.05 rad either "
+                     "side of it on its radius, and its sideslip on circles 30/44 and 52/44 the size)")
+    cal.add_argument("--iterations", type=int_in(1, 5000), default=150, metavar="N",
+                     help="weight sets tried (1..5000, default 150)")
+    cal.add_argument("--seeds", type=int_in(1, 64), default=3, metavar="N",
+                     help="episode seeds per point (1..64, default 3)")
+    cal.add_argument("--seed", type=int, default=0, help="the optimizer's seed")
+    cal.add_argument("--workers", type=int_in(1, 1024), metavar="N",
+                     help="episodes in flight (default: 1 local process, the cluster's threads with --dask)")
+    cal.add_argument("--dask", metavar="ADDRESS", help=dask_help)
+    cal.add_argument("--db", help=db_help)
+    cal.add_argument("--out", help="also write the profile to this JSON file")
+    return cal

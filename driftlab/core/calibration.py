@@ -1,0 +1,203 @@
+"""Calibration: the default controller's MPC weights for one car, found by DriftLab's own optimizer over several
+points of the car's drift window, robust over seeded episodes, never by hand.
+
+A point is a drift the car should hold: a sideslip and a circle radius (both circles of the 8 the same). Each
+weight set runs the untuned theta (driftlab.core.config.Theta's defaults) on every point under ``seeds`` episode
+seeds (the plant's per-episode variation: friction, mass, lag, start state, sensor noise), and scores the mean of
+their J (the paper's J, a failed episode at its failure penalty, driftlab.core.episode.failure_penalty): a set
+that completes everywhere always beats one that fails anywhere, and among those that complete the one that tracks
+best wins. The weights are searched in log space (each spans one to three decades) by the same GP + expected
+improvement that tunes theta (driftlab.core.optimizer), warm-started from the car's current weights so that a
+calibration never returns a set worse on its own points than the one it started from.
+
+Bayesian optimization of MPC weights over closed-loop episodes: Marco et al., "Automatic LQR tuning based on
+Gaussian process global optimization" (ICRA 2016); Edwards et al., "Automatic tuning for data-driven model
+predictive control" (ICRA 2021).
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Callable, Sequence
+from dataclasses import dataclass, field, replace
+from typing import Any
+
+from driftlab.core.config import EpisodeConfig, Theta, apply_overrides, config_to_dict
+from driftlab.core.drivability import drivable_reason
+from driftlab.core.episode import failure_penalty
+from driftlab.core.mpc import MpcConfig
+from driftlab.core.optimizer import BayesianOptimizer
+
+# log10 ranges of the weights searched (the cost terms of driftlab.core.mpc.config.MpcConfig) and the steering
+# rate limit (linear, rad/s). Wide: one search for any car; the warm start holds the car's current set.
+LOG_WEIGHT_BOUNDS: dict[str, tuple[float, float]] = {
+    "q_sideslip": (1.0, 3.5), "q_yaw_rate": (-1.0, 2.5), "q_steer": (-1.5, 2.5), "q_drive_kn": (-2.0, 1.0),
+    "r_steer_step": (0.0, 3.0), "r_drive_step_kn": (-4.0, 0.0), "q_speed": (-1.0, 1.0),
+    "q_lateral_error": (-1.5, 1.5), "q_course_error": (-1.5, 2.0)}
+STEER_RATE_BOUNDS_RADPS = (2.0, 20.0)
+# Episode seeds of calibration: a block no tuning job (seed x 64 + j) or rescore (2^40 + j) reaches.
+CALIBRATION_SEED_BASE = 2**41
+
+
+@dataclass(frozen=True)
+class CalibrationPoint:
+    """A drift to hold: |sideslip| [rad] on two circles of ``radius_m`` [m]."""
+
+    sideslip_rad: float
+    radius_m: float
+
+    def overrides(self) -> dict[str, float]:
+        return {"scenario.sideslip_rad": self.sideslip_rad, "scenario.left_radius_m": self.radius_m,
+                "scenario.right_radius_m": self.radius_m}
+
+    def label(self) -> str:
+        return f"{self.sideslip_rad:g} rad @ R {self.radius_m:g} m"
+
+
+def default_points(config: EpisodeConfig) -> list[CalibrationPoint]:
+    """The scenario's drift, 0.05 rad either side of it, and its sideslip on circles 30/44 and 52/44 the size."""
+    s = config.scenario
+    beta, radius = s.sideslip_rad, s.left_radius_m
+    return [CalibrationPoint(round(beta - 0.05, 4), radius), CalibrationPoint(beta, radius),
+            CalibrationPoint(round(beta + 0.05, 4), radius), CalibrationPoint(beta, round(radius * 30 / 44, 2)),
+            CalibrationPoint(beta, round(radius * 52 / 44, 2))]
+
+
+def point_config(base: EpisodeConfig, point: CalibrationPoint) -> EpisodeConfig:
+    """``base`` driving ``point``: the controller's model refitted there (its plant's catalog entry decides how)."""
+    return apply_overrides(base, point.overrides())
+
+
+def split_drivable(base: EpisodeConfig, points: Sequence[CalibrationPoint]
+                   ) -> tuple[list[tuple[CalibrationPoint, EpisodeConfig]], list[tuple[CalibrationPoint, str]]]:
+    """The points the car can drift (with their configs), and the others with the reason."""
+    inside, outside = [], []
+    for point in points:
+        try:
+            config = point_config(base, point)
+        except Exception as exc:  # ConfigError: no model fits there
+            outside.append((point, str(exc)))
+            continue
+        reason = drivable_reason(config)
+        if reason is None:
+            inside.append((point, config))
+        else:
+            outside.append((point, reason))
+    return inside, outside
+
+
+def search_bounds() -> dict[str, tuple[float, float]]:
+    return {**{f"log10_{k}": v for k, v in LOG_WEIGHT_BOUNDS.items()}, "steer_rate_radps": STEER_RATE_BOUNDS_RADPS}
+
+
+def weights_of(x: dict[str, float]) -> dict[str, float]:
+    """A point of the search space as ``mpc.*`` values."""
+    out = {k: 10.0 ** x[f"log10_{k}"] for k in LOG_WEIGHT_BOUNDS}
+    out["steer_rate_radps"] = x["steer_rate_radps"]
+    return out
+
+
+def search_point(mpc: MpcConfig) -> dict[str, float]:
+    """``mpc``'s weights as a point of the search space, clipped into it."""
+    x = {f"log10_{k}": min(max(math.log10(getattr(mpc, k)), lo), hi) for k, (lo, hi) in LOG_WEIGHT_BOUNDS.items()}
+    lo, hi = STEER_RATE_BOUNDS_RADPS
+    x["steer_rate_radps"] = min(max(mpc.steer_rate_radps, lo), hi)
+    return x
+
+
+def with_weights(config: EpisodeConfig, weights: dict[str, float]) -> EpisodeConfig:
+    return replace(config, mpc=replace(config.mpc, **weights))
+
+
+@dataclass(frozen=True)
+class EpisodeScore:
+    """One calibration episode as it came back."""
+
+    point: int
+    seed: int
+    status: str
+    J: float
+    completed_fraction: float
+    mean_abs_e_m: float | None
+
+    @property
+    def completed(self) -> bool:
+        return self.status == "completed"
+
+    @property
+    def penalized_J(self) -> float:
+        return self.J if self.completed and math.isfinite(self.J) else failure_penalty(self.completed_fraction)
+
+
+@dataclass
+class WeightSetResult:
+    weights: dict[str, float]
+    episodes: list[EpisodeScore]
+
+    @property
+    def score(self) -> float:
+        """Mean J over every point and seed, failed episodes at their penalty (lower is better)."""
+        return sum(e.penalized_J for e in self.episodes) / len(self.episodes)
+
+    @property
+    def completed(self) -> int:
+        return sum(e.completed for e in self.episodes)
+
+    def per_point(self, points: Sequence[CalibrationPoint]) -> list[dict[str, Any]]:
+        out = []
+        for i, point in enumerate(points):
+            mine = [e for e in self.episodes if e.point == i]
+            errors = [e.mean_abs_e_m for e in mine if e.completed and e.mean_abs_e_m is not None]
+            out.append({"sideslip_rad": point.sideslip_rad, "radius_m": point.radius_m,
+                        "completed": sum(e.completed for e in mine), "episodes": len(mine),
+                        "mean_abs_e_m": sum(errors) / len(errors) if errors else None})
+        return out
+
+
+# Runs a batch of (theta, config document, seed) episodes, returning for each (status, J, completed fraction,
+# mean |e|), in order: the caller's executor (local processes, a Dask cluster).
+RunBatch = Callable[[list[tuple[dict[str, float], dict[str, Any], int]]], list[tuple[str, float, float, float | None]]]
+
+
+@dataclass
+class Calibration:
+    """A calibration's state: the points, every weight set tried with its episodes, the best so far."""
+
+    points: list[CalibrationPoint]
+    seeds: list[int]
+    tried: list[WeightSetResult] = field(default_factory=list)
+
+    @property
+    def best(self) -> WeightSetResult | None:
+        return min(self.tried, key=lambda r: (r.score, -r.completed)) if self.tried else None
+
+
+def calibrate(base: EpisodeConfig, points: Sequence[tuple[CalibrationPoint, EpisodeConfig]], run_batch: RunBatch, *,
+              iterations: int = 150, seeds: int = 3, seed: int = 0,
+              on_progress: Callable[[Calibration], None] | None = None) -> Calibration:
+    """Search the MPC weights for ``points`` (the drivable ones, with their configs, :func:`split_drivable`).
+
+    The first weight set is ``base``'s own (the warm start); the next ``seed_points`` of the optimizer start near
+    it (its local phase), then the GP and expected improvement take over.
+    """
+    calibration = Calibration([p for p, _ in points], [CALIBRATION_SEED_BASE + j for j in range(seeds)])
+    start = search_point(base.mpc)
+    optimizer = BayesianOptimizer(search_bounds(), seed_points=min(20, iterations), seed=seed,
+                                  initial_points=[start], local_points=min(10, iterations), local_radius=0.15,
+                                  local_growth=max(iterations // 2, 1))
+    documents = [config_to_dict(config) for _, config in points]
+    theta = Theta().as_dict()
+    for _ in range(iterations):
+        x = optimizer.ask()
+        weights = weights_of(x)
+        batch = [(theta, {**doc, "mpc": {**doc["mpc"], **weights}}, s)
+                 for doc in documents for s in calibration.seeds]
+        outcomes = run_batch(batch)
+        episodes = [EpisodeScore(i // len(calibration.seeds), s, status, j, fraction, error)
+                    for i, ((_, _, s), (status, j, fraction, error)) in enumerate(zip(batch, outcomes, strict=True))]
+        result = WeightSetResult(weights, episodes)
+        calibration.tried.append(result)
+        optimizer.tell(x, result.score, result.score)
+        if on_progress is not None:
+            on_progress(calibration)
+    return calibration

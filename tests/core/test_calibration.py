@@ -1,0 +1,71 @@
+"""Calibration (driftlab.core.calibration): the weight search's own parts, with the real optimizer; the episodes
+of a whole calibration are in tests/test_calibrate_cli.py."""
+
+import math
+
+import pytest
+
+from driftlab.core.calibration import (
+    CALIBRATION_SEED_BASE,
+    CalibrationPoint,
+    calibrate,
+    default_points,
+    search_point,
+    split_drivable,
+    weights_of,
+)
+from driftlab.core.config import EpisodeConfig
+from driftlab.core.mpc import MpcConfig
+from driftlab.core.robust import RESCORE_SEED_BASE
+
+
+def test_weights_go_to_the_search_space_and_back():
+    mpc = MpcConfig()
+    weights = weights_of(search_point(mpc))
+    for name, value in weights.items():
+        assert value == pytest.approx(getattr(mpc, name), rel=1e-12), name
+
+
+def test_calibration_seeds_are_neither_tuning_nor_rescore_seeds():
+    assert CALIBRATION_SEED_BASE > RESCORE_SEED_BASE + 10**6  # rescores draw 2^40 + j, tuning seed x 64 + j
+
+
+def test_the_default_points_surround_the_scenario():
+    config = EpisodeConfig.preset("commonroad_std")
+    points = default_points(config)
+    assert points == [CalibrationPoint(0.45, 44.0), CalibrationPoint(0.5, 44.0), CalibrationPoint(0.55, 44.0),
+                      CalibrationPoint(0.5, 30.0), CalibrationPoint(0.5, 52.0)]
+
+
+def test_points_outside_the_cars_window_are_set_aside_with_the_reason():
+    inside, outside = split_drivable(EpisodeConfig.preset("commonroad_std"),
+                                     [CalibrationPoint(0.5, 44.0), CalibrationPoint(0.2, 44.0)])
+    assert [p for p, _ in inside] == [CalibrationPoint(0.5, 44.0)]
+    assert inside[0][1].scenario.sideslip_rad == 0.5
+    (point, reason), = outside
+    assert point == CalibrationPoint(0.2, 44.0) and "0.2" in reason
+
+
+def test_the_search_starts_from_the_cars_weights_and_improves_on_them():
+    """Episodes replaced by a known landscape: every episode completes where the sideslip weight is in a band, with
+    J the squared distance of its log to 2.2; the start (the default weights, log 2.79) fails half of them."""
+    base = EpisodeConfig()
+    points = [(CalibrationPoint(0.4, 44.0), base), (CalibrationPoint(0.4, 30.0), base)]
+    calls = []
+
+    def run_batch(batch):
+        calls.append(len(batch))
+        out = []
+        for _, doc, seed in batch:
+            x = math.log10(doc["mpc"]["q_sideslip"])
+            ok = 1.6 < x < 2.6 or seed % 2 == 0
+            out.append(("completed" if ok else "spun_out", (x - 2.2) ** 2 - 1.0, 1.0 if ok else 0.4, 0.1))
+        return out
+
+    calibration = calibrate(base, points, run_batch, iterations=40, seeds=2, seed=1)
+    assert calls == [4] * 40  # two points x two seeds per weight set
+    assert calibration.tried[0].weights["q_sideslip"] == pytest.approx(base.mpc.q_sideslip)
+    start, best = calibration.tried[0], calibration.best
+    assert start.completed == 2 and best.completed == 4 and best.score < start.score
+    assert 1.6 < math.log10(best.weights["q_sideslip"]) < 2.6
+    assert best.per_point([p for p, _ in points])[0]["completed"] == 2

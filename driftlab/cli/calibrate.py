@@ -58,38 +58,63 @@ def _progress(calibration) -> None:
     sys.stderr.flush()
 
 
-def cmd_calibrate(args: argparse.Namespace) -> int:
-    from driftlab.db import profiles, storage
-    from driftlab.worker.executors import open_executor
+def _model_candidates(base, args) -> list[dict[str, Any]]:
+    """The controller's models to calibrate: for a car with its own tyres (a CommonRoad car) both the paper's
+    independent rear forces and the rear friction circle matched to the car's drive answer, unless ``--set``
+    chose one; the weights are searched for each and the better model kept."""
+    chosen = any(item.split("=", 1)[0].strip() == "plant.model_drive_coupling" for item in args.set or [])
+    if not base.plant.plant_type.own_car or chosen:
+        return [{}]
+    return [{}, {"plant.model_drive_coupling": not base.plant.model_drive_coupling}]
 
-    base = episode_config(args)
-    points = parse_points(args.points) or default_points(base)
-    started = time.perf_counter()
+
+def _calibrate_model(base, points, executor, args) -> tuple[Any, list, list]:
     inside, outside = split_drivable(base, points)
     for point, reason in outside:
         sys.stderr.write(f"skipped {point.label()}: {reason}\n")
     if not inside:
         raise ConfigError("--points: none of the points is inside the car's drift window (`driftlab equilibrium "
                           f"--window --plant {args.plant}` prints it)")
+    calibration = calibrate(base, inside, _run_batch(executor), iterations=args.iterations, seeds=args.seeds,
+                            seed=args.seed, on_progress=_progress)
+    return calibration, inside, outside
+
+
+def _summary(result, points) -> dict[str, Any]:
+    return {"weights": result.weights, "score": result.score, "completed": result.completed,
+            "episodes": len(result.episodes), "per_point": result.per_point(points)}
+
+
+def cmd_calibrate(args: argparse.Namespace) -> int:
+    from driftlab.core.config import apply_overrides
+    from driftlab.db import profiles, storage
+    from driftlab.worker.executors import open_executor
+
+    given = episode_config(args)
+    points = parse_points(args.points) or default_points(given)
+    started = time.perf_counter()
+    factory = storage.open_database(db_url(args.db))
+    executor, _ = open_executor(args.workers, dask_address(args))
+    candidates = []
+    try:
+        for change in _model_candidates(given, args):
+            base = apply_overrides(given, change) if change else given
+            sys.stderr.write(f"calibrating the controller's model with plant.model_drive_coupling="
+                             f"{str(base.plant.model_drive_coupling).lower()}\n")
+            candidates.append((base, *_calibrate_model(base, points, executor, args)))
+    finally:
+        executor.shutdown()
+    base, calibration, inside, outside = min(candidates, key=lambda c: (c[1].best.score, -c[1].best.completed))
+    best, start = calibration.best, calibration.tried[0]
     radii = sorted({p.radius_m for p, _ in inside})
     window = [drift_window(config, config.scenario.left_radius_m, 0.2, 1.0).as_dict()
               for config in (next(c for p, c in inside if p.radius_m == r) for r in radii)]
-    factory = storage.open_database(db_url(args.db))
-    executor, _ = open_executor(args.workers, dask_address(args))
-    try:
-        calibration = calibrate(base, inside, _run_batch(executor), iterations=args.iterations, seeds=args.seeds,
-                                seed=args.seed, on_progress=_progress)
-    finally:
-        executor.shutdown()
-    best, start = calibration.best, calibration.tried[0]
     document: dict[str, Any] = {
         "plant_model": base.plant.model, "vehicle_id": base.plant.commonroad_vehicle,
-        "plant": config_to_dict(base)["plant"], "weights": best.weights,
-        "mpc": {**config_to_dict(base)["mpc"], **best.weights},
-        "score": best.score, "completed": best.completed, "episodes": len(best.episodes),
-        "per_point": best.per_point(calibration.points),
-        "start": {"weights": start.weights, "score": start.score, "completed": start.completed,
-                  "per_point": start.per_point(calibration.points)},
+        "plant": config_to_dict(base)["plant"], "mpc": {**config_to_dict(base)["mpc"], **best.weights},
+        **_summary(best, calibration.points), "start": _summary(start, calibration.points),
+        "candidates": [{"model_drive_coupling": b.plant.model_drive_coupling, **_summary(c.best, c.points)}
+                       for b, c, _, _ in candidates],
         "points": [asdict(p) for p in calibration.points],
         "skipped": [{**asdict(p), "reason": reason} for p, reason in outside],
         "window": window, "seeds": calibration.seeds, "iterations": args.iterations, "theta": "untuned",
@@ -104,8 +129,8 @@ def cmd_calibrate(args: argparse.Namespace) -> int:
         with open(args.out, "w") as handle:
             json.dump(finite(document), handle, indent=1)
     print(json.dumps(finite({k: document[k] for k in ("profile_id", "plant_model", "vehicle_id", "score",
-                                                      "completed", "episodes", "per_point", "start", "window",
-                                                      "weights", "wall_s")})))
+                                                      "completed", "episodes", "per_point", "start", "candidates",
+                                                      "window", "weights", "wall_s")})))
     return 0
 
 

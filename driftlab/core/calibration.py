@@ -6,9 +6,9 @@ weight set runs the untuned theta (driftlab.core.config.Theta's defaults) on eve
 seeds (the plant's per-episode variation: friction, mass, lag, start state, sensor noise), and scores the mean of
 their J (the paper's J, a failed episode at its failure penalty, driftlab.core.episode.failure_penalty): a set
 that completes everywhere always beats one that fails anywhere, and among those that complete the one that tracks
-best wins. The weights are searched in log space (each spans one to three decades) by the same GP + expected
-improvement that tunes theta (driftlab.core.optimizer), warm-started from the car's current weights so that a
-calibration never returns a set worse on its own points than the one it started from.
+best wins. The weights are searched in log space, a decade either side of the car's current set, by the same GP +
+expected improvement that tunes theta (driftlab.core.optimizer), warm-started from that set so that a calibration
+never returns a set worse on its own points than the one it started from.
 
 Bayesian optimization of MPC weights over closed-loop episodes: Marco et al., "Automatic LQR tuning based on
 Gaussian process global optimization" (ICRA 2016); Edwards et al., "Automatic tuning for data-driven model
@@ -28,13 +28,15 @@ from driftlab.core.episode import failure_penalty
 from driftlab.core.mpc import MpcConfig
 from driftlab.core.optimizer import BayesianOptimizer
 
-# log10 ranges of the weights searched (the cost terms of driftlab.core.mpc.config.MpcConfig) and the steering
-# rate limit (linear, rad/s). Wide: one search for any car; the warm start holds the car's current set.
-LOG_WEIGHT_BOUNDS: dict[str, tuple[float, float]] = {
-    "q_sideslip": (1.0, 3.5), "q_yaw_rate": (-1.0, 2.5), "q_steer": (-1.5, 2.5), "q_drive_kn": (-2.0, 1.0),
-    "r_steer_step": (0.0, 3.0), "r_drive_step_kn": (-4.0, 0.0), "q_speed": (-1.0, 1.0),
-    "q_lateral_error": (-1.5, 1.5), "q_course_error": (-1.5, 2.0)}
-STEER_RATE_BOUNDS_RADPS = (2.0, 20.0)
+# The weights searched (the cost terms of driftlab.core.mpc.config.MpcConfig and the disturbance estimator's gain),
+# in log10, within LOG_SPAN_DECADES of the car's current set and inside these limits; the steering rate limit
+# [rad/s] and the estimator's hold after a flick [s] linearly within their ranges.
+LOG_WEIGHT_LIMITS: dict[str, tuple[float, float]] = {
+    "q_sideslip": (0.5, 4.0), "q_yaw_rate": (-2.0, 3.0), "q_steer": (-2.0, 3.0), "q_drive_kn": (-3.0, 1.5),
+    "r_steer_step": (-1.0, 3.5), "r_drive_step_kn": (-5.0, 0.5), "q_speed": (-2.0, 1.5),
+    "q_lateral_error": (-2.5, 2.0), "q_course_error": (-2.5, 2.0), "disturbance_gain": (-4.0, 0.0)}
+LOG_SPAN_DECADES = 1.0
+LINEAR_LIMITS: dict[str, tuple[float, float]] = {"steer_rate_radps": (2.0, 25.0), "estimator_hold_s": (0.0, 2.5)}
 # Episode seeds of calibration: a block no tuning job (seed x 64 + j) or rescore (2^40 + j) reaches.
 CALIBRATION_SEED_BASE = 2**41
 
@@ -86,22 +88,27 @@ def split_drivable(base: EpisodeConfig, points: Sequence[CalibrationPoint]
     return inside, outside
 
 
-def search_bounds() -> dict[str, tuple[float, float]]:
-    return {**{f"log10_{k}": v for k, v in LOG_WEIGHT_BOUNDS.items()}, "steer_rate_radps": STEER_RATE_BOUNDS_RADPS}
+def search_bounds(start: MpcConfig) -> dict[str, tuple[float, float]]:
+    """The box searched around the car's current weights ``start``."""
+    bounds = {}
+    for name, (lo, hi) in LOG_WEIGHT_LIMITS.items():
+        centre = math.log10(getattr(start, name))
+        bounds[f"log10_{name}"] = (max(lo, centre - LOG_SPAN_DECADES), min(hi, centre + LOG_SPAN_DECADES))
+    return {**bounds, **LINEAR_LIMITS}
 
 
 def weights_of(x: dict[str, float]) -> dict[str, float]:
     """A point of the search space as ``mpc.*`` values."""
-    out = {k: 10.0 ** x[f"log10_{k}"] for k in LOG_WEIGHT_BOUNDS}
-    out["steer_rate_radps"] = x["steer_rate_radps"]
+    out = {name: 10.0 ** x[f"log10_{name}"] for name in LOG_WEIGHT_LIMITS}
+    out.update({name: x[name] for name in LINEAR_LIMITS})
     return out
 
 
 def search_point(mpc: MpcConfig) -> dict[str, float]:
-    """``mpc``'s weights as a point of the search space, clipped into it."""
-    x = {f"log10_{k}": min(max(math.log10(getattr(mpc, k)), lo), hi) for k, (lo, hi) in LOG_WEIGHT_BOUNDS.items()}
-    lo, hi = STEER_RATE_BOUNDS_RADPS
-    x["steer_rate_radps"] = min(max(mpc.steer_rate_radps, lo), hi)
+    """``mpc``'s weights as a point of the search space, clipped into the limits."""
+    x = {f"log10_{name}": min(max(math.log10(getattr(mpc, name)), lo), hi)
+         for name, (lo, hi) in LOG_WEIGHT_LIMITS.items()}
+    x.update({name: min(max(getattr(mpc, name), lo), hi) for name, (lo, hi) in LINEAR_LIMITS.items()})
     return x
 
 
@@ -182,7 +189,7 @@ def calibrate(base: EpisodeConfig, points: Sequence[tuple[CalibrationPoint, Epis
     """
     calibration = Calibration([p for p, _ in points], [CALIBRATION_SEED_BASE + j for j in range(seeds)])
     start = search_point(base.mpc)
-    optimizer = BayesianOptimizer(search_bounds(), seed_points=min(20, iterations), seed=seed,
+    optimizer = BayesianOptimizer(search_bounds(base.mpc), seed_points=min(20, iterations), seed=seed,
                                   initial_points=[start], local_points=min(10, iterations), local_radius=0.15,
                                   local_growth=max(iterations // 2, 1))
     documents = [config_to_dict(config) for _, config in points]

@@ -98,6 +98,10 @@ class PlantConfig:
             differential: in a 1 g drift the inner rear wheel unloads, its normal force falls below zero within
             0.3 s, and it spins up, 78 -> 185 rad/s in 0.35 s, so no power-on drift can be held; drift cars lock
             or weld theirs). STD has one rear wheel: this does not apply.
+        model_drive_coupling: the controller's model of a CommonRoad car takes the rear friction circle, its
+            coupling (VehicleParams.rear_coupling) matched to the car's yaw answer to a drive step: the car's rear
+            slides further under more drive, the paper's model does not answer (driftlab.core.commonroad.model_fit).
+            Off: the paper's independent rear forces (STD) or the whole circle (MB).
 
     Per-episode variation, drawn from the episode's seed (:mod:`driftlab.core.variation`); a real car never
     drives the same episode twice. Spreads are half-widths of uniform draws, noise levels standard deviations
@@ -143,6 +147,7 @@ class PlantConfig:
     commonroad_vehicle: int = 2
     initial_rear_slip: float = -0.5
     locked_differential: bool = True
+    model_drive_coupling: bool = False
 
     def __post_init__(self) -> None:
         check_ranges(self, "plant", PLANT_LIMITS)
@@ -150,7 +155,7 @@ class PlantConfig:
         if self.steer_lag_spread_s > self.steer_lag_s:
             raise ConfigError(f"plant.steer_lag_spread_s must be in [0, plant.steer_lag_s = {self.steer_lag_s}], "
                               f"got {self.steer_lag_spread_s!r}")
-        for name in ("friction_circle", "load_transfer", "locked_differential"):
+        for name in ("friction_circle", "load_transfer", "locked_differential", "model_drive_coupling"):
             if not isinstance(getattr(self, name), bool):
                 raise ConfigError(f"plant.{name} must be true or false, got {getattr(self, name)!r}")
 
@@ -204,7 +209,8 @@ class PlantConfig:
         # The plant's own car: a model's equilibrium offsets are the model's, not the car's, and the plant's tyre
         # coupling is plant.friction_circle, not the model's.
         return replace(scaled, cg_height_m=self.cg_height_m, steer_offset_rad=0.0, drive_offset_n=0.0,
-                       steer_offset_right_rad=0.0, drive_offset_right_n=0.0, rear_friction_circle=False)
+                       steer_offset_right_rad=0.0, drive_offset_right_n=0.0, rear_friction_circle=False,
+                       rear_coupling=1.0)
 
     def packed_params(self, model_vehicle: VehicleParams) -> np.ndarray:
         """Parameter vector for the compiled dynamics of this plant."""

@@ -36,7 +36,8 @@ P_LOAD_TRANSFER = 10
 P_STEER_OFFSET = 11
 P_DRIVE_OFFSET = 12
 P_FRONT_GRIP = 13
-N_PARAMS = 14
+P_REAR_COUPLING = 14
+N_PARAMS = 15
 
 # Fixed-point passes for the load-transfer loop (loads depend on Fyf, which depends on loads). The loop
 # gain is roughly h/L * mu * |sin(delta)| ~ 0.05, so each pass shrinks the error about twentyfold.
@@ -75,6 +76,9 @@ class VehicleParams:
             (the multi-body car's) answers more drive with more yaw rate and sideslip; the paper's model answers
             with less, and an MPC that uses the drive to hold the sideslip then pushes the wrong way
             (driftlab.core.commonroad.model_fit).
+        rear_coupling: how much of the drive force the rear friction circle takes, sqrt((mu Fzr)^2 - (k Fxr)^2)
+            (1: the whole circle); a model's, fitted to a car's yaw answer to a drive step
+            (driftlab.core.commonroad.model_fit). Only with ``rear_friction_circle``.
     """
 
     mass_kg: float = 1844.7
@@ -92,6 +96,7 @@ class VehicleParams:
     drive_offset_right_n: float = 0.0
     front_grip_scale: float = 1.0
     rear_friction_circle: bool = False
+    rear_coupling: float = 1.0
 
     def __post_init__(self) -> None:
         limits = {
@@ -109,6 +114,7 @@ class VehicleParams:
             "steer_offset_right_rad": (-0.5, 0.5),
             "drive_offset_right_n": (-10000.0, 10000.0),
             "front_grip_scale": (0.2, 5.0),
+            "rear_coupling": (0.0, 1.0),
         }
         check_ranges(self, "vehicle", limits)
         if not isinstance(self.rear_friction_circle, bool):
@@ -161,6 +167,7 @@ def pack_params(
     p[P_STEER_OFFSET] = -steer_offset if mirrored else steer_offset
     p[P_DRIVE_OFFSET] = vehicle.drive_offset_right_n if right else vehicle.drive_offset_n
     p[P_FRONT_GRIP] = vehicle.front_grip_scale
+    p[P_REAR_COUPLING] = vehicle.rear_coupling
     return p
 
 
@@ -212,7 +219,8 @@ def tyre_forces(speed_mps, sideslip_rad, yaw_rate_radps, steer_rad, drive_force_
         if p[P_FRICTION_CIRCLE] > 0.5:
             cap = 0.999 * rear_peak
             fxr = min(max(drive_force_n, -cap), cap)
-            rear_peak = math.sqrt(rear_peak * rear_peak - fxr * fxr)
+            coupled = p[P_REAR_COUPLING] * fxr  # exactly fxr at the whole circle's coupling 1
+            rear_peak = math.sqrt(rear_peak * rear_peak - coupled * coupled)
         fyf = pacejka_lateral_force(alpha_f, mu * p[P_FRONT_GRIP] * fzf, p[P_TYRE_B], p[P_TYRE_C])
         fyr = pacejka_lateral_force(alpha_r, rear_peak, p[P_TYRE_B], p[P_TYRE_C])
         if p[P_LOAD_TRANSFER] > 0.5:

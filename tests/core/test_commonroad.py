@@ -276,3 +276,19 @@ def test_a_plant_stepped_in_python_runs_the_same_loop_bit_for_bit():
     assert a.completed and a.J == b.J and np.array_equal(a.trajectory, b.trajectory)
     with pytest.raises(ConfigError, match="or a registered plant"):
         replace(default.plant, model="not_registered")
+
+
+def test_a_model_with_matched_drive_coupling_answers_the_drive_as_the_car_does():
+    """STD's car, like MB's, answers more drive with more yaw rate (its rear slides further); the paper's model
+    does not answer and the whole friction circle answers twice as strongly: the coupling is matched to the car."""
+    from driftlab.core.commonroad.steering_gain import DRIVE_STEP_N, car_yaw_response, model_yaw_response
+    from driftlab.core.plant import PlantConfig
+
+    drift = commonroad_drifts(2, 44.0, 0.5)[0]
+    car, steering, drive = car_yaw_response(PlantConfig.commonroad_std(2), drift, 44.0, steer_step_rad=0.0,
+                                            drive_step_n=DRIVE_STEP_N)
+    paper = fitted_model_vehicle(2, 44.0, 0.5)
+    matched = fitted_model_vehicle(2, 44.0, 0.5, drive_coupling=True)
+    assert car > 0.015 and abs(model_yaw_response(paper, drift, steering, drive)) < 0.002
+    assert matched.rear_friction_circle and 0.5 < matched.rear_coupling < 0.95
+    assert model_yaw_response(matched, drift, steering, drive) == pytest.approx(car, abs=2e-4)

@@ -27,3 +27,14 @@ def test_a_new_job_takes_its_cars_newest_profile(tmp_path):
         assert own["profile_id"] is None and own["spec"]["config"]["mpc"]["q_sideslip"] == 300.0
         default_plant = client.post("/api/jobs", json={"iterations": 1}).json()
         assert default_plant["profile_id"] is None
+
+
+def test_a_profile_brings_the_controllers_model_it_was_calibrated_with(tmp_path):
+    with in_process_client(tmp_path / "coupled.db") as client:
+        with storage.transaction(client.app.state.factory) as session:
+            profile_id = profiles.add_profile(session, plant_model="commonroad_std", vehicle_id=2, document={
+                "weights": WEIGHTS, "plant": {"model_drive_coupling": True}}).id
+        job = client.post("/api/jobs", json={"iterations": 1, "config": CAR}).json()
+        config = job["spec"]["config"]
+        assert job["profile_id"] == profile_id and config["plant"]["model_drive_coupling"] is True
+        assert config["vehicle"]["rear_friction_circle"] is True and 0.0 < config["vehicle"]["rear_coupling"] < 1.0

@@ -24,6 +24,7 @@ from driftlab.core.plant import DRIVE, SIDESLIP, SPEED, STEER, YAW_RATE, PlantCo
 from driftlab.core.vehicle import VehicleParams, drift_derivatives, pack_params
 
 STEP_RAD = 0.02  # toward less countersteer: small enough to stay near the drift, large enough to read
+DRIVE_STEP_N = 500.0  # more drive: about 15 % of the drift's, small enough to stay near it
 PERIOD_S = 0.05
 WINDOW_S = (0.1, 0.3)
 _MODEL_DT_S = 0.001

@@ -70,7 +70,8 @@ class CommonRoadPlantType(PlantType):
     def model_vehicle(self, config: PlantConfig, radius_m: float, sideslip_rad: float) -> VehicleParams:
         from driftlab.core.commonroad.model_fit import fitted_model_vehicle
 
-        return fitted_model_vehicle(config.commonroad_vehicle, radius_m, sideslip_rad, self)
+        return fitted_model_vehicle(config.commonroad_vehicle, radius_m, sideslip_rad, self,
+                                    drive_coupling=config.model_drive_coupling)
 
     def controller(self) -> MpcConfig:
         if self.weights is None:

@@ -5,7 +5,7 @@ from __future__ import annotations
 from typing import Any
 
 from driftlab.core.equilibrium import drift_equilibrium
-from driftlab.core.errors import NoEquilibriumError
+from driftlab.core.errors import ConfigError, NoEquilibriumError
 from driftlab.core.plant import Plant, PlantConfig
 from driftlab.core.plants.plant_type import PlantType
 from driftlab.core.vehicle import VehicleParams
@@ -20,6 +20,11 @@ class DriftLabPlantType(PlantType):
 
     def preset(self, vehicle_id: int | None = None) -> PlantConfig:
         return PlantConfig()
+
+    def check(self, config: PlantConfig) -> None:
+        if config.model_drive_coupling:
+            raise ConfigError("plant.model_drive_coupling fits a CommonRoad car's model; DriftLab's plant comes with "
+                              "the paper's (keep it false)", field="plant.model_drive_coupling")
 
     def build(self, config: PlantConfig, model_vehicle: VehicleParams) -> Plant:
         return Plant(config, model_vehicle)

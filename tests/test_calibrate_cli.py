@@ -1,0 +1,40 @@
+"""`driftlab calibrate` as a real process on CommonRoad's STD: points outside the car's window are set aside with
+the reason, the profile is stored and written, and a job of that car started afterwards takes it."""
+
+import json
+import subprocess
+import sys
+
+import pytest
+
+pytestmark = pytest.mark.e2e  # real processes: servers, browsers, Dask, the CLI
+
+
+def _run(*args, timeout=600):
+    return subprocess.run([sys.executable, "-m", "driftlab.cli", *args], capture_output=True, text=True,
+                          timeout=timeout)
+
+
+def test_calibrate_stores_a_profile_that_the_next_job_of_that_car_takes(tmp_path):
+    db, out_file = tmp_path / "lab.db", tmp_path / "std.json"
+    out = _run("calibrate", "--plant", "commonroad_std", "--points", "0.5@44,0.2@44", "--iterations", "3",
+               "--seeds", "1", "--workers", "2", "--db", str(db), "--out", str(out_file))
+    assert out.returncode == 0, out.stderr
+    summary = json.loads(out.stdout)
+    assert summary["profile_id"] == 1 and summary["plant_model"] == "commonroad_std" and summary["episodes"] == 1
+    assert "skipped 0.2 rad @ R 44 m" in out.stderr  # outside the window: not run, and said why
+    profile = json.loads(out_file.read_text())
+    assert profile["command"].startswith("driftlab calibrate --plant commonroad_std --points 0.5@44,0.2@44")
+    assert profile["skipped"][0]["sideslip_rad"] == 0.2 and profile["start"]["per_point"][0]["episodes"] == 1
+    assert profile["score"] <= profile["start"]["score"]  # the warm start is among the sets tried
+    tune = _run("tune", "--plant", "commonroad_std", "--iterations", "1", "--seed-points", "1",
+                "--robust-samples", "1", "--confirm-samples", "0", "--name", "after", "--db", str(db))
+    assert tune.returncode == 0, tune.stderr
+    import sqlite3
+
+    with sqlite3.connect(db) as connection:
+        profile_id, spec = connection.execute("SELECT profile_id, spec FROM jobs WHERE name = 'after'").fetchone()
+    mpc = json.loads(spec)["config"]["mpc"]
+    assert profile_id == 1 and all(mpc[k] == v for k, v in profile["weights"].items())
+    bad = _run("calibrate", "--plant", "commonroad_std", "--points", "0.5/44", "--db", str(db))
+    assert bad.returncode == 2 and "--points" in bad.stderr and len(bad.stderr.strip().splitlines()) == 1

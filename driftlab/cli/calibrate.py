@@ -118,7 +118,7 @@ def cmd_calibrate(args: argparse.Namespace) -> int:
         "points": [asdict(p) for p in calibration.points],
         "skipped": [{**asdict(p), "reason": reason} for p, reason in outside],
         "window": window, "seeds": calibration.seeds, "iterations": args.iterations, "theta": "untuned",
-        "command": "driftlab calibrate " + " ".join(shlex.quote(a) for a in args.argv),
+        "command": "driftlab " + " ".join(shlex.quote(a) for a in args.argv),
         "driftlab_version": version("driftlab"), "wall_s": round(time.perf_counter() - started, 1)}
     with storage.transaction(factory) as session:
         profile = profiles.add_profile(session, plant_model=base.plant.model,

@@ -7,10 +7,9 @@ import time
 
 import httpx
 import pytest
-from playwright.sync_api import sync_playwright
 
 from tests.server_process import free_port, start_server, wait_status
-from tests.web.test_view_browser import CHROMIUM, CHROMIUM_ARGS, ConsoleLog
+from tests.web.test_view_browser import ConsoleLog
 
 pytestmark = pytest.mark.e2e  # real processes: servers, browsers, Dask, the CLI
 
@@ -43,14 +42,6 @@ def server(tmp_path_factory):
     yield url, ids
     proc.terminate()
     proc.wait(timeout=30)
-
-
-@pytest.fixture(scope="module")
-def browser():
-    with sync_playwright() as p:
-        b = p.chromium.launch(executable_path=CHROMIUM, args=CHROMIUM_ARGS, headless=True)
-        yield b
-        b.close()
 
 
 def _watched(browser, url):

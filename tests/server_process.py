@@ -23,6 +23,7 @@ def start_server(db_path, port, env_extra=None, extra_args=()):
     log = tempfile.NamedTemporaryFile(prefix="driftlab-serve-", suffix=".log", delete=False)
     proc = subprocess.Popen([sys.executable, "-m", "driftlab.cli", "serve", "--port", str(port), "--db", str(db_path),
                              *extra_args], env=env, stdout=subprocess.DEVNULL, stderr=log)
+    proc.log_path = log.name  # the server's stderr, for tests that read what it logged
     url = f"http://127.0.0.1:{port}"
     for _ in range(150):
         try:

@@ -7,7 +7,7 @@ and its J is a penalty worse than any completed run's (see :func:`failure_penalt
 from __future__ import annotations
 
 import time
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 
 import numpy as np
 
@@ -159,6 +159,8 @@ def run_episode(theta: Theta, config: EpisodeConfig, *, seed: int = 0) -> Episod
                 if phase in (Phase.INERTIA_LEFT_TO_RIGHT, Phase.INERTIA_RIGHT_TO_LEFT)]
     metrics = compute_metrics(trajectory, [e["t_s"] for e in triggers], track, COL,
                               config.scenario.settle_tolerance_rad)
+    if hasattr(plant, "validity"):
+        metrics = replace(metrics, plant_validity=plant.validity())
     if status == "completed":
         j_value = metrics.objective_j
     else:

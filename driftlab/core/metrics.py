@@ -30,6 +30,8 @@ class EpisodeMetrics:
     trigger_times_s: list[float]
     duration_s: float
     lap_mean_abs_e_m: list[float]  # mean |e| over each lap of the 8 driven (by arc length; the last may be partial)
+    # Where the plant left its model's validity, if it reports it (MB: time with a negative wheel load).
+    plant_validity: dict | None = None
 
     def as_dict(self) -> dict:
         out = asdict(self)

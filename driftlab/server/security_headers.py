@@ -16,7 +16,9 @@ _COMMON = ("default-src 'self'; style-src 'self' 'unsafe-inline'; img-src 'self'
            "font-src 'self' data:; connect-src 'self'; object-src 'none'; frame-src 'none'; child-src 'self' blob:; "
            "worker-src 'self' blob:; base-uri 'none'; form-action 'self'; frame-ancestors 'none'")
 PAGE_POLICY = f"{_COMMON}; script-src 'self'"
-VIEWER_POLICY = f"{_COMMON}; script-src 'self' 'unsafe-inline' 'wasm-unsafe-eval' blob:"
+# viser's client reads the scene's images and environment map from blob: and data: URLs it makes itself.
+VIEWER_POLICY = (_COMMON.replace("connect-src 'self'", "connect-src 'self' blob: data:")
+                 + "; script-src 'self' 'unsafe-inline' 'wasm-unsafe-eval' blob:")
 VIEWER_PREFIX = "/viser/"
 # FastAPI's Swagger UI and ReDoc pages load their bundles from jsDelivr and start them from an inline script.
 DOCS_PATHS = frozenset({"/docs", "/redoc"})

@@ -54,6 +54,7 @@ class Playback:
         self.speed = 1.0
         self.compare_captions: list[str] = []
         self.stale: str | None = None  # why the episode shown is not the one last asked for (a what-if refused)
+        self.empty: EpisodeFrames | None = None  # the evaluation chosen last, if it has no step to play
         self.player = EpisodePlayer(client.scene)
         self._build_gui(client.gui)
 
@@ -107,8 +108,11 @@ class Playback:
             return
         if history.n_done == 0:  # nothing of this job to show: not the previous job's episode under its name
             self.player.unload()
+            self.empty = None
             self.show_hud()
             return
+        if self.empty is not None and self.empty.evaluation_id == history.ids[-1]:
+            return  # the newest stopped before its first step; it is shown as such until a newer one lands
         self._load_stored(history.ids[-1])
 
     def _load_stored(self, evaluation_id: int) -> None:
@@ -167,6 +171,13 @@ class Playback:
     def load(self, frames: EpisodeFrames, ghost: EpisodeFrames | None = None,
              more_ghosts: tuple[EpisodeFrames, ...] = ()) -> None:
         self.stale = None
+        if frames.n_frames == 0:  # stopped at t = 0 (a model without a drift there): nothing to draw or play
+            self.player.unload()
+            self.empty = frames
+            self._show_downloads(frames)
+            self.show_hud()
+            return
+        self.empty = None
         self.player.load(frames, ghost, more_ghosts)
         self.gui_time.max = max(self.player.duration_s, 0.1)
         self._show_states(frames)
@@ -240,6 +251,10 @@ class Playback:
         frames = self.player.frames
         history = self.history()
         if frames is None:
+            if self.empty is not None:
+                self.hud.content = (f"**{MODE_TITLES[self.mode]}**: {plain(self.empty.name())} stopped before its "
+                                    f"first step ({plain(self.empty.status)}): nothing to play.")
+                return
             name = f" of job **{plain(history.name)}**" if history is not None else ""
             self.hud.content = f"Waiting for the first evaluation{name}..."
             return

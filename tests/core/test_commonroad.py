@@ -292,3 +292,29 @@ def test_a_model_with_matched_drive_coupling_answers_the_drive_as_the_car_does()
     assert car > 0.015 and abs(model_yaw_response(paper, drift, steering, drive)) < 0.002
     assert matched.rear_friction_circle and 0.5 < matched.rear_coupling < 0.95
     assert model_yaw_response(matched, drift, steering, drive) == pytest.approx(car, abs=2e-4)
+
+
+def test_an_mb_episode_reports_where_a_wheel_load_went_below_zero():
+    """MB does not clamp a tyre's normal load at zero: the episode reports the time any load was negative and each
+    wheel's lowest load; its loads at the start sum to the car's weight."""
+    from driftlab.core.commonroad.mb import mb_wheel_loads
+    from driftlab.core.commonroad.parameters import package_parameters
+    from driftlab.core.plant import make_plant
+
+    config = apply_overrides(EpisodeConfig.preset("commonroad_mb"), {"scenario.max_time_s": 2.0})
+    plant = make_plant(config.plant, config.vehicle)
+    loop = np.zeros(8)
+    loop[4] = 20.0
+    state = plant.start_state(loop)
+    loads = mb_wheel_loads(state[8:8 + 29], plant.params)
+    mass = package_parameters(2).m
+    assert loads.sum() == pytest.approx(mass * 9.81, rel=0.02)
+    result = run_episode(Theta(), config, seed=0)
+    validity = result.metrics.plant_validity
+    assert set(validity) == {"negative_wheel_load_s", "first_negative_wheel_load_s", "min_wheel_load_n"}
+    assert 0.0 <= validity["negative_wheel_load_s"] <= result.metrics.duration_s + 0.05
+    lowest = validity["min_wheel_load_n"]
+    assert set(lowest) == {"lf", "rf", "lr", "rr"}
+    assert (validity["negative_wheel_load_s"] > 0) == (min(lowest.values()) < 0)
+    assert run_episode(Theta(), apply_overrides(EpisodeConfig.preset("commonroad_std"),
+                                                {"scenario.max_time_s": 1.0}), seed=0).metrics.plant_validity is None

@@ -95,6 +95,20 @@ def mb_acceleration_constraints(velocity, acceleration, p):
     return acceleration
 
 
+@njit(cache=True)
+def mb_wheel_loads(x, p):
+    """The tyres' normal loads [N] of MB state ``x``, in the package's order and names (lf, rf, lr, rr; its "l"
+    wheels sit at -y): the spring forces of mb_derivatives, which does not clamp them at zero, so a lifted wheel
+    has a negative load and its tyre pulls the road (PAC2002 scales its forces with it)."""
+    r_w, t_f, t_r = p[R_W], p[T_F], p[T_R]
+    out = np.empty(4)
+    out[0] = (x[16] + r_w * (math.cos(x[13]) - 1) - 0.5 * t_f * math.sin(x[13])) * p[K_ZT]
+    out[1] = (x[16] + r_w * (math.cos(x[13]) - 1) + 0.5 * t_f * math.sin(x[13])) * p[K_ZT]
+    out[2] = (x[21] + r_w * (math.cos(x[18]) - 1) - 0.5 * t_r * math.sin(x[18])) * p[K_ZT]
+    out[3] = (x[21] + r_w * (math.cos(x[18]) - 1) + 0.5 * t_r * math.sin(x[18])) * p[K_ZT]
+    return out
+
+
 @njit(cache=True, error_model="numpy")  # x / 0 is inf (then a failed episode), as in the package's numpy floats
 def mb_derivatives(x, u_init, p):
     """d/dt of the MB state under [steering velocity, longitudinal acceleration] (the package's

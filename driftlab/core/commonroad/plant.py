@@ -21,7 +21,7 @@ import math
 import numpy as np
 from numba import njit
 
-from driftlab.core.commonroad.mb import N_MB, mb_acceleration_constraints, mb_derivatives, pack_mb
+from driftlab.core.commonroad.mb import N_MB, mb_acceleration_constraints, mb_derivatives, mb_wheel_loads, pack_mb
 from driftlab.core.commonroad.mb import M as MB_MASS
 from driftlab.core.commonroad.parameters import CR_CG_TO_FRONT, CR_MASS, CR_WHEEL_RADIUS, pack_commonroad
 from driftlab.core.commonroad.std import (
@@ -213,6 +213,10 @@ class CommonRoadMbPlant:
                               mass_scale=config.mass_scale, steer_rate_radps=config.steer_rate_radps)
         self.actuators = np.append(config.actuator_params(), 1.0 if config.locked_differential else 0.0)
         self.steady: np.ndarray | None = None
+        self.negative_load_s = 0.0  # time with a tyre's normal load below zero (sampled each control step)
+        self.first_negative_load_s: float | None = None  # when it first was, from the episode's start
+        self.min_wheel_load_n = np.full(4, np.inf)
+        self._elapsed_s = 0.0
 
     def start_in_drift_of(self, radius_m: float, sideslip_rad: float) -> None:
         """Start the suspension as it sits in the car's steady drift there (if one was found)."""
@@ -247,5 +251,21 @@ class CommonRoadMbPlant:
         return out
 
     def step(self, state: np.ndarray, steer_cmd_rad: float, drive_cmd_n: float, duration_s: float) -> np.ndarray:
-        return mb_plant_step(state, steer_cmd_rad, drive_cmd_n, duration_s, self.config.substep_s, self.params,
-                             self.actuators)
+        new = mb_plant_step(state, steer_cmd_rad, drive_cmd_n, duration_s, self.config.substep_s, self.params,
+                            self.actuators)
+        loads = mb_wheel_loads(new[MB_FIRST:MB_FIRST + N_MB], self.params)
+        self.min_wheel_load_n = np.minimum(self.min_wheel_load_n, loads)
+        self._elapsed_s += duration_s
+        if loads.min() < 0.0:
+            self.negative_load_s += duration_s
+            if self.first_negative_load_s is None:
+                self.first_negative_load_s = round(self._elapsed_s, 6)
+        return new
+
+    def validity(self) -> dict[str, object]:
+        """Where the episode left the model's validity: MB does not clamp a tyre's normal load at zero, so a lifted
+        wheel would push back; the time any load was negative and each wheel's lowest load (the package's names:
+        its "l" wheels sit at -y)."""
+        lowest = {name: float(v) for name, v in zip(("lf", "rf", "lr", "rr"), self.min_wheel_load_n, strict=True)}
+        return {"negative_wheel_load_s": round(self.negative_load_s, 6),
+                "first_negative_wheel_load_s": self.first_negative_load_s, "min_wheel_load_n": lowest}

@@ -2,10 +2,12 @@
 
 from __future__ import annotations
 
+from urllib.parse import urlsplit
+
 from fastapi import HTTPException, Request
 from sqlalchemy.orm import Session, sessionmaker
 
-from driftlab.server.edge import same_secret
+from driftlab.server.edge import TOKEN_COOKIE, same_secret
 from driftlab.server.evaluation_pages import EvaluationPages
 from driftlab.settings import Settings
 
@@ -30,6 +32,14 @@ def require_token(request: Request) -> None:
     (driftlab.server.openapi), and only when a token is set."""
     settings: Settings = request.app.state.settings
     token = settings.token
+    if not token:
+        return
     authorization = request.headers.get("authorization")
-    if token and not (authorization and same_secret(authorization, f"Bearer {token}")):
+    if authorization and same_secret(authorization, f"Bearer {token}"):
+        return
+    # The cookie a page opened with ?token= got (driftlab.server.token_cookie), from this origin only.
+    origin, host = request.headers.get("origin"), request.headers.get("host", "")
+    same_origin = origin is None or urlsplit(origin).netloc.lower() == host.lower()
+    cookie = request.cookies.get(TOKEN_COOKIE)
+    if not (same_origin and cookie and same_secret(cookie, token)):
         raise HTTPException(401, "this endpoint needs 'Authorization: Bearer <DRIFTLAB_TOKEN>'")

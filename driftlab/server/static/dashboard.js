@@ -27,7 +27,9 @@ async function api(method, path, body) {
   const data = parseJson(await r.text()) ?? { detail: `${r.status} ${r.statusText}` };
   if (!r.ok) {
     const hint = r.status === 401 ? " (open this page as /dashboard/?token=<DRIFTLAB_TOKEN>)" : "";
-    throw new Error(`${method} ${path}: ${r.status} ${data.detail || r.statusText}${hint}`);
+    const error = new Error(`${method} ${path}: ${r.status} ${data.detail || r.statusText}${hint}`);
+    error.status = r.status;
+    throw error;
   }
   return data;
 }
@@ -89,7 +91,17 @@ function select(jobId) {
 async function refreshJob() {
   if (state.selected === null) return;
   const id = state.selected;
-  const job = await api("GET", `/api/jobs/${id}`);
+  let job;
+  try {
+    job = await api("GET", `/api/jobs/${id}`);
+  } catch (e) {
+    // Deleted meanwhile (here or elsewhere): the selection goes, the next poll's list has it gone too.
+    if (e.status !== 404 || id !== state.selected) throw e;
+    state.selected = null;
+    state.job = null;
+    $("job-panel").hidden = true;
+    return;
+  }
   if (id !== state.selected) return;
   state.job = job;
   const after = state.evals.length - 1;

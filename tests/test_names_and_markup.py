@@ -57,3 +57,16 @@ def test_a_name_in_a_trajectory_csv_never_starts_a_cell_of_its_own():
     assert not any(cell.lstrip('"').startswith(("=", "+", "-", "@")) for cell in first_row), first_row
     assert read_csv_metadata(text) == metadata  # reads back exactly
     assert json.loads(text.split("\n", 1)[0][len("# driftlab: "):]) == metadata
+
+
+def test_the_access_log_never_holds_the_token():
+    import logging
+
+    from driftlab.server.access_log import RedactToken
+
+    record = logging.LogRecord("uvicorn.access", logging.INFO, __file__, 1, '%s - "%s %s HTTP/%s" %d',
+                               ("127.0.0.1:5555", "GET", "/viser/?playbackPath=/x&token=s3cret&b=1", "1.1", 303),
+                               None)
+    assert RedactToken().filter(record)
+    line = record.getMessage()
+    assert "s3cret" not in line and "token=[redacted]" in line and "playbackPath=/x" in line and "b=1" in line

@@ -13,6 +13,7 @@ def cmd_serve(args: argparse.Namespace) -> int:
 
     import uvicorn
 
+    from driftlab.server.access_log import redact_access_log
     from driftlab.server.app import create_app
     from driftlab.settings import Settings
 
@@ -41,5 +42,6 @@ def cmd_serve(args: argparse.Namespace) -> int:
     print(f"DriftLab: the 3D view on http://{shown_host}:{args.port}/viser/{login}, the API docs on "
           f"http://{shown_host}:{args.port}/docs", flush=True)
     server = uvicorn.Server(uvicorn.Config(app, log_level="info"))
+    redact_access_log()  # after uvicorn's Config set its loggers up
     server.run(sockets=[sock])
     return 0

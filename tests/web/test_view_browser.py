@@ -9,7 +9,6 @@ import time
 import httpx
 import pytest
 from matplotlib import image as mpimg
-from playwright.sync_api import sync_playwright
 
 from tests.server_process import free_port, start_server
 
@@ -32,17 +31,6 @@ def server(tmp_path_factory):
     yield url
     proc.terminate()
     proc.wait(timeout=30)
-
-
-@pytest.fixture(scope="module")
-def browser():
-    if not os.path.exists(CHROMIUM):
-        pytest.fail(f"no chromium at {CHROMIUM}: install Debian's package (apt-get install chromium) "
-                    "or set DRIFTLAB_CHROMIUM")
-    with sync_playwright() as p:
-        b = p.chromium.launch(executable_path=CHROMIUM, args=CHROMIUM_ARGS, headless=True)
-        yield b
-        b.close()
 
 
 class ConsoleLog:

@@ -12,9 +12,9 @@ from collections.abc import Callable
 from importlib.metadata import entry_points
 
 from driftlab.core.errors import ConfigError
+from driftlab.core.plants.base import ExternalPlantType, PlantType, model_reason
 from driftlab.core.plants.commonroad import DRIFTLAB_ONLY, CommonRoadPlantType
 from driftlab.core.plants.driftlab_plant import DriftLabPlantType
-from driftlab.core.plants.plant_type import ExternalPlantType, PlantType, model_reason
 
 __all__ = ["DRIFTLAB_ONLY", "CommonRoadPlantType", "ExternalPlantType", "PlantType", "built_in_names", "model_reason",
            "plant_type", "preset_types", "register_plant"]

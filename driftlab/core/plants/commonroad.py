@@ -10,7 +10,7 @@ from typing import Any
 from driftlab.core.errors import ConfigError
 from driftlab.core.mpc import MpcConfig
 from driftlab.core.plant import PlantConfig
-from driftlab.core.plants.plant_type import PlantType
+from driftlab.core.plants.base import PlantType
 from driftlab.core.vehicle import VehicleParams
 
 # Settings that shape DriftLab's own car and tyres; a CommonRoad plant has its own (PAC2002 tyres, load transfer,

@@ -7,7 +7,7 @@ from typing import Any
 from driftlab.core.equilibrium import drift_equilibrium
 from driftlab.core.errors import ConfigError, NoEquilibriumError
 from driftlab.core.plant import Plant, PlantConfig
-from driftlab.core.plants.plant_type import PlantType
+from driftlab.core.plants.base import PlantType
 from driftlab.core.vehicle import VehicleParams
 
 

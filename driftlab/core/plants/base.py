@@ -6,6 +6,7 @@ and never test its name.
 
 from __future__ import annotations
 
+from abc import ABC, abstractmethod
 from typing import Any
 
 from driftlab.core.equilibrium import drift_equilibrium
@@ -15,7 +16,7 @@ from driftlab.core.plant import PlantConfig
 from driftlab.core.vehicle import VehicleParams, pack_params
 
 
-class PlantType:
+class PlantType(ABC):
     """A plant model. Subclasses override what differs; the defaults fit a plant that steps on its own (a user's
     registered plant): the paper's Table I car as the controller's model, the default weights, and a drift known
     only through that model.
@@ -41,12 +42,12 @@ class PlantType:
         """Its configuration as ``--plant NAME`` starts it (``vehicle_id``: a parameter set, where it has them)."""
         return PlantConfig(model=self.name)
 
-    def check(self, config: PlantConfig) -> None:
+    def check(self, config: PlantConfig) -> None:  # noqa: B027  # every setting is fine unless a plant says so
         """Raise ConfigError naming the field for a setting this plant cannot take."""
 
+    @abstractmethod
     def build(self, config: PlantConfig, model_vehicle: VehicleParams) -> Any:
         """What the episode loop steps (see :class:`driftlab.core.plant.Plant` for the interface)."""
-        raise NotImplementedError
 
     def model_vehicle(self, config: PlantConfig, radius_m: float, sideslip_rad: float) -> VehicleParams:
         """The controller's vehicle for this plant driving (radius, sideslip)."""

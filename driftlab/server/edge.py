@@ -4,7 +4,7 @@ middleware, so nothing is buffered first):
 - the Host header names this machine (127.0.0.1, localhost, ::1) or a host of ``DRIFTLAB_ALLOWED_HOSTS``: a page
   on another site cannot reach the API through DNS rebinding (400 otherwise);
 - a mutating API request (POST, PUT, PATCH, DELETE under /api) carries the token when one is set, as a bearer
-  header or, from this origin, as the cookie a page opened with ``?token=`` got (401 before its body is read);
+  header or, from this origin, as the cookie a page opened with ``?token=`` got (401 before any route sees its body);
   without a token, one sent by a browser from another origin is refused (403): body-less POSTs are "simple"
   cross-site requests that no CORS preflight stops;
 - a request body larger than ``DRIFTLAB_MAX_BODY_BYTES`` is refused (413), by its Content-Length or, for a
@@ -17,6 +17,7 @@ from __future__ import annotations
 
 import json
 import secrets
+from functools import partial
 from http.cookies import SimpleCookie
 from urllib.parse import parse_qs, urlsplit
 
@@ -48,31 +49,31 @@ class EdgeGuard:
     async def __call__(self, scope, receive, send):
         if scope["type"] not in ("http", "websocket"):
             return await self.app(scope, receive, send)
+        refuse = partial(self._refuse, scope, receive, send)
         headers = {k.decode("latin-1").lower(): v.decode("latin-1") for k, v in scope.get("headers", ())}
         host = headers.get("host", "")
         if "*" not in self.allowed_hosts and host_name(host) not in self.allowed_hosts:
-            return await self._refuse(scope, send, 400, f"host: {host!r} is not this server's (127.0.0.1, localhost, "
-                                      "or DRIFTLAB_ALLOWED_HOSTS)")
+            return await refuse(400, f"host: {host!r} is not this server's (127.0.0.1, localhost, "
+                                "or DRIFTLAB_ALLOWED_HOSTS)")
         origin = headers.get("origin")
         foreign = origin is not None and not self._same_origin(origin, host)
         if scope["type"] == "websocket":
             if foreign:
-                return await self._refuse(scope, send, 403, f"origin: {origin!r} may not open the view's websocket")
+                return await refuse(403, f"origin: {origin!r} may not open the view's websocket")
             if self.token and not self._websocket_token_ok(scope, headers):
-                return await self._refuse(scope, send, 401, "token: open the view as /viser/?token=<DRIFTLAB_TOKEN>")
+                return await refuse(401, "token: open the view as /viser/?token=<DRIFTLAB_TOKEN>")
             return await self.app(scope, receive, send)
         if scope["method"] in MUTATING and scope["path"].startswith("/api"):
             if self.token:
                 if not (same_secret(headers.get("authorization", ""), f"Bearer {self.token}")
                         or (not foreign and self._cookie_token_ok(headers))):
-                    return await self._refuse(scope, send, 401,
-                                              "this endpoint needs 'Authorization: Bearer <DRIFTLAB_TOKEN>'")
+                    return await refuse(401, "this endpoint needs 'Authorization: Bearer <DRIFTLAB_TOKEN>'")
             elif foreign:
-                return await self._refuse(scope, send, 403, f"origin: a request from {origin!r} may not change "
-                                          "anything here (set DRIFTLAB_TOKEN to allow authenticated clients)")
+                return await refuse(403, f"origin: a request from {origin!r} may not change "
+                                    "anything here (set DRIFTLAB_TOKEN to allow authenticated clients)")
         length = headers.get("content-length")
         if length is not None and length.isdigit() and int(length) > self.max_body_bytes:
-            return await self._refuse(scope, send, 413, self._too_large())
+            return await refuse(413, self._too_large())
         return await self._limited(scope, receive, send)
 
     def _same_origin(self, origin: str, host: str) -> bool:
@@ -116,12 +117,29 @@ class EdgeGuard:
 
         await self.app(scope, limited_receive, guarded_send)
 
-    async def _refuse(self, scope, send, status: int, detail: str):
+    async def _refuse(self, scope, receive, send, status: int, detail: str):
         if scope["type"] == "websocket":
             # Before the handshake is accepted: the server answers the upgrade with 403.
             await send({"type": "websocket.close", "code": 1008, "reason": detail[:120]})
             return
+        await self._drain_small_body(scope, receive)
         await self._send_json(send, status, detail)
+
+    async def _drain_small_body(self, scope, receive) -> None:
+        """Read (and drop) a body whose declared length is within the limit before refusing it: the refusal closes
+        the connection, and a close with unread bytes is a TCP reset that can destroy the answer on its way to the
+        client. A body of unknown or too large a length stays unread (refused before a byte of it is read)."""
+        length = dict(scope.get("headers", ())).get(b"content-length", b"")
+        if not length.isdigit() or not 0 < int(length) <= self.max_body_bytes:
+            return
+        read = 0
+        while read < int(length):
+            message = await receive()
+            if message["type"] != "http.request":
+                return
+            read += len(message.get("body", b""))
+            if not message.get("more_body", False):
+                return
 
     @staticmethod
     async def _send_json(send, status: int, detail: str):

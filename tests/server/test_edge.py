@@ -2,8 +2,10 @@
 same-origin mutations and the view's websocket."""
 
 import os
+import socket
 import subprocess
 import sys
+import time
 
 import httpx
 import psutil
@@ -237,3 +239,31 @@ def test_sigterm_stops_tune_like_ctrl_c(tmp_path):
     assert status == "paused" and runner is None  # the lease released at once, not left to go stale
     time.sleep(1.0)
     assert workers and not [p for p in workers if psutil.pid_exists(p) and psutil.Process(p).status() != "zombie"]
+
+
+def _refused_post(url, path, body, pause_s):
+    """A POST without the token whose body arrives ``pause_s`` after its headers (a client on a slow link, or
+    requests, which writes the two separately); returns every byte the server sent back."""
+    host, port = url.removeprefix("http://").split(":")
+    with socket.create_connection((host, int(port)), timeout=10) as sock:
+        sock.sendall(f"POST {path} HTTP/1.1\r\nHost: {host}:{port}\r\ncontent-type: application/json\r\n"
+                     f"content-length: {len(body)}\r\n\r\n".encode())
+        time.sleep(pause_s)
+        sock.sendall(body)
+        answer = b""
+        while chunk := sock.recv(65536):
+            answer += chunk
+    return answer
+
+
+def test_a_refused_request_is_answered_in_full_after_its_body(token_server):
+    """A refusal waits for the (small, declared) body before it closes the connection: closing on unread bytes
+    resets it, and the client loses the answer it was reading."""
+    _, url = token_server
+    for attempt in range(300):
+        try:
+            answer = _refused_post(url, "/api/jobs/1/rescore", b'{"samples": 20}', pause_s=(attempt % 6) * 4e-4)
+        except ConnectionResetError:
+            raise AssertionError(f"attempt {attempt}: the connection was reset before the answer was read") from None
+        head, _, body = answer.partition(b"\r\n\r\n")
+        assert head.startswith(b"HTTP/1.1 401") and b"Authorization: Bearer" in body, answer

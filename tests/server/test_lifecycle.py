@@ -294,7 +294,8 @@ def test_schemathesis_all_checks_pass(tmp_path):
     finally:
         proc.terminate()
         proc.wait(timeout=30)
-    assert out.returncode == 0, out.stdout[-4000:] + out.stderr[-2000:]
+    server_log = Path(proc.log_path).read_text(errors="replace")
+    assert out.returncode == 0, out.stdout[-4000:] + out.stderr[-2000:] + "\nserver log:\n" + server_log[-6000:]
 
 
 def test_a_job_says_compiling_until_its_first_evaluation_after_an_install(tmp_path):

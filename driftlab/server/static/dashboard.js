@@ -91,17 +91,21 @@ function select(jobId) {
 async function refreshJob() {
   if (state.selected === null) return;
   const id = state.selected;
-  let job;
   try {
-    job = await api("GET", `/api/jobs/${id}`);
+    await refreshSelected(id);
   } catch (e) {
-    // Deleted meanwhile (here or elsewhere): the selection goes, the next poll's list has it gone too.
-    if (e.status !== 404 || id !== state.selected) throw e;
+    // Deleted meanwhile (here, between two of this refresh's requests, or elsewhere): the selection goes quietly,
+    // the next poll's list has it gone too. A job no longer selected has nothing left to say.
+    if (id !== state.selected) return;
+    if (e.status !== 404) throw e;
     state.selected = null;
     state.job = null;
     $("job-panel").hidden = true;
-    return;
   }
+}
+
+async function refreshSelected(id) {
+  const job = await api("GET", `/api/jobs/${id}`);
   if (id !== state.selected) return;
   state.job = job;
   const after = state.evals.length - 1;
@@ -194,7 +198,7 @@ async function maybeFetchSpace() {
       renderSpace(state.space, state.evals);
     }
   } catch (e) {
-    say(e.message);
+    if (id === state.selected) say(e.message); // a job deleted meanwhile has nothing left to say
   } finally {
     state.spaceBusy = false;
   }

@@ -3,6 +3,7 @@ matches the published parameter set's numbers, the controller's model sits at th
 refuses what cannot drift."""
 
 import json
+import re
 import subprocess
 import sys
 from dataclasses import replace
@@ -12,15 +13,21 @@ import pytest
 from vehiclemodels.vehicle_dynamics_std import vehicle_dynamics_std
 
 from driftlab.core.commonroad.equilibrium import commonroad_drifts, describe_family, frozen_front_wheel_drifts
+from driftlab.core.commonroad.family import sideslip_window
 from driftlab.core.commonroad.model_fit import _placed_at_drift, fitted_model_vehicle
-from driftlab.core.commonroad.parameters import _vehiclemodels, pack_commonroad, package_parameters
+from driftlab.core.commonroad.parameters import (
+    _vehiclemodels,
+    commonroad_model_vehicle,
+    pack_commonroad,
+    package_parameters,
+)
 from driftlab.core.commonroad.std import std_derivatives
 from driftlab.core.commonroad.weights import std_weights
 from driftlab.core.config import EpisodeConfig, Theta, apply_overrides
 from driftlab.core.drivability import drivable_reason
 from driftlab.core.episode import run_episode
 from driftlab.core.equilibrium import drift_equilibrium
-from driftlab.core.errors import ConfigError
+from driftlab.core.errors import ConfigError, NoEquilibriumError
 from driftlab.core.mpc import MpcConfig
 from driftlab.core.vehicle import pack_params
 
@@ -318,3 +325,32 @@ def test_an_mb_episode_reports_where_a_wheel_load_went_below_zero():
     assert (validity["negative_wheel_load_s"] > 0) == (min(lowest.values()) < 0)
     assert run_episode(Theta(), apply_overrides(EpisodeConfig.preset("commonroad_std"),
                                                 {"scenario.max_time_s": 1.0}), seed=0).metrics.plant_validity is None
+
+
+def test_sideslip_window_finds_a_runs_edges_to_the_grid():
+    assert sideslip_window(lambda b: 0.42 <= b + 1e-9 and b <= 0.57 + 1e-9) == (0.42, 0.57)
+    assert sideslip_window(lambda b: b >= 0.56 - 1e-9) == (0.56, 0.8)
+    assert sideslip_window(lambda b: False) is None
+
+
+def test_a_refused_sideslip_names_where_the_car_and_its_model_both_drift():
+    """The window the refusal names, checked point by point: the car's main drift countersteers both ways at its
+    edges and not one step outside, the controller's model has a drift at its upper edge and none one step above."""
+    config = EpisodeConfig.preset("commonroad_std")
+    with pytest.raises(ConfigError) as refused:
+        apply_overrides(config, {"scenario.sideslip_rad": 0.7})
+    found = re.search(r"needs a scenario.sideslip_rad in (\d\.\d\d)-(\d\.\d\d) rad", str(refused.value))
+    assert found and refused.value.field == "scenario.sideslip_rad", str(refused.value)
+    low, high = float(found[1]), float(found[2])
+
+    def car_countersteers(beta, right):
+        family = commonroad_drifts(2, 44.0, beta, right=right)
+        return bool(family and family[0].countersteer)
+
+    assert car_countersteers(low, False) and car_countersteers(low, True)
+    assert not (car_countersteers(round(low - 0.01, 2), False) and car_countersteers(round(low - 0.01, 2), True))
+    model = pack_params(commonroad_model_vehicle(2))
+    drift_equilibrium(44.0, -high, model)  # raises if the model has no drift there
+    with pytest.raises(NoEquilibriumError):
+        drift_equilibrium(44.0, -round(high + 0.01, 2), model)
+    apply_overrides(config, {"scenario.sideslip_rad": round((low + high) / 2, 2)})  # inside: accepted

@@ -18,7 +18,7 @@ from typing import Any
 
 from scipy.optimize import brentq
 
-from driftlab.core.commonroad.family import describe_family, drift_family
+from driftlab.core.commonroad.family import countersteer_window, describe_family, drift_family, sideslip_window
 from driftlab.core.commonroad.parameters import commonroad_model_vehicle
 from driftlab.core.equilibrium import drift_equilibrium
 from driftlab.core.errors import ConfigError, NoEquilibriumError
@@ -54,6 +54,52 @@ def fitted_model_vehicle(vehicle_id: int, radius_m: float, sideslip_rad: float,
 
 @lru_cache(maxsize=64)
 def _fitted(vehicle_id: int, radius_m: float, sideslip_rad: float, model: Any, drive_coupling: bool) -> VehicleParams:
+    try:
+        return _fit(vehicle_id, radius_m, sideslip_rad, model, drive_coupling)
+    except ConfigError as exc:
+        raise ConfigError(f"{exc}. {windows_text(vehicle_id, radius_m, model)}", field=exc.field) from None
+
+
+def windows_text(vehicle_id: int, radius_m: float, model: Any) -> str:
+    """Where a job of this car on a circle of ``radius_m`` can drift: the sideslips at which the car's own main
+    drift countersteers (driftlab.core.commonroad.family) and those at which the controller's model of it (the
+    paper's tyre with the car's mass, geometry and tyre shape) has a countersteer drift; a job needs both."""
+    car = _overlap(countersteer_window(model, vehicle_id, radius_m),
+                   countersteer_window(model, vehicle_id, radius_m, right=True))
+    own = model_window(commonroad_model_vehicle(vehicle_id), radius_m)
+    return (f"On a {radius_m:g} m circle (sideslips 0.20-0.80 rad scanned) CommonRoad vehicle {vehicle_id} drifts with "
+            f"countersteer both ways at {_range_text(car)}, the controller's model of it at {_range_text(own)}: a "
+            f"job of this car needs a scenario.sideslip_rad in {_range_text(_overlap(car, own))}")
+
+
+def _overlap(a: tuple[float, float] | None, b: tuple[float, float] | None) -> tuple[float, float] | None:
+    if a is None or b is None or max(a[0], b[0]) > min(a[1], b[1]):
+        return None
+    return max(a[0], b[0]), min(a[1], b[1])
+
+
+def _range_text(window: tuple[float, float] | None) -> str:
+    if window is None:
+        return "no sideslip"
+    return f"{window[0]:.2f} rad" if window[0] == window[1] else f"{window[0]:.2f}-{window[1]:.2f} rad"
+
+
+@lru_cache(maxsize=64)
+def model_window(vehicle: VehicleParams, radius_m: float) -> tuple[float, float] | None:
+    """[lowest, highest] |sideslip| from 0.2 to 0.8 (to 0.01 rad) at which ``vehicle`` (the controller's model) has
+    a countersteer drift on a circle of ``radius_m`` (None: nowhere)."""
+    params = pack_params(vehicle)
+
+    def drifts(sideslip_rad: float) -> bool:
+        try:
+            drift_equilibrium(radius_m, -sideslip_rad, params)
+        except NoEquilibriumError:
+            return False
+        return True
+    return sideslip_window(drifts)
+
+
+def _fit(vehicle_id: int, radius_m: float, sideslip_rad: float, model: Any, drive_coupling: bool) -> VehicleParams:
     left = _main_drift(vehicle_id, radius_m, sideslip_rad, False, model)
     right = _main_drift(vehicle_id, radius_m, sideslip_rad, True, model)
     base = commonroad_model_vehicle(vehicle_id)

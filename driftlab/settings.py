@@ -17,7 +17,10 @@ from pydantic_settings import BaseSettings, SettingsConfigDict
 class Settings(BaseSettings):
     """Attributes:
         database_url: SQLAlchemy URL of the database (DRIFTLAB_DATABASE_URL).
-        token: bearer token every mutating API request must carry, if set (DRIFTLAB_TOKEN).
+        token: bearer token every API request must carry, if set (DRIFTLAB_TOKEN); /api/health, the pages and
+            the OpenAPI document stay open.
+        public_reads: with a token set, API reads (GET) need none (DRIFTLAB_PUBLIC_READS=1): a lab that shows its
+            results to anyone on its network and lets only token holders change them.
         dask_address: a Dask scheduler (tcp://HOST:8786) to run episodes on (DRIFTLAB_DASK_ADDRESS); unset: a
             local process pool.
         allowed_hosts: host names this server answers to besides 127.0.0.1, localhost and ::1, comma-separated
@@ -39,6 +42,7 @@ class Settings(BaseSettings):
 
     database_url: str | None = None
     token: str | None = None
+    public_reads: bool = False
     dask_address: str | None = None
     allowed_hosts: str = ""
     max_body_bytes: int = 1_000_000

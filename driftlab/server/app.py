@@ -87,7 +87,7 @@ def create_app(db_url: str, *, workers: int | None = 2, start_worker: bool = Tru
     app.state.settings = settings
     # Outermost: hosts, origins, the token and the body size are checked before anything else runs.
     app.add_middleware(EdgeGuard, token=settings.token, allowed_hosts=settings.allowed_host_names(),
-                       max_body_bytes=settings.max_body_bytes)
+                       max_body_bytes=settings.max_body_bytes, public_reads=settings.public_reads)
     app.add_middleware(SecurityHeaders)  # outside the edge: its refusals carry the headers too
     app.state.factory = factory
     app.state.evaluation_pages = EvaluationPages()
@@ -103,7 +103,7 @@ def create_app(db_url: str, *, workers: int | None = 2, start_worker: bool = Tru
     add_view_routes(app, lambda: app.state.dashboard.port if hasattr(app.state, "dashboard") else None,
                     app.state.recordings,
                     lambda: len(app.state.dashboard.sessions) if hasattr(app.state, "dashboard") else 0)
-    document_edge(app, token_set=bool(settings.token))
+    document_edge(app, token_set=bool(settings.token), public_reads=settings.public_reads)
 
     @app.exception_handler(RequestValidationError)
     async def _validation(_request: Request, exc: RequestValidationError):

@@ -3,10 +3,11 @@ middleware, so nothing is buffered first):
 
 - the Host header names this machine (127.0.0.1, localhost, ::1) or a host of ``DRIFTLAB_ALLOWED_HOSTS``: a page
   on another site cannot reach the API through DNS rebinding (400 otherwise);
-- a mutating API request (POST, PUT, PATCH, DELETE under /api) carries the token when one is set, as a bearer
-  header or, from this origin, as the cookie a page opened with ``?token=`` got (401 before any route sees its body);
-  without a token, one sent by a browser from another origin is refused (403): body-less POSTs are "simple"
-  cross-site requests that no CORS preflight stops;
+- an API request (under /api, but /api/health) carries the token when one is set, as a bearer header or, from
+  this origin, as the cookie a page opened with ``?token=`` got (401 before any route sees its body); reads too,
+  unless ``DRIFTLAB_PUBLIC_READS`` opens them (configs, notes and trajectories are a lab's unpublished work);
+  without a token, a mutating request (POST, PUT, PATCH, DELETE) sent by a browser from another origin is refused
+  (403): body-less POSTs are "simple" cross-site requests that no CORS preflight stops;
 - a request body larger than ``DRIFTLAB_MAX_BODY_BYTES`` is refused (413), by its Content-Length or, for a
   chunked body, as soon as the bytes read pass the limit;
 - the /viser websocket (the 3D view, whose what-if panel runs episodes) opens only from this origin, and with the
@@ -23,6 +24,14 @@ from urllib.parse import parse_qs, urlsplit
 
 LOCAL_HOSTS = frozenset({"127.0.0.1", "localhost", "::1"})
 MUTATING = frozenset({"POST", "PUT", "PATCH", "DELETE"})
+OPEN_PATHS = frozenset({"/api/health"})  # a load balancer's or a container's liveness probe has no token
+
+
+def needs_token(method: str, path: str, *, public_reads: bool) -> bool:
+    """Whether a request needs the token when one is set."""
+    if not path.startswith("/api") or path in OPEN_PATHS:
+        return False
+    return method.upper() in MUTATING or not public_reads
 TOKEN_COOKIE = "driftlab_token"
 
 
@@ -40,9 +49,11 @@ def same_secret(given: str, expected: str) -> bool:
 
 
 class EdgeGuard:
-    def __init__(self, app, *, token: str | None, allowed_hosts: frozenset[str], max_body_bytes: int) -> None:
+    def __init__(self, app, *, token: str | None, allowed_hosts: frozenset[str], max_body_bytes: int,
+                 public_reads: bool = False) -> None:
         self.app = app
         self.token = token or None
+        self.public_reads = public_reads
         self.allowed_hosts = LOCAL_HOSTS | {h.lower() for h in allowed_hosts}
         self.max_body_bytes = max_body_bytes
 
@@ -63,14 +74,13 @@ class EdgeGuard:
             if self.token and not self._websocket_token_ok(scope, headers):
                 return await refuse(401, "token: open the view as /viser/?token=<DRIFTLAB_TOKEN>")
             return await self.app(scope, receive, send)
-        if scope["method"] in MUTATING and scope["path"].startswith("/api"):
-            if self.token:
-                if not (same_secret(headers.get("authorization", ""), f"Bearer {self.token}")
-                        or (not foreign and self._cookie_token_ok(headers))):
-                    return await refuse(401, "this endpoint needs 'Authorization: Bearer <DRIFTLAB_TOKEN>'")
-            elif foreign:
-                return await refuse(403, f"origin: a request from {origin!r} may not change "
-                                    "anything here (set DRIFTLAB_TOKEN to allow authenticated clients)")
+        if self.token and needs_token(scope["method"], scope["path"], public_reads=self.public_reads):
+            if not (same_secret(headers.get("authorization", ""), f"Bearer {self.token}")
+                    or (not foreign and self._cookie_token_ok(headers))):
+                return await refuse(401, "this endpoint needs 'Authorization: Bearer <DRIFTLAB_TOKEN>'")
+        if not self.token and foreign and scope["method"] in MUTATING and scope["path"].startswith("/api"):
+            return await refuse(403, f"origin: a request from {origin!r} may not change "
+                                "anything here (set DRIFTLAB_TOKEN to allow authenticated clients)")
         length = headers.get("content-length")
         if length is not None and length.isdigit() and int(length) > self.max_body_bytes:
             return await refuse(413, self._too_large())

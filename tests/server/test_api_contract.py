@@ -40,12 +40,26 @@ def test_unknown_ids_are_404(api):
     assert api.get("/api/evaluations/999999/trajectory").status_code == 404
 
 
-def test_token_guards_mutating_endpoints(tmp_path):
+def test_token_guards_every_api_request_but_the_health_check(tmp_path):
     with in_process_client(tmp_path / "tok.db", token="s3cret") as client:
         assert client.post("/api/jobs", json={"iterations": 1}).status_code == 401
-        assert client.get("/api/jobs").status_code == 200  # reads stay open
+        for path in ("/api/jobs", "/api/jobs/1", "/api/evaluations/1/trajectory", "/api/studies", "/api/view"):
+            refused = client.get(path)
+            assert refused.status_code == 401 and "Bearer" in refused.json()["detail"], path
+        assert client.get("/api/health").status_code == 200
+        assert client.get("/api/jobs", headers={"Authorization": "Bearer s3cret"}).json() == []
+        assert client.get("/api/jobs", cookies={"driftlab_token": "s3cret"}).status_code == 200  # a page's cookie
         ok = client.post("/api/jobs", json={"iterations": 1}, headers={"Authorization": "Bearer s3cret"})
         assert ok.status_code == 201
         job_id = ok.json()["id"]
         assert client.delete(f"/api/jobs/{job_id}").status_code == 401
         assert client.delete(f"/api/jobs/{job_id}", headers={"Authorization": "Bearer s3cret"}).status_code == 204
+
+
+def test_public_reads_open_the_reads_and_only_them(tmp_path):
+    with in_process_client(tmp_path / "pub.db", token="s3cret", public_reads=True) as client:
+        assert client.get("/api/jobs").json() == []
+        assert client.post("/api/jobs", json={"iterations": 1}).status_code == 401
+        schema = client.get("/openapi.json").json()
+        assert "security" not in schema["paths"]["/api/jobs"]["get"]
+        assert schema["paths"]["/api/jobs"]["post"]["security"] == [{"bearerToken": []}]

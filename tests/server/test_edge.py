@@ -97,7 +97,8 @@ def test_the_openapi_document_states_the_edge(open_server, token_server):
     create = token_doc["paths"]["/api/jobs"]["post"]
     assert create["security"] == [{"bearerToken": []}] and "401" in create["responses"]
     assert token_doc["components"]["securitySchemes"]["bearerToken"]["scheme"] == "bearer"
-    assert "security" not in token_doc["paths"]["/api/jobs"]["get"]  # reading needs no token
+    assert token_doc["paths"]["/api/jobs"]["get"]["security"] == [{"bearerToken": []}]  # reads need it too
+    assert "security" not in token_doc["paths"]["/api/health"]["get"]  # the liveness probe has none
     error = create["responses"]["409"]["content"]["application/json"]["schema"]
     assert error == {"$ref": "#/components/schemas/ErrorBody"}
 

@@ -2,8 +2,8 @@
 
 Starts ``driftlab serve`` on a small finished job (the view replays its newest episode at 1x, forever),
 then measures the server process's CPU time (user + system, from /proc) over windows of WINDOW_S seconds:
-with no client, with one client through the API port's relay (what browsers use), and with one client
-straight to viser's own loopback port (the relay's share is the difference). The client is a real headless
+with no client and with one client through the API port's relay (viser's own port answers only the relay,
+driftlab.web.viser_server). The client is a real headless
 Chromium (a bare websocket client received one message and no scene: viser's page sends what it needs
 first). Prints the median of
 RUNS windows, in percent of one core.
@@ -19,7 +19,6 @@ import sys
 import time
 from pathlib import Path
 
-import httpx
 from playwright.sync_api import sync_playwright
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
@@ -56,22 +55,19 @@ def measure_with_browser(pid: int, browser, page_url: str) -> float:
 def main() -> None:
     proc, url = serve_finished_job()
     try:
-        viser_port = httpx.get(f"{url}/api/view").json()["viser_port"]
         idle = [measure(proc.pid) for _ in range(RUNS)]
         with sync_playwright() as p:
             browser = p.chromium.launch(executable_path=CHROMIUM, args=CHROMIUM_ARGS, headless=True)
             relay = [measure_with_browser(proc.pid, browser, f"{url}/viser/") for _ in range(RUNS)]
-            direct = [measure_with_browser(proc.pid, browser, f"http://127.0.0.1:{viser_port}/") for _ in range(RUNS)]
             browser.close()
     finally:
         proc.terminate()
         proc.wait(timeout=30)
     idle_cpu = statistics.median(idle)
     print(f"server process, no client:           {idle_cpu:5.2f} % of a core (median of {RUNS} x {WINDOW_S:.0f} s)")
-    for name, runs in (("one tab via the /viser relay", relay), ("one tab direct to viser  ", direct)):
-        cpu = statistics.median(runs)
-        print(f"server process, {name}: {cpu:5.2f} % ({cpu - idle_cpu:+.2f} % for streaming; "
-              f"runs {', '.join(f'{r:.2f}' for r in runs)})")
+    cpu = statistics.median(relay)
+    print(f"server process, one tab via /viser:   {cpu:5.2f} % ({cpu - idle_cpu:+.2f} % for streaming; "
+          f"runs {', '.join(f'{r:.2f}' for r in relay)})")
 
 
 if __name__ == "__main__":

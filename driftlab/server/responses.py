@@ -53,7 +53,6 @@ class Health(BaseModel):
 
 class ViewStatus(BaseModel):
     clients: int = Field(description="open browser tabs of the 3D view")
-    viser_port: int | None = Field(description="the loopback port of the viser server behind /viser")
 
 
 class Evaluation(BaseModel):

@@ -1,5 +1,6 @@
 """The 3D view on the API's port: viser's client page at ``/viser/``, its websocket relayed to the viser
-server on a loopback port, and episode recordings as downloads.
+server on a loopback port that answers only this relay (driftlab.web.viser_server), and episode recordings as
+downloads.
 
 viser 1.1 rejects a websocket without its subprotocol (``viser-v<version>``), so the relay accepts with the
 browser's subprotocol and passes the same one upstream.
@@ -26,6 +27,7 @@ from driftlab.server.schemas import EvaluationId
 from driftlab.server.token_cookie import token_to_cookie
 from driftlab.web.recording import EpisodeRecorder
 from driftlab.web.sources import frames_of_evaluation, track_of_spec
+from driftlab.web.viser_server import RELAY_HEADER, RELAY_SECRET
 
 CLIENT_PAGE = Path(viser.__file__).parent / "client" / "build" / "index.html"
 MAX_MESSAGE_BYTES = 50 * 1024 * 1024  # viser's own limit
@@ -66,9 +68,9 @@ def add_view_routes(app: FastAPI, upstream_port: Callable[[], int | None], recor
     page_gzip = gzip.compress(page)
 
     @app.get("/api/view", tags=["view"], response_model=ViewStatus)
-    def view_status() -> dict[str, int | None]:
-        """The 3D view: open browser tabs, and the loopback port of the viser server behind ``/viser``."""
-        return {"clients": n_clients(), "viser_port": upstream_port()}
+    def view_status() -> dict[str, int]:
+        """The 3D view: its open browser tabs."""
+        return {"clients": n_clients()}
 
     @app.get("/viser", include_in_schema=False)
     def view_redirect(request: Request) -> RedirectResponse:
@@ -111,6 +113,7 @@ async def relay(websocket: WebSocket, port: int | None) -> None:
         await websocket.close(code=1002 if subprotocol is None else 1013)
         return
     async with websockets.connect(f"ws://127.0.0.1:{port}", subprotocols=[subprotocol],
+                                  additional_headers={RELAY_HEADER: RELAY_SECRET},
                                   max_size=MAX_MESSAGE_BYTES, compression=None) as upstream:
         await websocket.accept(subprotocol=subprotocol)
         tasks = [asyncio.create_task(_browser_to_viser(websocket, upstream)),

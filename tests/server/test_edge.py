@@ -268,3 +268,23 @@ def test_a_refused_request_is_answered_in_full_after_its_body(token_server):
             raise AssertionError(f"attempt {attempt}: the connection was reset before the answer was read") from None
         head, _, body = answer.partition(b"\r\n\r\n")
         assert head.startswith(b"HTTP/1.1 401") and b"Authorization: Bearer" in body, answer
+
+
+def test_no_port_but_the_apis_answers_a_stranger(open_server):
+    """viser's own loopback port refuses every websocket and page request that does not come through the API's relay
+    (a local process, or a page any site opened in a local browser), whatever its Origin."""
+    proc, url = open_server
+    api_port = int(url.rsplit(":", 1)[1])
+    listening = {c.laddr.port for c in psutil.Process(proc.pid).net_connections(kind="tcp")
+                 if c.status == psutil.CONN_LISTEN}
+    others = listening - {api_port}
+    assert api_port in listening and others  # viser's port is there, and closed to strangers
+    for port in others:
+        for origin in (url, f"http://127.0.0.1:{port}", "http://evil.example"):
+            with pytest.raises(InvalidStatus) as refused:
+                connect(f"ws://127.0.0.1:{port}/", subprotocols=[SUBPROTOCOL], origin=origin, open_timeout=10)
+            assert refused.value.response.status_code == 403
+        assert httpx.get(f"http://127.0.0.1:{port}/").status_code == 403
+    assert set(httpx.get(f"{url}/api/view").json()) == {"clients"}  # names no port
+    with _ws(url, origin=url) as socket:  # the relay still gets through
+        assert socket.recv(timeout=10)

@@ -14,6 +14,7 @@ from driftlab.core.tuning import TuningSpec
 from driftlab.db import storage
 from driftlab.web.dashboard import Dashboard
 from driftlab.web.scene import set_chase_camera
+from driftlab.web.viser_server import RELAY_HEADER, RELAY_SECRET
 from driftlab.worker.executors import evaluate_episode
 from tests.web.test_view_browser import CHROMIUM, CHROMIUM_ARGS
 
@@ -64,7 +65,9 @@ def test_the_chase_camera_follows_the_car_when_paused_and_scrubbed(dashboard):
         pytest.fail(f"no chromium at {CHROMIUM}: install Debian's package or set DRIFTLAB_CHROMIUM")
     with sync_playwright() as p:
         browser = p.chromium.launch(executable_path=CHROMIUM, args=CHROMIUM_ARGS, headless=True)
-        page = browser.new_page(viewport={"width": 1400, "height": 900})
+        # Straight to viser's port, as the API's relay connects (it answers nothing else: driftlab.web.viser_server).
+        page = browser.new_page(viewport={"width": 1400, "height": 900},
+                                extra_http_headers={RELAY_HEADER: RELAY_SECRET})
         page.goto(f"http://127.0.0.1:{view.port}/")
         page.get_by_role("button", name="Play best").click()
         page.get_by_role("button", name="Pause").click()

@@ -34,6 +34,10 @@ class Settings(BaseSettings):
             and an episode re-runs bit for bit from its theta, config and seed.
         what_if_per_minute: what-if episodes one browser tab may start a minute (DRIFTLAB_WHAT_IF_PER_MINUTE,
             default 60, bursts of 5): one open tab cannot keep the what-if worker busy for everyone.
+        max_heavy_reads: search spaces, recordings and trajectory downloads served at once
+            (DRIFTLAB_MAX_HEAVY_READS, default 2: the server's cores); one more is a 503 with Retry-After.
+        max_view_tabs: browser tabs of the 3D view at once (DRIFTLAB_MAX_VIEW_TABS, default 20); one more is
+            closed with "try again later" (each streams a car at 30 Hz from the server process).
         max_rescore_episodes: episodes that queued and running rescores may wait for, all jobs together
             (DRIFTLAB_MAX_RESCORE_EPISODES, default 5000): rescores share the job runner's workers.
     """
@@ -52,6 +56,8 @@ class Settings(BaseSettings):
     max_trajectories_per_job: int = Field(default=5000, ge=1)
     what_if_per_minute: float = Field(default=60.0, gt=0.0, le=6000.0)
     max_rescore_episodes: int = Field(default=5000, ge=1)
+    max_heavy_reads: int = Field(default=2, ge=1, le=64)
+    max_view_tabs: int = Field(default=20, ge=1, le=1000)
 
     def allowed_host_names(self) -> frozenset[str]:
         return frozenset(h.strip() for h in self.allowed_hosts.split(",") if h.strip())

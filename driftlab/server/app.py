@@ -17,6 +17,7 @@ from driftlab.core.errors import ConfigError
 from driftlab.db import storage
 from driftlab.server.edge import EdgeGuard
 from driftlab.server.evaluation_pages import EvaluationPages
+from driftlab.server.heavy_reads import HeavyReads
 from driftlab.server.openapi import document_edge
 from driftlab.server.routes import analysis, evaluations, jobs, pages, studies
 from driftlab.server.security_headers import SecurityHeaders
@@ -94,6 +95,7 @@ def create_app(db_url: str, *, workers: int | None = 2, start_worker: bool = Tru
     app.state.runner = runner
     app.state.recordings = RecordingCache(factory)
     app.state.search_spaces = SearchSpaceCache()
+    app.state.heavy_reads = HeavyReads(settings.max_heavy_reads)
     app.include_router(pages.router)
     pages.mount_static(app)
     app.include_router(jobs.router)
@@ -102,7 +104,8 @@ def create_app(db_url: str, *, workers: int | None = 2, start_worker: bool = Tru
     app.include_router(studies.router)
     add_view_routes(app, lambda: app.state.dashboard.port if hasattr(app.state, "dashboard") else None,
                     app.state.recordings,
-                    lambda: len(app.state.dashboard.sessions) if hasattr(app.state, "dashboard") else 0)
+                    lambda: len(app.state.dashboard.sessions) if hasattr(app.state, "dashboard") else 0,
+                    max_tabs=settings.max_view_tabs)
     document_edge(app, token_set=bool(settings.token), public_reads=settings.public_reads)
 
     @app.exception_handler(RequestValidationError)

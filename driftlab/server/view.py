@@ -17,11 +17,12 @@ from pathlib import Path
 
 import viser
 import websockets
-from fastapi import FastAPI, Request, WebSocket, WebSocketDisconnect
+from fastapi import Depends, FastAPI, Request, WebSocket, WebSocketDisconnect
 from fastapi.responses import HTMLResponse, RedirectResponse, Response
 from sqlalchemy.orm import Session, sessionmaker
 
 from driftlab.db import storage
+from driftlab.server.heavy_reads import heavy_read
 from driftlab.server.responses import ViewStatus, errors, media
 from driftlab.server.schemas import EvaluationId
 from driftlab.server.token_cookie import token_to_cookie
@@ -62,9 +63,15 @@ class RecordingCache:
         return self.recorder.html(frames, track).encode()
 
 
+TOO_MANY_TABS = 1013  # the websocket close code for "try again later"
+
+
 def add_view_routes(app: FastAPI, upstream_port: Callable[[], int | None], recordings: RecordingCache,
-                    n_clients: Callable[[], int]) -> None:
+                    n_clients: Callable[[], int], max_tabs: int = 20) -> None:
+    """``max_tabs``: relayed tabs at once; one more is accepted and closed at once with code 1013 (try again
+    later) and the reason: each tab streams a car at 30 Hz from this process (50 tabs: the health check's p99 4 s)."""
     page = CLIENT_PAGE.read_bytes()
+    tabs = {"open": 0}  # changed on the event loop only
     page_gzip = gzip.compress(page)
 
     @app.get("/api/view", tags=["view"], response_model=ViewStatus)
@@ -88,9 +95,20 @@ def add_view_routes(app: FastAPI, upstream_port: Callable[[], int | None], recor
 
     @app.websocket("/viser")
     async def view_socket(websocket: WebSocket) -> None:
-        await relay(websocket, upstream_port())
+        if tabs["open"] >= max_tabs:
+            await websocket.accept(subprotocol=next((p for p in websocket.scope.get("subprotocols") or []
+                                                     if p.startswith("viser-v")), None))
+            await websocket.close(code=TOO_MANY_TABS, reason=f"{max_tabs} view tabs are open "
+                                  "(DRIFTLAB_MAX_VIEW_TABS): try again later")
+            return
+        tabs["open"] += 1
+        try:
+            await relay(websocket, upstream_port())
+        finally:
+            tabs["open"] -= 1
 
-    @app.get("/api/evaluations/{evaluation_id}/recording.viser", tags=["view"], response_class=Response, responses={
+    @app.get("/api/evaluations/{evaluation_id}/recording.viser", tags=["view"], response_class=Response,
+             dependencies=[Depends(heavy_read)], responses={
         **media("application/octet-stream", {"type": "string", "format": "binary"}, "a viser recording"),
         **errors(404, 422, 503)})
     def recording(evaluation_id: EvaluationId) -> Response:
@@ -98,7 +116,8 @@ def add_view_routes(app: FastAPI, upstream_port: Callable[[], int | None], recor
         return Response(recordings.get(evaluation_id, "viser"), media_type="application/octet-stream",
                         headers={"Content-Disposition": f'attachment; filename="evaluation-{evaluation_id}.viser"'})
 
-    @app.get("/api/evaluations/{evaluation_id}/replay.html", tags=["view"], response_class=Response, responses={
+    @app.get("/api/evaluations/{evaluation_id}/replay.html", tags=["view"], response_class=Response,
+             dependencies=[Depends(heavy_read)], responses={
         **media("text/html", {"type": "string"}, "a page that replays the episode"), **errors(404, 422, 503)})
     def replay(evaluation_id: EvaluationId) -> Response:
         """A standalone HTML page that replays the episode with no server."""

@@ -3,13 +3,14 @@ of J over two theta coordinates, the learned probability of failure, and the par
 models of :mod:`driftlab.core.search_space` fitted to the job's stored evaluations.
 
 Fitted models are kept per (job, evaluations stored): a stored evaluation never changes and a job's id is never
-reused, so tabs that poll a job refit only when an evaluation lands.
+reused, so tabs that poll a job refit only when an evaluation lands, once for all of them.
 """
 
 from __future__ import annotations
 
 import threading
 from collections import OrderedDict
+from concurrent.futures import Future
 from typing import Any
 
 import numpy as np
@@ -22,29 +23,54 @@ _CACHE_SIZE = 16
 
 
 class SearchSpaceCache:
+    """Fitted models by (job, evaluations stored), bounded; a fit in progress is shared (single flight): every tab
+    that asks for the same job while its models are being fitted waits for that one fit."""
+
     def __init__(self, size: int = _CACHE_SIZE) -> None:
         self.size = size
         self._models: OrderedDict[tuple[int, int], SearchSpaceModels] = OrderedDict()
+        self._fitting: dict[tuple[int, int], Future[SearchSpaceModels]] = {}
         self._lock = threading.Lock()
 
     def models(self, factory: sessionmaker[Session], job_id: int) -> tuple[SearchSpaceModels, int]:
         """The models of a job's stored evaluations, and how many evaluations they were fitted to."""
         with storage.snapshot(factory) as session:
-            job = storage.get_job(session, job_id=job_id)  # NotFound -> 404
-            rows = storage.evaluations(session, job_id=job_id)
-            bounds = job.spec.get("bounds") or {}
-            history = ([dict(e.theta) for e in rows], [float(e.J) for e in rows], [bool(e.completed) for e in rows])
-        key = (job_id, len(rows))
+            storage.get_job(session, job_id=job_id)  # NotFound -> 404
+            n = storage.count_evaluations(session, job_id=job_id)
+        key = (job_id, n)
         with self._lock:
             if key in self._models:
                 self._models.move_to_end(key)
-                return self._models[key], len(rows)
-        models = fit_models(bounds, *history)  # outside the lock: another job's tab need not wait
+                return self._models[key], n
+            pending = self._fitting.get(key)
+            owner = pending is None
+            if owner:
+                pending = self._fitting[key] = Future()
+        if not owner:
+            return pending.result(), n  # the fit another request started (its error too)
+        try:
+            models = self._fit(factory, job_id, n)  # outside the lock: another job's tab need not wait
+        except BaseException as exc:
+            with self._lock:
+                del self._fitting[key]
+            pending.set_exception(exc)
+            raise
         with self._lock:
+            del self._fitting[key]
             self._models[key] = models
             while len(self._models) > self.size:
                 self._models.popitem(last=False)
-        return models, len(rows)
+        pending.set_result(models)
+        return models, n
+
+    @staticmethod
+    def _fit(factory: sessionmaker[Session], job_id: int, n: int) -> SearchSpaceModels:
+        with storage.snapshot(factory) as session:
+            job = storage.get_job(session, job_id=job_id)
+            rows = storage.evaluations(session, job_id=job_id, limit=n)  # those counted: the key's
+            bounds = job.spec.get("bounds") or {}
+            history = ([dict(e.theta) for e in rows], [float(e.J) for e in rows], [bool(e.completed) for e in rows])
+        return fit_models(bounds, *history)
 
 
 def _grid(values: np.ndarray | None) -> list[list[float]] | None:

@@ -57,6 +57,49 @@ def test_the_search_space_of_a_stored_history(api):
     assert "k" in (default["x"], default["y"])
 
 
+def test_tabs_asking_at_once_share_one_fit(api, monkeypatch):
+    """Twelve requests for the same job's search space while it is fitted: one fit, twelve equal answers; a new
+    evaluation refits once."""
+    from driftlab.services import search_space as module
+
+    job = api.post("/api/jobs", json={"name": "sf", "iterations": 30, "model_correction": False}).json()
+    _store(api, job["id"])
+    fits = []
+    real_fit = module.fit_models
+
+    def counted_fit(*args):
+        fits.append(1)
+        return real_fit(*args)
+
+    monkeypatch.setattr(module, "fit_models", counted_fit)
+    api.app.state.heavy_reads.limit = 64  # the cap is tested apart
+    url = f"/api/jobs/{job['id']}/search-space"
+    with ThreadPoolExecutor(12) as pool:
+        answers = list(pool.map(lambda _: api.get(url, params={"x": "c_lr", "y": "k", "grid": 6}).json(), range(12)))
+    assert len(fits) == 1 and all(a == answers[0] for a in answers)
+    _store(api, job["id"], n=1)
+    assert api.get(url).json()["n_evaluations"] == 15 and len(fits) == 2
+
+
+def test_heavy_reads_past_the_cap_are_a_503_with_retry_after(tmp_path):
+    with in_process_client(tmp_path / "cap.db", max_heavy_reads=1) as client:
+        job = client.post("/api/jobs", json={"name": "cap", "iterations": 20, "model_correction": False}).json()
+        _store(client, job["id"])
+        reads = client.app.state.heavy_reads
+        assert reads.try_enter()  # the one slot, taken
+        for path in (f"/api/jobs/{job['id']}/search-space", "/api/evaluations/1/trajectory",
+                     "/api/evaluations/1/recording.viser", "/api/evaluations/1/replay.html"):
+            busy = client.get(path)
+            assert busy.status_code == 503 and busy.headers["retry-after"] == "2", path
+            assert "DRIFTLAB_MAX_HEAVY_READS" in busy.json()["detail"]
+        assert client.get("/api/jobs").status_code == 200 and client.get("/api/health").status_code == 200
+        reads.leave()
+        assert client.get(f"/api/jobs/{job['id']}/search-space").status_code == 200
+        assert client.get("/api/evaluations/999/trajectory").status_code == 404  # past the cap: the route's answer
+        assert reads.try_enter()  # the slots were given back after each request, errors included
+        reads.leave()
+
+
 def test_bad_search_space_requests_name_the_field(api):
     job = api.post("/api/jobs", json={"name": "b", "iterations": 5, "model_correction": False}).json()
     r = api.get(f"/api/jobs/{job['id']}/search-space", params={"x": "mass"})

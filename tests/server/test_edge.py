@@ -11,7 +11,7 @@ import httpx
 import psutil
 import pytest
 import viser
-from websockets.exceptions import InvalidStatus
+from websockets.exceptions import ConnectionClosed, InvalidStatus
 from websockets.sync.client import connect
 
 from tests.server_process import free_port, start_server, wait_status
@@ -288,3 +288,25 @@ def test_no_port_but_the_apis_answers_a_stranger(open_server):
     assert set(httpx.get(f"{url}/api/view").json()) == {"clients"}  # names no port
     with _ws(url, origin=url) as socket:  # the relay still gets through
         assert socket.recv(timeout=10)
+
+
+def test_view_tabs_past_the_cap_are_told_to_come_back(tmp_path):
+    proc, url = start_server(tmp_path / "tabs.db", free_port(), env_extra={"DRIFTLAB_MAX_VIEW_TABS": "2"})
+    try:
+        with _ws(url, origin=url) as first, _ws(url, origin=url) as second:
+            assert first.recv(timeout=10) and second.recv(timeout=10)
+            with _ws(url, origin=url) as third, pytest.raises(ConnectionClosed) as closed:
+                third.recv(timeout=10)
+            assert closed.value.rcvd.code == 1013 and "DRIFTLAB_MAX_VIEW_TABS" in closed.value.rcvd.reason
+        deadline = time.time() + 10
+        while True:  # the tabs closed: there is room again once the relay has seen them go
+            with _ws(url, origin=url) as again:
+                try:
+                    assert again.recv(timeout=10)
+                    break
+                except ConnectionClosed:
+                    assert time.time() < deadline, "no room after the tabs closed"
+            time.sleep(0.2)
+    finally:
+        proc.terminate()
+        proc.wait(timeout=30)

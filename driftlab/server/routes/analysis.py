@@ -12,6 +12,7 @@ from sqlalchemy.orm import Session, sessionmaker
 from driftlab.core.config import THETA_KEYS
 from driftlab.core.search_space import MAX_GRID
 from driftlab.server import quotas
+from driftlab.server.heavy_reads import heavy_read
 from driftlab.server.responses import Rescore, SearchSpace, errors
 from driftlab.server.routes.deps import factory, require_token, wake_runner
 from driftlab.server.schemas import JobId
@@ -32,7 +33,8 @@ class RescoreCreate(BaseModel):
                          description="fresh seeds the best theta runs on")
 
 
-@router.get("/api/jobs/{job_id}/search-space", response_model=SearchSpace, responses=errors(404, 422, 503))
+@router.get("/api/jobs/{job_id}/search-space", response_model=SearchSpace, dependencies=[Depends(heavy_read)],
+            responses=errors(404, 422, 503))
 def get_search_space(job_id: JobId, db: Factory, request: Request,
                      x: Annotated[ThetaKey | None, Query(description="parameter along x")] = None,
                      y: Annotated[ThetaKey | None, Query(description="parameter along y")] = None,

@@ -58,7 +58,8 @@ def dashboard(request: Request) -> Response:
 
 
 @router.get("/api/health", tags=["health"], response_model=Health)
-def health() -> dict[str, str]:
+async def health() -> dict[str, str]:
+    """On the event loop, not the thread pool: it answers while every thread is busy."""
     return {"status": "ok"}
 
 

@@ -38,6 +38,9 @@ class Settings(BaseSettings):
             (DRIFTLAB_MAX_HEAVY_READS, default 2: the server's cores); one more is a 503 with Retry-After.
         max_view_tabs: browser tabs of the 3D view at once (DRIFTLAB_MAX_VIEW_TABS, default 20); one more is
             closed with "try again later" (each streams a car at 30 Hz from the server process).
+        header_timeout_s, body_timeout_s: how long a request's headers may take to arrive, and a request body may
+            pause between chunks (DRIFTLAB_HEADER_TIMEOUT_S, default 10; DRIFTLAB_BODY_TIMEOUT_S, default 30;
+            driftlab.server.slow_clients).
         max_rescore_episodes: episodes that queued and running rescores may wait for, all jobs together
             (DRIFTLAB_MAX_RESCORE_EPISODES, default 5000): rescores share the job runner's workers.
     """
@@ -58,6 +61,8 @@ class Settings(BaseSettings):
     max_rescore_episodes: int = Field(default=5000, ge=1)
     max_heavy_reads: int = Field(default=2, ge=1, le=64)
     max_view_tabs: int = Field(default=20, ge=1, le=1000)
+    header_timeout_s: float = Field(default=10.0, gt=0.0, le=3600.0)
+    body_timeout_s: float = Field(default=30.0, gt=0.0, le=3600.0)
 
     def allowed_host_names(self) -> frozenset[str]:
         return frozenset(h.strip() for h in self.allowed_hosts.split(",") if h.strip())

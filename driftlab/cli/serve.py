@@ -15,6 +15,7 @@ def cmd_serve(args: argparse.Namespace) -> int:
 
     from driftlab.server.access_log import redact_access_log
     from driftlab.server.app import create_app
+    from driftlab.server.slow_clients import with_header_deadline
     from driftlab.settings import Settings
 
     settings = Settings()
@@ -41,7 +42,7 @@ def cmd_serve(args: argparse.Namespace) -> int:
     login = "?token=<DRIFTLAB_TOKEN>" if settings.token else ""
     print(f"DriftLab: the 3D view on http://{shown_host}:{args.port}/viser/{login}, the API docs on "
           f"http://{shown_host}:{args.port}/docs", flush=True)
-    server = uvicorn.Server(uvicorn.Config(app, log_level="info"))
+    server = uvicorn.Server(uvicorn.Config(app, log_level="info", http=with_header_deadline(settings.header_timeout_s)))
     redact_access_log()  # after uvicorn's Config set its loggers up
     server.run(sockets=[sock])
     return 0

@@ -88,7 +88,8 @@ def create_app(db_url: str, *, workers: int | None = 2, start_worker: bool = Tru
     app.state.settings = settings
     # Outermost: hosts, origins, the token and the body size are checked before anything else runs.
     app.add_middleware(EdgeGuard, token=settings.token, allowed_hosts=settings.allowed_host_names(),
-                       max_body_bytes=settings.max_body_bytes, public_reads=settings.public_reads)
+                       max_body_bytes=settings.max_body_bytes, public_reads=settings.public_reads,
+                       body_timeout_s=settings.body_timeout_s)
     app.add_middleware(SecurityHeaders)  # outside the edge: its refusals carry the headers too
     app.state.factory = factory
     app.state.evaluation_pages = EvaluationPages()

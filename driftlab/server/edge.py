@@ -9,13 +9,15 @@ middleware, so nothing is buffered first):
   without a token, a mutating request (POST, PUT, PATCH, DELETE) sent by a browser from another origin is refused
   (403): body-less POSTs are "simple" cross-site requests that no CORS preflight stops;
 - a request body larger than ``DRIFTLAB_MAX_BODY_BYTES`` is refused (413), by its Content-Length or, for a
-  chunked body, as soon as the bytes read pass the limit;
+  chunked body, as soon as the bytes read pass the limit; one that pauses longer than ``DRIFTLAB_BODY_TIMEOUT_S``
+  between chunks is a 408 (headers have their deadline in the protocol: driftlab.server.slow_clients);
 - the /viser websocket (the 3D view, whose what-if panel runs episodes) opens only from this origin, and with the
   token (the ``driftlab_token`` cookie that ``/viser/?token=...`` sets) when one is set.
 """
 
 from __future__ import annotations
 
+import asyncio
 import json
 import secrets
 from functools import partial
@@ -50,8 +52,9 @@ def same_secret(given: str, expected: str) -> bool:
 
 class EdgeGuard:
     def __init__(self, app, *, token: str | None, allowed_hosts: frozenset[str], max_body_bytes: int,
-                 public_reads: bool = False) -> None:
+                 public_reads: bool = False, body_timeout_s: float = 30.0) -> None:
         self.app = app
+        self.body_timeout_s = body_timeout_s
         self.token = token or None
         self.public_reads = public_reads
         self.allowed_hosts = LOCAL_HOSTS | {h.lower() for h in allowed_hosts}
@@ -105,10 +108,20 @@ class EdgeGuard:
 
     async def _limited(self, scope, receive, send):
         """The app, with a body that may not pass the limit while it is read (chunked bodies have no length)."""
-        state = {"read": 0, "started": False, "refused": False}
+        state = {"read": 0, "started": False, "refused": False, "body_done": False}
 
         async def limited_receive():
-            message = await receive()
+            if state["body_done"]:
+                return await receive()  # after the body: waiting for a disconnect may last
+            try:
+                message = await asyncio.wait_for(receive(), self.body_timeout_s)
+            except TimeoutError:
+                if not state["started"]:
+                    await self._send_json(send, 408, f"body: no byte for {self.body_timeout_s:g} s "
+                                                     "(DRIFTLAB_BODY_TIMEOUT_S)")
+                    state["started"] = state["refused"] = True
+                return {"type": "http.disconnect"}
+            state["body_done"] = message["type"] != "http.request" or not message.get("more_body", False)
             if message["type"] == "http.request":
                 state["read"] += len(message.get("body", b""))
                 if state["read"] > self.max_body_bytes:
@@ -144,7 +157,10 @@ class EdgeGuard:
             return
         read = 0
         while read < int(length):
-            message = await receive()
+            try:
+                message = await asyncio.wait_for(receive(), self.body_timeout_s)
+            except TimeoutError:
+                return  # a held body: refused without it
             if message["type"] != "http.request":
                 return
             read += len(message.get("body", b""))

@@ -41,7 +41,7 @@ def add_edge(schema: dict[str, Any], *, token_set: bool, public_reads: bool = Fa
         for method, operation in operations.items():
             codes = [400]
             if method.upper() in MUTATING and path.startswith("/api"):
-                codes += [413] if token_set else [413, 403]
+                codes += [408, 413] if token_set else [408, 413, 403]
             if token_set and needs_token(method, path, public_reads=public_reads):
                 codes.append(401)
                 operation["security"] = [{SCHEME: []}]

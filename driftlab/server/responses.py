@@ -30,10 +30,12 @@ ERROR_DESCRIPTIONS = {
     401: "A token is set (DRIFTLAB_TOKEN) and the request does not carry 'Authorization: Bearer <token>'.",
     403: "No token is set and a browser on another origin sent the request.",
     404: "No such job, evaluation or study (or nothing of it yet).",
+    408: "The request body paused longer than DRIFTLAB_BODY_TIMEOUT_S between two chunks.",
     409: "Not in this state: the resource's status does not allow it, or the name is taken.",
     413: "The body is larger than DRIFTLAB_MAX_BODY_BYTES.",
     422: "The request is invalid: ``detail`` says why, naming the field.",
-    503: "The storage is unavailable (read-only, full, locked past the timeout); nothing was changed.",
+    503: "The storage is unavailable (read-only, full, locked past the timeout), or, for a heavy read, as many are "
+         "running as DRIFTLAB_MAX_HEAVY_READS allows (Retry-After says when to ask again); nothing was changed.",
 }
 
 

@@ -310,3 +310,49 @@ def test_view_tabs_past_the_cap_are_told_to_come_back(tmp_path):
     finally:
         proc.terminate()
         proc.wait(timeout=30)
+
+
+def _read_until_closed(sock, limit_s):
+    """Every byte until the server closes the connection; the seconds it took (AssertionError past ``limit_s``)."""
+    start, answer = time.monotonic(), b""
+    sock.settimeout(limit_s)
+    try:
+        while chunk := sock.recv(65536):
+            answer += chunk
+    except TimeoutError:
+        raise AssertionError(f"still open after {limit_s} s: {answer[:200]!r}") from None
+    except ConnectionResetError:
+        pass
+    return answer, time.monotonic() - start
+
+
+def test_slow_clients_are_closed(tmp_path):
+    """Headers that trickle (on a fresh connection and on a kept-alive one) and bodies that stop are given up after
+    their deadlines (1 s here), with and without a token."""
+    env = {"DRIFTLAB_HEADER_TIMEOUT_S": "1", "DRIFTLAB_BODY_TIMEOUT_S": "1", "DRIFTLAB_TOKEN": TOKEN}
+    proc, url = start_server(tmp_path / "slow.db", free_port(), env_extra=env)
+    host, port = url.removeprefix("http://").split(":")
+    try:
+        with socket.create_connection((host, int(port))) as sock:  # a header line every 0.3 s, never the end
+            sock.sendall(f"GET /api/jobs HTTP/1.1\r\nHost: {host}:{port}\r\n".encode())
+            start = time.monotonic()
+            with pytest.raises((BrokenPipeError, ConnectionResetError)):
+                while time.monotonic() - start < 10:
+                    sock.sendall(b"X-Slow: 1\r\n")
+                    time.sleep(0.3)
+            assert time.monotonic() - start < 5
+        with socket.create_connection((host, int(port))) as sock:  # one request, then the next one's headers stall
+            first = f"GET /api/health HTTP/1.1\r\nHost: {host}:{port}\r\n\r\n"
+            sock.sendall(f"{first}GET /api/health HTTP/1.1\r\n".encode())
+            answer, seconds = _read_until_closed(sock, 5)
+            assert answer.startswith(b"HTTP/1.1 200") and answer.count(b"HTTP/1.1") == 1 and seconds < 5
+        for headers, status in (("", b"401"), (f"Authorization: Bearer {TOKEN}\r\n", b"408")):
+            with socket.create_connection((host, int(port))) as sock:  # 10 of the 1000 bytes it announced
+                sock.sendall(f"POST /api/jobs HTTP/1.1\r\nHost: {host}:{port}\r\n{headers}content-type: "
+                             f"application/json\r\ncontent-length: 1000\r\n\r\n{{\"name\": ".encode())
+                answer, seconds = _read_until_closed(sock, 5)
+                assert answer.startswith(b"HTTP/1.1 " + status) and seconds < 5, answer
+        assert httpx.get(f"{url}/api/health").status_code == 200
+    finally:
+        proc.terminate()
+        proc.wait(timeout=30)

@@ -15,6 +15,7 @@ from starlette.routing import Match
 
 from driftlab.core.errors import ConfigError
 from driftlab.db import storage
+from driftlab.server.docs_page import add_docs_page
 from driftlab.server.edge import EdgeGuard
 from driftlab.server.evaluation_pages import EvaluationPages
 from driftlab.server.heavy_reads import HeavyReads
@@ -83,7 +84,7 @@ def create_app(db_url: str, *, workers: int | None = 2, start_worker: bool = Tru
             _stop_view(app)
         storage.close_database(factory)
 
-    app = FastAPI(title="DriftLab", version="0.1.0", lifespan=lifespan,
+    app = FastAPI(title="DriftLab", version="0.1.0", lifespan=lifespan, docs_url=None, redoc_url=None,
                   description="Learning-based inertia drift: tuning jobs, evaluations, trajectories.")
     app.state.settings = settings
     # Outermost: hosts, origins, the token and the body size are checked before anything else runs.
@@ -97,6 +98,7 @@ def create_app(db_url: str, *, workers: int | None = 2, start_worker: bool = Tru
     app.state.recordings = RecordingCache(factory)
     app.state.search_spaces = SearchSpaceCache()
     app.state.heavy_reads = HeavyReads(settings.max_heavy_reads)
+    add_docs_page(app)
     app.include_router(pages.router)
     pages.mount_static(app)
     app.include_router(jobs.router)

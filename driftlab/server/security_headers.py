@@ -20,8 +20,9 @@ PAGE_POLICY = f"{_COMMON}; script-src 'self'"
 VIEWER_POLICY = (_COMMON.replace("connect-src 'self'", "connect-src 'self' blob: data:")
                  + "; script-src 'self' 'unsafe-inline' 'wasm-unsafe-eval' blob:")
 VIEWER_PREFIX = "/viser/"
-# FastAPI's Swagger UI and ReDoc pages load their bundles from jsDelivr and start them from an inline script.
-DOCS_PATHS = frozenset({"/docs", "/redoc"})
+# The Swagger UI page loads its bundle from jsDelivr, pinned with integrity (driftlab.server.docs_page), and starts
+# it from an inline script.
+DOCS_PATHS = frozenset({"/docs"})
 DOCS_POLICY = (_COMMON.replace("style-src 'self'", "style-src 'self' https://cdn.jsdelivr.net")
                + "; script-src 'self' 'unsafe-inline' https://cdn.jsdelivr.net")
 

@@ -1,5 +1,7 @@
 """The REST API's contract in-process (TestClient on a real SQLite file, no worker): bad requests name the field and
-store nothing, unknown ids are 404, the token guards every mutation."""
+store nothing, unknown ids are 404, the token guards every request but the health check."""
+
+import re
 
 import pytest
 
@@ -63,3 +65,14 @@ def test_public_reads_open_the_reads_and_only_them(tmp_path):
         schema = client.get("/openapi.json").json()
         assert "security" not in schema["paths"]["/api/jobs"]["get"]
         assert schema["paths"]["/api/jobs"]["post"]["security"] == [{"bearerToken": []}]
+
+
+def test_the_docs_page_loads_only_pinned_files_with_their_integrity(api):
+    page = api.get("/docs")
+    assert page.status_code == 200
+    external = re.findall(r'<(?:script|link)[^>]*(?:src|href)="https://[^"]*"[^>]*>', page.text)
+    assert len(external) == 2  # the bundle and its stylesheet, nothing else leaves
+    for tag in external:
+        assert re.search(r'swagger-ui-dist@\d+\.\d+\.\d+/', tag), tag  # one version, not "@5"
+        assert re.search(r'integrity="sha384-[A-Za-z0-9+/]{64}"', tag) and 'crossorigin="anonymous"' in tag, tag
+    assert api.get("/redoc").status_code == 404  # ReDoc's bundle is not pinned: not served

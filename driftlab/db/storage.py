@@ -120,8 +120,10 @@ def set_notes(session: Session, *, job_id: int, notes: str) -> Job:
     return job
 
 
-def list_jobs(session: Session) -> list[Job]:
-    return list(session.scalars(select(Job).order_by(Job.id)))
+def list_jobs(session: Session, *, after: int = 0, limit: int | None = None) -> list[Job]:
+    """Jobs with id > after, in id order, at most ``limit``."""
+    query = select(Job).where(Job.id > after).order_by(Job.id)
+    return list(session.scalars(query if limit is None else query.limit(limit)))
 
 
 def count_evaluations(session: Session, *, job_id: int) -> int:

@@ -21,6 +21,9 @@ JobId = Annotated[int, Path(ge=1, le=MAX_ID, description="a job's id")]
 EvaluationId = Annotated[int, Path(ge=1, le=MAX_ID, description="an evaluation's id (global, as in the API)")]
 After = Annotated[int, Query(ge=-1, le=MAX_ID, description="only evaluations with index > after")]
 Limit = Annotated[int, Query(ge=1, le=MAX_PAGE, description="at most this many evaluations")]
+JOBS_PAGE = 100  # a job's summary carries its spec (~12 kB): 100 of them are ~1 MB
+JobsAfter = Annotated[int, Query(ge=0, le=MAX_ID, description="only jobs with a larger id")]
+JobsLimit = Annotated[int, Query(ge=1, le=MAX_PAGE, description="at most this many jobs")]
 
 
 def _checked_name(name: str) -> str:

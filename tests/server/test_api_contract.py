@@ -76,3 +76,17 @@ def test_the_docs_page_loads_only_pinned_files_with_their_integrity(api):
         assert re.search(r'swagger-ui-dist@\d+\.\d+\.\d+/', tag), tag  # one version, not "@5"
         assert re.search(r'integrity="sha384-[A-Za-z0-9+/]{64}"', tag) and 'crossorigin="anonymous"' in tag, tag
     assert api.get("/redoc").status_code == 404  # ReDoc's bundle is not pinned: not served
+
+
+def test_the_job_list_comes_in_pages_linked_to_the_next(api):
+    ids = [api.post("/api/jobs", json={"name": f"p{i}", "iterations": 1}).json()["id"] for i in range(5)]
+    seen, url = [], "/api/jobs?limit=2"
+    while url:
+        page = api.get(url)
+        assert page.status_code == 200 and len(page.json()) <= 2
+        seen += [job["id"] for job in page.json()]
+        link = page.headers.get("link")
+        url = re.fullmatch(r'<(.+)>; rel="next"', link)[1] if link else None
+    assert seen == ids
+    assert [j["id"] for j in api.get("/api/jobs").json()] == ids  # 100 a page by default
+    assert api.get("/api/jobs", params={"limit": 0}).status_code == 422

@@ -14,7 +14,17 @@ from driftlab.server import quotas
 from driftlab.server.evaluation_pages import EvaluationPages
 from driftlab.server.responses import Evaluation, Job, errors, media
 from driftlab.server.routes.deps import evaluation_pages, factory, require_token, wake_runner
-from driftlab.server.schemas import After, JobCreate, JobId, JobPatch, Limit, check_document_types
+from driftlab.server.schemas import (
+    JOBS_PAGE,
+    After,
+    JobCreate,
+    JobId,
+    JobPatch,
+    JobsAfter,
+    JobsLimit,
+    Limit,
+    check_document_types,
+)
 from driftlab.server.serialize import evaluation_dict, evaluations_csv, job_dict
 from driftlab.services.profiles import with_profile
 
@@ -50,10 +60,17 @@ def create_job(body: JobCreate, db: Factory, request: Request) -> dict[str, Any]
     return out
 
 
-@router.get("", response_model=list[Job], responses=errors(503))
-def list_jobs(db: Factory) -> list[dict[str, Any]]:
+@router.get("", response_model=list[Job], responses=errors(422, 503))
+def list_jobs(db: Factory, response: Response, after: JobsAfter = 0, limit: JobsLimit = JOBS_PAGE
+              ) -> list[dict[str, Any]]:
+    """Jobs in id order, a page at a time: when more follow, a ``Link: <...?after=ID&limit=N>; rel="next"`` header
+    names the next page."""
     with storage.snapshot(db) as session:
-        return [job_dict(session, j) for j in storage.list_jobs(session)]
+        jobs = storage.list_jobs(session, after=after, limit=limit + 1)  # one more: whether a next page exists
+        page = [job_dict(session, j) for j in jobs[:limit]]
+    if len(jobs) > limit:
+        response.headers["Link"] = f'</api/jobs?after={page[-1]["id"]}&limit={limit}>; rel="next"'
+    return page
 
 
 @router.get("/{job_id}", response_model=Job, responses=errors(404, 422, 503))

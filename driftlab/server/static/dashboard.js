@@ -290,9 +290,19 @@ async function submitForm() {
   await select(job.id);
 }
 
+// The API pages its job list (100 a page): follow the pages.
+async function allJobs() {
+  const jobs = [];
+  for (;;) {
+    const page = await api("GET", `/api/jobs?after=${jobs.length ? jobs[jobs.length - 1].id : 0}&limit=1000`);
+    jobs.push(...page);
+    if (page.length < 1000) return jobs;
+  }
+}
+
 // ----- the loop -----------------------------------------------------------------------------------------------
 async function poll() {
-  state.jobs = await api("GET", "/api/jobs");
+  state.jobs = await allJobs();
   if (state.selected !== null && !state.jobs.some((j) => j.id === state.selected)) {
     state.selected = null;
     $("job-panel").hidden = true;

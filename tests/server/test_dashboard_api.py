@@ -1,5 +1,6 @@
 """What the dashboard page asks of the API beyond jobs: notes, the search space, rescoring with progress."""
 
+import threading
 from concurrent.futures import ThreadPoolExecutor
 
 import numpy as np
@@ -86,6 +87,7 @@ def test_heavy_reads_past_the_cap_are_a_503_with_retry_after(tmp_path):
         job = client.post("/api/jobs", json={"name": "cap", "iterations": 20, "model_correction": False}).json()
         _store(client, job["id"])
         reads = client.app.state.heavy_reads
+        reads.wait_s = 0.3  # how long one more waits for a slot before its 503
         assert reads.try_enter()  # the one slot, taken
         for path in (f"/api/jobs/{job['id']}/search-space", "/api/evaluations/1/trajectory",
                      "/api/evaluations/1/recording.viser", "/api/evaluations/1/replay.html"):
@@ -97,7 +99,9 @@ def test_heavy_reads_past_the_cap_are_a_503_with_retry_after(tmp_path):
         assert client.get(f"/api/jobs/{job['id']}/search-space").status_code == 200
         assert client.get("/api/evaluations/999/trajectory").status_code == 404  # past the cap: the route's answer
         assert reads.try_enter()  # the slots were given back after each request, errors included
-        reads.leave()
+        reads.wait_s = 10.0
+        threading.Timer(0.5, reads.leave).start()  # the slot comes free while the next request waits for it
+        assert client.get(f"/api/jobs/{job['id']}/search-space").status_code == 200
 
 
 def test_bad_search_space_requests_name_the_field(api):

@@ -4,8 +4,8 @@ the scenario runs), the answers the load got (200 / 503 ...) and the server's RS
 
 1. 45 clients for 45 s on the search space (x, y varied) and the recordings of a stored 500-evaluation job;
 2. 50 browser-tab websockets on the 3D view (through the /viser relay) for 30 s;
-3. 600 requests without the token that announce a 0.9 MB body (under the 1 MB limit) and send 10 bytes of it, held open (token server);
-   counts how many the server closed within 60 s.
+3. 600 requests without the token that announce a 0.9 MB body (under the 1 MB limit) and send 10 bytes of it,
+   held open (token server); counts how many the server closed within 60 s.
 
 Run: python benchmarks/bench_heavy_reads.py [--db JOB500.db --job ID]
 Without --db it first tunes a 500-evaluation job of the default plant (`driftlab tune --iterations 500`, minutes).

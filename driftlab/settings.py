@@ -34,9 +34,8 @@ class Settings(BaseSettings):
             and an episode re-runs bit for bit from its theta, config and seed.
         what_if_per_minute: what-if episodes one browser tab may start a minute (DRIFTLAB_WHAT_IF_PER_MINUTE,
             default 60, bursts of 5): one open tab cannot keep the what-if worker busy for everyone.
-        max_heavy_reads: search spaces, recordings and trajectory downloads served at once
-            (DRIFTLAB_MAX_HEAVY_READS, default 2: the server's cores); one more waits up to 5 s for a slot, then is a 503
-            with Retry-After.
+        max_heavy_reads: search spaces, recordings and replays served at once (DRIFTLAB_MAX_HEAVY_READS, default 2:
+            the server's cores); one more waits up to 5 s for a slot, then is a 503 with Retry-After.
         max_view_tabs: browser tabs of the 3D view at once (DRIFTLAB_MAX_VIEW_TABS, default 20); one more is
             closed with "try again later" (each streams a car at 30 Hz from the server process).
         header_timeout_s, body_timeout_s: how long a request's headers may take to arrive, and a request body may

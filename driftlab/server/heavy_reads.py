@@ -1,8 +1,8 @@
-"""A cap on the reads that cost a server CPU seconds (a job's search space, episode recordings, trajectory
-downloads): at most ``DRIFTLAB_MAX_HEAVY_READS`` run at once. One more waits for a slot on the event loop, holding
-no thread, for up to ``WAIT_S``, then is answered with 503 and a Retry-After. Queued in the thread pool instead, they
-held every thread of the server's pool (45 tabs on the search space of a 500-evaluation job: the health check's p99
-30 s), and everything else waited behind them.
+"""A cap on the reads that cost a server CPU seconds (a job's search space, episode recordings and replays; a
+trajectory download is not one): at most ``DRIFTLAB_MAX_HEAVY_READS`` run at once. One more waits for a slot on the
+event loop, holding no thread, for up to ``WAIT_S``, then is answered with 503 and a Retry-After. Queued in the thread
+pool instead, they held every thread of the server's pool (45 tabs on the search space of a 500-evaluation job: the
+health check's p99 30 s), and everything else waited behind them.
 """
 
 from __future__ import annotations
@@ -53,7 +53,7 @@ async def heavy_read(request: Request) -> AsyncIterator[None]:
     """A route dependency: a slot for the request's duration, or 503 with Retry-After when none came free."""
     reads: HeavyReads = request.app.state.heavy_reads
     if not await reads.enter():
-        raise HTTPException(503, f"busy: {reads.limit} heavy reads (search spaces, recordings, trajectories) are "
+        raise HTTPException(503, f"busy: {reads.limit} heavy reads (search spaces, recordings) are "
                                  f"running (DRIFTLAB_MAX_HEAVY_READS); try again in {RETRY_AFTER_S} s",
                             headers={"Retry-After": str(RETRY_AFTER_S)})
     try:

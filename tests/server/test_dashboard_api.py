@@ -89,15 +89,15 @@ def test_heavy_reads_past_the_cap_are_a_503_with_retry_after(tmp_path):
         reads = client.app.state.heavy_reads
         reads.wait_s = 0.3  # how long one more waits for a slot before its 503
         assert reads.try_enter()  # the one slot, taken
-        for path in (f"/api/jobs/{job['id']}/search-space", "/api/evaluations/1/trajectory",
-                     "/api/evaluations/1/recording.viser", "/api/evaluations/1/replay.html"):
+        for path in (f"/api/jobs/{job['id']}/search-space", "/api/evaluations/1/recording.viser",
+                     "/api/evaluations/1/replay.html"):
             busy = client.get(path)
             assert busy.status_code == 503 and busy.headers["retry-after"] == "2", path
             assert "DRIFTLAB_MAX_HEAVY_READS" in busy.json()["detail"]
         assert client.get("/api/jobs").status_code == 200 and client.get("/api/health").status_code == 200
         reads.leave()
         assert client.get(f"/api/jobs/{job['id']}/search-space").status_code == 200
-        assert client.get("/api/evaluations/999/trajectory").status_code == 404  # past the cap: the route's answer
+        assert client.get("/api/evaluations/999/recording.viser").status_code == 404  # past the cap: the route's
         assert reads.try_enter()  # the slots were given back after each request, errors included
         reads.wait_s = 10.0
         threading.Timer(0.5, reads.leave).start()  # the slot comes free while the next request waits for it

@@ -10,7 +10,6 @@ from sqlalchemy.orm import Session, sessionmaker
 from driftlab.core.track import FigureEight
 from driftlab.db import storage
 from driftlab.reports.export import trajectory_csv, trajectory_json, with_lap_column
-from driftlab.server.heavy_reads import heavy_read
 from driftlab.server.responses import Evaluation, TrajectoryDocument, errors, media
 from driftlab.server.routes.deps import factory
 from driftlab.server.schemas import EvaluationId
@@ -26,8 +25,7 @@ def get_evaluation(evaluation_id: EvaluationId, db: Factory) -> dict[str, Any]:
         return evaluation_dict(storage.get_evaluation(session, evaluation_id=evaluation_id))
 
 
-@router.get("/{evaluation_id}/trajectory", dependencies=[Depends(heavy_read)], response_model=TrajectoryDocument,
-            responses={
+@router.get("/{evaluation_id}/trajectory", response_model=TrajectoryDocument, responses={
     **media("text/csv", {"type": "string"}, "format=csv (the default): a '# driftlab: {metadata}' line, then a "
             "header and one row per control step; format=json: the document below"), **errors(404, 422, 503)})
 def trajectory(evaluation_id: EvaluationId, db: Factory,

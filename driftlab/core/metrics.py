@@ -3,7 +3,7 @@
 from __future__ import annotations
 
 import math
-from dataclasses import asdict, dataclass
+from dataclasses import asdict, dataclass, field
 
 import numpy as np
 from numba import njit
@@ -30,6 +30,8 @@ class EpisodeMetrics:
     trigger_times_s: list[float]
     duration_s: float
     lap_mean_abs_e_m: list[float]  # mean |e| over each lap of the 8 driven (by arc length; the last may be partial)
+    # Each run of one planner phase in order (:func:`phase_segments`): the drifts and the flicks in numbers.
+    phases: list[dict] = field(default_factory=list)
     # Where the plant left its model's validity, if it reports it (MB: time with a negative wheel load).
     plant_validity: dict | None = None
 
@@ -99,6 +101,31 @@ def _transition_times(t: np.ndarray, beta: np.ndarray, beta_ref: np.ndarray, tri
     return flip, settle
 
 
+def phase_segments(t_s: np.ndarray, phase: np.ndarray, e_m: np.ndarray, beta_err_rad: np.ndarray,
+                   speed_mps: np.ndarray) -> list[dict]:
+    """Each run of one planner phase (paper section III-A: sustained drift, inertia drift, ...), in order, the
+    finish excluded: its name, start and end [s] (the end is the next run's start), mean and max |e| [m], mean
+    |beta - beta_ref| [rad], speed at its start, its lowest speed and the loss between them [m/s]. A flick's
+    (``inertia_*``) runs from its trigger to the sideslip settling on the new side, so its speed loss is the
+    "minimal velocity loss" the paper claims for the inertia drift."""
+    starts = [0, *(np.flatnonzero(np.diff(phase)) + 1)]
+    ends = [*starts[1:], len(t_s)]
+    segments = []
+    for start, end in zip(starts, ends, strict=True):
+        if phase[start] == Phase.FINISHED:
+            continue
+        run = slice(start, end)
+        lowest = float(np.min(speed_mps[run]))
+        segments.append({
+            "phase": Phase(int(phase[start])).name.lower(), "start_s": float(t_s[start]),
+            "end_s": float(t_s[end] if end < len(t_s) else t_s[-1]), "steps": end - start,
+            "mean_abs_e_m": float(np.mean(np.abs(e_m[run]))), "max_abs_e_m": float(np.max(np.abs(e_m[run]))),
+            "mean_abs_beta_err_rad": float(np.mean(np.abs(beta_err_rad[run]))),
+            "start_speed_mps": float(speed_mps[start]), "min_speed_mps": lowest,
+            "speed_loss_mps": float(speed_mps[start]) - lowest})
+    return segments
+
+
 def compute_metrics(traj: np.ndarray, trigger_times_s: list[float], track: FigureEight,
                     col: dict[str, int], settle_tolerance_rad: float = 0.05) -> EpisodeMetrics:
     """``settle_tolerance_rad``: the scenario's, so that beta_settle_s means what ends an inertia phase."""
@@ -135,4 +162,5 @@ def compute_metrics(traj: np.ndarray, trigger_times_s: list[float], track: Figur
         trigger_times_s=[float(x) for x in trigger_times_s],
         duration_s=float(t[-1]),
         lap_mean_abs_e_m=lap_mean_abs_e_m(e, cumulative, track),
+        phases=phase_segments(t, phase, e, beta_err, traj[:, col["V_mps"]]),
     )

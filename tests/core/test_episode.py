@@ -40,6 +40,25 @@ def test_beta_changes_sign_after_each_trigger(nominal_run):
     assert all(0.2 < f < 0.8 for f in r.metrics.beta_flip_s)
 
 
+def test_the_phases_in_numbers_add_up_to_the_episode(nominal_run):
+    """Per phase: the runs in the scenario's order, contiguous, each flick starting at its trigger and ending where
+    the sideslip settled; the step-weighted means of |e| give the episode's mean |e|, the largest max its max."""
+    r = nominal_run
+    phases = r.metrics.phases
+    assert [p["phase"] for p in phases] == ["left_drift", "inertia_left_to_right", "right_drift",
+                                           "inertia_right_to_left", "left_drift_final"]
+    assert all(a["end_s"] == b["start_s"] for a, b in zip(phases, phases[1:], strict=False))
+    flicks = [p for p in phases if p["phase"].startswith("inertia")]
+    for flick, trigger, settle in zip(flicks, r.metrics.trigger_times_s, r.metrics.beta_settle_s, strict=True):
+        assert flick["start_s"] == trigger and flick["end_s"] == pytest.approx(trigger + settle)
+        assert flick["speed_loss_mps"] >= 0.0 and flick["mean_abs_beta_err_rad"] > 0.1  # the sideslip crosses over
+    driving = r.column("phase") != Phase.FINISHED
+    assert sum(p["steps"] for p in phases) == int(np.sum(driving))
+    assert sum(p["steps"] * p["mean_abs_e_m"] for p in phases) == pytest.approx(
+        float(np.sum(np.abs(r.column("e_m")[driving]))), rel=1e-12)
+    assert max(p["max_abs_e_m"] for p in phases) == float(np.max(np.abs(r.column("e_m")[driving])))
+
+
 def test_path_stays_on_both_circles(nominal_run):
     phase = nominal_run.column("phase")
     assert {int(p) for p in phase} >= {Phase.LEFT_DRIFT, Phase.RIGHT_DRIFT, Phase.LEFT_DRIFT_FINAL}

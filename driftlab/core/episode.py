@@ -115,9 +115,12 @@ def run_episode(theta: Theta, config: EpisodeConfig, *, seed: int = 0) -> Episod
     try:
         model = build_controller_model(theta.model_vehicle(config.vehicle), config.mpc, scenario.left_radius_m,
                                        scenario.right_radius_m, scenario.sideslip_rad, theta.k, scenario.lookahead_m)
-    except NoEquilibriumError:
+    except NoEquilibriumError as exc:
         empty = np.zeros((0, len(COLUMNS)))
-        return EpisodeResult("diverged", failure_penalty(0.0), compute_metrics(empty, [], track, COL), empty,
+        reason = (f"the controller's model (model_mu_scale {theta.model_mu_scale:g}, model_c_scale "
+                  f"{theta.model_c_scale:g}) has no drift to hold: {exc}")
+        metrics = replace(compute_metrics(empty, [], track, COL), failure_reason=reason)
+        return EpisodeResult("diverged", failure_penalty(0.0), metrics, empty,
                              wall_ms=(time.perf_counter() - started) * 1e3, theta=theta, seed=seed)
     dt = config.mpc.dt_s
     n_steps = int(round(scenario.max_time_s * scenario.laps / dt))

@@ -32,6 +32,8 @@ class EpisodeMetrics:
     lap_mean_abs_e_m: list[float]  # mean |e| over each lap of the 8 driven (by arc length; the last may be partial)
     # Each run of one planner phase in order (:func:`phase_segments`): the drifts and the flicks in numbers.
     phases: list[dict] = field(default_factory=list)
+    # Why an episode stopped before its first step (the controller's model has no drift to hold), else None.
+    failure_reason: str | None = None
     # Where the plant left its model's validity, if it reports it (MB: time with a negative wheel load).
     plant_validity: dict | None = None
 
@@ -108,7 +110,7 @@ def phase_segments(t_s: np.ndarray, phase: np.ndarray, e_m: np.ndarray, beta_err
     |beta - beta_ref| [rad], speed at its start, its lowest speed and the loss between them [m/s]. A flick's
     (``inertia_*``) runs from its trigger to the sideslip settling on the new side, so its speed loss is the
     "minimal velocity loss" the paper claims for the inertia drift."""
-    starts = [0, *(np.flatnonzero(np.diff(phase)) + 1)]
+    starts = [0, *(int(i) + 1 for i in np.flatnonzero(np.diff(phase)))]  # Python ints: the metrics are JSON
     ends = [*starts[1:], len(t_s)]
     segments = []
     for start, end in zip(starts, ends, strict=True):

@@ -43,6 +43,7 @@ class EpisodeFrames:
     episode_J: float = float("nan")  # J of the episode drawn, on ``seed``
     n_seeds: int = 1  # how many episodes J averages
     plant: dict[str, float] = field(default_factory=dict)  # plant settings a what-if episode changed
+    failure_reason: str = ""  # why an episode stopped before its first step (its metrics')
 
     def __post_init__(self) -> None:
         if self.rows.ndim != 2 or self.rows.shape[1] != len(self.columns):

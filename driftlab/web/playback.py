@@ -252,8 +252,9 @@ class Playback:
         history = self.history()
         if frames is None:
             if self.empty is not None:
+                why = f": {plain(self.empty.failure_reason)}" if self.empty.failure_reason else ""
                 self.hud.content = (f"**{MODE_TITLES[self.mode]}**: {plain(self.empty.name())} stopped before its "
-                                    f"first step ({plain(self.empty.status)}): nothing to play.")
+                                    f"first step ({plain(self.empty.status)}{why}): nothing to play.")
                 return
             name = f" of job **{plain(history.name)}**" if history is not None else ""
             self.hud.content = f"Waiting for the first evaluation{name}..."

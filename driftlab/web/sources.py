@@ -33,14 +33,16 @@ def frames_of_evaluation(factory: sessionmaker[Session], evaluation_id: int) -> 
         episode_j = next((float(s["J"]) for s in seeds if s["seed"] == seed), float(e.J))
         return EpisodeFrames(tuple(columns), rows, tuple(e.trigger_points or ()), evaluation_id=e.id,
                              index=e.index, theta=dict(e.theta), status=e.status, J=float(e.J), seed=int(seed),
-                             episode_J=episode_j, n_seeds=max(len(seeds), 1))
+                             episode_J=episode_j, n_seeds=max(len(seeds), 1),
+                             failure_reason=str((e.metrics or {}).get("failure_reason") or ""))
 
 
 def frames_of_outcome(outcome: Any, plant: dict[str, float] | None = None) -> EpisodeFrames:
     """An episode the worker ran (an ``EpisodeOutcome``), not stored; ``plant``: the settings it changed."""
     return EpisodeFrames(tuple(outcome.columns), np.asarray(outcome.trajectory), tuple(outcome.trigger_points),
                          theta=dict(outcome.theta), status=outcome.status, J=float(outcome.J),
-                         seed=int(outcome.seed), episode_J=float(outcome.J), plant=dict(plant or {}))
+                         seed=int(outcome.seed), episode_J=float(outcome.J), plant=dict(plant or {}),
+                         failure_reason=str((outcome.metrics or {}).get("failure_reason") or ""))
 
 
 def car_geometry_of_spec(spec: dict[str, Any]) -> tuple[float, float]:

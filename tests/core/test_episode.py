@@ -1,5 +1,6 @@
 """Closed-loop episodes on the figure 8."""
 
+import json
 import math
 
 import numpy as np
@@ -45,6 +46,7 @@ def test_the_phases_in_numbers_add_up_to_the_episode(nominal_run):
     the sideslip settled; the step-weighted means of |e| give the episode's mean |e|, the largest max its max."""
     r = nominal_run
     phases = r.metrics.phases
+    assert json.loads(json.dumps(phases)) == phases  # stored as JSON with the evaluation
     assert [p["phase"] for p in phases] == ["left_drift", "inertia_left_to_right", "right_drift",
                                            "inertia_right_to_left", "left_drift_final"]
     assert all(a["end_s"] == b["start_s"] for a, b in zip(phases, phases[1:], strict=False))
@@ -57,6 +59,13 @@ def test_the_phases_in_numbers_add_up_to_the_episode(nominal_run):
     assert sum(p["steps"] * p["mean_abs_e_m"] for p in phases) == pytest.approx(
         float(np.sum(np.abs(r.column("e_m")[driving]))), rel=1e-12)
     assert max(p["max_abs_e_m"] for p in phases) == float(np.max(np.abs(r.column("e_m")[driving])))
+
+
+def test_a_theta_whose_model_cannot_drift_stops_at_once_saying_why():
+    r = run_episode(Theta(model_c_scale=0.85), EpisodeConfig.preset("commonroad_std"))
+    assert r.status == "diverged" and len(r.trajectory) == 0 and r.metrics.duration_s == 0.0
+    assert "model_c_scale 0.85" in r.metrics.failure_reason and "no drift to hold" in r.metrics.failure_reason
+    assert run_episode(Theta(), EpisodeConfig.preset("commonroad_std")).metrics.failure_reason is None
 
 
 def test_path_stays_on_both_circles(nominal_run):

@@ -35,12 +35,15 @@ def test_an_evaluation_with_no_step_is_shown_as_such(server, browser):
     done = wait_status(url, job["id"], {"finished"}, timeout_s=300)
     evaluations = httpx.get(f"{url}/api/jobs/{job['id']}/evaluations").json()
     assert done["n_done"] == 3 and all(e["metrics"]["duration_s"] == 0.0 for e in evaluations), evaluations
+    # Each says why: the model scales leave the controller's model without a drift.
+    assert all("has no drift to hold" in e["metrics"]["failure_reason"] for e in evaluations), evaluations
     page = browser.new_page(viewport={"width": 1400, "height": 1300})
     log = ConsoleLog(page)
     page.goto(f"{url}/viser/")
     log.wait_for("Connected!")
     # The newest job is shown, live: its newest evaluation said to have no step, nothing of "other" played.
     page.get_by_text("stopped before its first step").first.wait_for(timeout=60_000)
+    page.get_by_text("has no drift to hold").first.wait_for(timeout=30_000)  # and why
     assert page.get_by_text("evaluation id 1 ").count() == 0
     page.get_by_role("button", name="Play best").click()
     page.get_by_role("button", name="Play evaluation at index").click()

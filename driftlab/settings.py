@@ -41,6 +41,9 @@ class Settings(BaseSettings):
         header_timeout_s, body_timeout_s: how long a request's headers may take to arrive, and a request body may
             pause between chunks (DRIFTLAB_HEADER_TIMEOUT_S, default 10; DRIFTLAB_BODY_TIMEOUT_S, default 30;
             driftlab.server.slow_clients).
+        request_threads: threads that run the API's request handlers at once (DRIFTLAB_REQUEST_THREADS, default 8;
+            FastAPI's own default is 40): the handlers share one interpreter, and 40 threads taking turns at it
+            served no more requests than 8, only in a less fair order (the longest waits grew).
         max_rescore_episodes: episodes that queued and running rescores may wait for, all jobs together
             (DRIFTLAB_MAX_RESCORE_EPISODES, default 5000): rescores share the job runner's workers.
     """
@@ -63,6 +66,7 @@ class Settings(BaseSettings):
     max_view_tabs: int = Field(default=20, ge=1, le=1000)
     header_timeout_s: float = Field(default=10.0, gt=0.0, le=3600.0)
     body_timeout_s: float = Field(default=30.0, gt=0.0, le=3600.0)
+    request_threads: int = Field(default=8, ge=2, le=256)
 
     def allowed_host_names(self) -> frozenset[str]:
         return frozenset(h.strip() for h in self.allowed_hosts.split(",") if h.strip())

@@ -3,14 +3,13 @@
 from __future__ import annotations
 
 import argparse
+import socket
 
 from driftlab.cli.options import db_url
 from driftlab.core.errors import ConfigError
 
 
 def cmd_serve(args: argparse.Namespace) -> int:
-    import socket
-
     import uvicorn
 
     from driftlab.server.access_log import redact_access_log
@@ -23,17 +22,8 @@ def cmd_serve(args: argparse.Namespace) -> int:
         # Reachable from other machines: every client there could start, pause and delete jobs.
         raise ConfigError(f"--host {args.host}: serving beyond this machine needs DRIFTLAB_TOKEN (mutations then "
                           "need 'Authorization: Bearer <token>', the view /viser/?token=<token>); or bind 127.0.0.1")
-    # Bind before touching any job: a second server on a taken port must leave the first one's jobs alone.
-    family = socket.AF_INET6 if ":" in args.host else socket.AF_INET
-    sock = socket.socket(family, socket.SOCK_STREAM)
-    sock.setsockopt(socket.SOL_SOCKET, socket.SO_REUSEADDR, 1)
-    try:
-        sock.bind((args.host, args.port))
-    except OSError as exc:
-        sock.close()
-        raise ConfigError(f"--port {args.port} on {args.host}: {exc.strerror or exc}") from None
-    sock.listen(2048)
-    sock.set_inheritable(True)
+    sock = listening_socket(args.host, args.port)  # before touching any job: a second server on a taken port
+    # must leave the first one's jobs alone
     if args.dask:
         settings = settings.model_copy(update={"dask_address": args.dask})
     workers = args.workers or (None if settings.dask_address else 2)
@@ -42,7 +32,27 @@ def cmd_serve(args: argparse.Namespace) -> int:
     login = "?token=<DRIFTLAB_TOKEN>" if settings.token else ""
     print(f"DriftLab: the 3D view on http://{shown_host}:{args.port}/viser/{login}, the API docs on "
           f"http://{shown_host}:{args.port}/docs", flush=True)
-    server = uvicorn.Server(uvicorn.Config(app, log_level="info", http=with_header_deadline(settings.header_timeout_s)))
+    # uvicorn's keep-alive (5 s) equal to a client pool's idle expiry (httpx: 5 s) races it: a request sent on a
+    # connection the server is closing is lost. Idle connections are closed by the header deadline instead.
+    server = uvicorn.Server(uvicorn.Config(app, log_level="info", http=with_header_deadline(settings.header_timeout_s),
+                                           timeout_keep_alive=int(settings.header_timeout_s) + 1))
     redact_access_log()  # after uvicorn's Config set its loggers up
     server.run(sockets=[sock])
     return 0
+
+
+def listening_socket(host: str, port: int) -> socket.socket:
+    """The server's bound, listening TCP socket (ConfigError naming --port if it is taken)."""
+    family = socket.AF_INET6 if ":" in host else socket.AF_INET
+    # IPPROTO_TCP named: asyncio turns Nagle's algorithm off (TCP_NODELAY) only on sockets that say they are TCP;
+    # with it on, a response's body waited for the client's delayed ACK of its headers (~40 ms a request).
+    sock = socket.socket(family, socket.SOCK_STREAM, socket.IPPROTO_TCP)
+    sock.setsockopt(socket.SOL_SOCKET, socket.SO_REUSEADDR, 1)
+    try:
+        sock.bind((host, port))
+    except OSError as exc:
+        sock.close()
+        raise ConfigError(f"--port {port} on {host}: {exc.strerror or exc}") from None
+    sock.listen(2048)
+    sock.set_inheritable(True)
+    return sock

@@ -19,7 +19,7 @@ from datetime import datetime
 from typing import Any
 
 import numpy as np
-from sqlalchemy import Engine, create_engine, event, func, select
+from sqlalchemy import Engine, bindparam, create_engine, event, func, select
 from sqlalchemy.orm import Session, sessionmaker
 
 from driftlab.db import schema
@@ -27,6 +27,7 @@ from driftlab.db.models import Evaluation, Job, JobStatus, Trajectory
 
 _BUSY_TIMEOUT_MS = 30_000
 _BEGIN_OPTION = "driftlab_sqlite_begin"
+_POOLED_CONNECTIONS = 20
 
 
 class NotFound(LookupError):
@@ -35,12 +36,21 @@ class NotFound(LookupError):
 
 def open_database(url: str) -> sessionmaker[Session]:
     """Engine and session factory; creates or upgrades the schema to the newest revision."""
-    engine = create_engine(url, connect_args={"timeout": _BUSY_TIMEOUT_MS / 1000} if url.startswith("sqlite") else {})
-    if url.startswith("sqlite"):
+    sqlite = url.startswith("sqlite")
+    # A connection per request thread kept open (FastAPI's thread pool runs up to 40 at once): with SQLAlchemy's
+    # default pool of 5, every request past the fifth opened a connection and ran its pragmas, then closed it.
+    pool = ({"pool_size": _POOLED_CONNECTIONS, "max_overflow": 2 * _POOLED_CONNECTIONS, "pool_use_lifo": True}
+            if _is_sqlite_file(url) else {})
+    engine = create_engine(url, connect_args={"timeout": _BUSY_TIMEOUT_MS / 1000} if sqlite else {}, **pool)
+    if sqlite:
         event.listen(engine, "connect", _sqlite_pragmas)
         event.listen(engine, "begin", _sqlite_begin)
     schema.upgrade(engine)
     return sessionmaker(engine, expire_on_commit=False)
+
+
+def _is_sqlite_file(url: str) -> bool:
+    return url.startswith("sqlite") and url.split("///", 1)[-1] not in ("", ":memory:") and "mode=memory" not in url
 
 
 def close_database(factory: sessionmaker[Session]) -> None:
@@ -127,7 +137,14 @@ def list_jobs(session: Session, *, after: int = 0, limit: int | None = None) -> 
 
 
 def count_evaluations(session: Session, *, job_id: int) -> int:
-    return session.scalar(select(func.count()).select_from(Evaluation).where(Evaluation.job_id == job_id)) or 0
+    return session.scalar(_COUNT, {"job_id": job_id}) or 0
+
+
+def count_and_best(session: Session, *, job_id: int) -> tuple[int, Evaluation | None]:
+    """The job's number of stored evaluations and its best (:func:`best_evaluation`), in one query."""
+    n, best_completed, best_failed = session.execute(_COUNT_AND_BEST, {"job_id": job_id}).one()
+    best_id = best_completed if best_completed is not None else best_failed
+    return n or 0, (session.get(Evaluation, best_id) if best_id is not None else None)
 
 
 def unique_job_name(session: Session, base: str) -> str:
@@ -222,12 +239,19 @@ def best_evaluation(session: Session, *, job_id: int) -> Evaluation | None:
     """The job's best (driftlab.core.convergence.best_position's rule, in SQL: the lowest completed J, the earliest
     on a tie); while none has completed, the failure with the lowest J (its penalty: the one that drove furthest),
     so that a job always shows something to watch."""
-    for status_filter in (Evaluation.status == "completed", Evaluation.status != "completed"):
-        best = session.scalar(select(Evaluation).where(Evaluation.job_id == job_id, status_filter)
-                              .order_by(Evaluation.J, Evaluation.index).limit(1))
-        if best is not None:
-            return best
-    return None
+    return count_and_best(session, job_id=job_id)[1]
+
+
+def _lowest_j(status_filter) -> Any:
+    return (select(Evaluation.id).where(Evaluation.job_id == bindparam("job_id"), status_filter)
+            .order_by(Evaluation.J, Evaluation.index).limit(1).scalar_subquery())
+
+
+# Built once: a dashboard and every script poll these, and building a statement costs more than SQLite's answer.
+_COUNT = select(func.count()).select_from(Evaluation).where(Evaluation.job_id == bindparam("job_id"))
+_COUNT_AND_BEST = select(func.count(), _lowest_j(Evaluation.status == "completed"),
+                         _lowest_j(Evaluation.status != "completed")
+                         ).select_from(Evaluation).where(Evaluation.job_id == bindparam("job_id"))
 
 
 def best_summary(best: Evaluation | None) -> dict[str, Any] | None:
@@ -237,6 +261,11 @@ def best_summary(best: Evaluation | None) -> dict[str, Any] | None:
         return None
     return {"id": best.id, "index": best.index, "theta": best.theta, "J": best.J, "status": best.status,
             "seeds": best.seeds, "trajectory_seed": best.trajectory_seed}
+
+
+def has_trajectory(session: Session, *, evaluation_id: int) -> bool:
+    """Whether the evaluation's trajectory is stored (without loading it)."""
+    return session.scalar(select(Trajectory.evaluation_id).where(Trajectory.evaluation_id == evaluation_id)) is not None
 
 
 def trajectory_array(session: Session, *, evaluation_id: int) -> tuple[list[str], np.ndarray]:

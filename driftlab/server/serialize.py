@@ -41,9 +41,8 @@ def evaluations_csv(rows: list[dict[str, Any]]) -> str:
 
 
 def job_dict(session, job: Job) -> dict[str, Any]:
-    n_done = storage.count_evaluations(session, job_id=job.id)
+    n_done, best = storage.count_and_best(session, job_id=job.id)
     iterations = job.spec["iterations"]
-    best = storage.best_evaluation(session, job_id=job.id)
     running = job.status == JobStatus.RUNNING
     rate = storage.seconds_per_evaluation(session, job_id=job.id, since=job.started_at) if running else None
     eta = None if rate is None else rate * (iterations - n_done)

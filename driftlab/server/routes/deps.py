@@ -9,6 +9,7 @@ from sqlalchemy.orm import Session, sessionmaker
 
 from driftlab.server.edge import TOKEN_COOKIE, same_secret
 from driftlab.server.evaluation_pages import EvaluationPages
+from driftlab.server.trajectory_documents import TrajectoryDocuments
 from driftlab.settings import Settings
 
 
@@ -18,6 +19,10 @@ def factory(request: Request) -> sessionmaker[Session]:
 
 def evaluation_pages(request: Request) -> EvaluationPages:
     return request.app.state.evaluation_pages
+
+
+def trajectory_documents(request: Request) -> TrajectoryDocuments:
+    return request.app.state.trajectory_documents
 
 
 def wake_runner(request: Request) -> None:

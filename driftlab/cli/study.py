@@ -15,6 +15,7 @@ from typing import Any
 
 from driftlab.cli.options import key_values, name_text
 from driftlab.core.errors import ConfigError
+from driftlab.core.statuses import StudyKind
 
 
 def _grid(items: list[str]) -> dict[str, list[float]]:
@@ -37,7 +38,7 @@ def _seeds(text: str) -> list[int]:
 
 def study_doc(args: argparse.Namespace, tuning_spec) -> dict[str, Any]:
     """The request document (as POST /api/studies takes) from the command line."""
-    if args.kind == "seeds":
+    if args.kind == StudyKind.SEEDS:
         return {"kind": "seeds", "seeds": _seeds(args.seeds), "spec": tuning_spec(args).to_dict()}
     doc: dict[str, Any] = {"kind": "robustness", "grid": _grid(args.grid or [])}
     if args.theta:
@@ -68,7 +69,7 @@ def _open_study(factory, args: argparse.Namespace, tuning_spec, runner: str) -> 
         else:
             sys.stderr.write(f"resuming study {study.name} (id {study.id}) with its stored settings (arguments "
                              f"given now that differ are not applied; a new --name starts a new study)\n")
-        if study.kind == "seeds":
+        if study.kind == StudyKind.SEEDS:
             studies.hold_seeds_study(session, study_id=study.id, runner=runner)
         return study.id
 
@@ -153,7 +154,7 @@ def brief_summary(summary: dict[str, Any], every: int = 10) -> dict[str, Any]:
     """What the command prints: a seeds study's band every ``every`` iterations and its final spread, or a
     robustness study's cells without their per-seed lists."""
     out = {k: summary[k] for k in ("id", "name", "kind", "status", "job_ids")}
-    if summary["kind"] == "seeds":
+    if summary["kind"] == StudyKind.SEEDS:
         band = summary["band"]
         keep = [i for i, it in enumerate(band["iterations"])
                 if (it + 1) % every == 0 or i == len(band["iterations"]) - 1]
@@ -189,7 +190,7 @@ def cmd_study(args: argparse.Namespace, tuning_spec, db_url: str, dask_address: 
     executor, workers = open_executor(args.workers, dask_address)
     started = time.perf_counter()
     try:
-        if kind == "seeds":
+        if kind == StudyKind.SEEDS:
             _run_seeds_jobs(factory, study_id, executor, workers, runner)
         else:
             _run_cells(factory, study_id, executor, workers, runner)
@@ -198,7 +199,7 @@ def cmd_study(args: argparse.Namespace, tuning_spec, db_url: str, dask_address: 
         return 130
     finally:
         executor.shutdown()
-        if kind == "seeds":
+        if kind == StudyKind.SEEDS:
             with storage.transaction(factory) as session:
                 studies.let_go_seeds_study(session, study_id=study_id, runner=runner)
     with storage.transaction(factory) as session:

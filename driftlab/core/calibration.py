@@ -27,6 +27,7 @@ from driftlab.core.drivability import drivable_reason
 from driftlab.core.episode import failure_penalty
 from driftlab.core.mpc import MpcConfig
 from driftlab.core.optimizer import BayesianOptimizer
+from driftlab.core.statuses import EpisodeStatus
 
 # The weights searched (the cost terms of driftlab.core.mpc.config.MpcConfig and the disturbance estimator's gain),
 # in log10, within LOG_SPAN_DECADES of the car's current set and inside these limits; the steering rate limit
@@ -129,7 +130,7 @@ class EpisodeScore:
 
     @property
     def completed(self) -> bool:
-        return self.status == "completed"
+        return self.status == EpisodeStatus.COMPLETED
 
     @property
     def penalized_J(self) -> float:

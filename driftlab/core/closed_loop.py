@@ -54,6 +54,7 @@ from driftlab.core.plant import (
     YAW_RATE,
     plant_step,
 )
+from driftlab.core.statuses import EpisodeStatus
 from driftlab.core.track import LEFT, TWO_PI, circle_errors
 from driftlab.core.variation import (
     NOISE_HEADING,
@@ -74,7 +75,8 @@ COL = {name: i for i, name in enumerate(COLUMNS)}
 (C_T, C_X, C_Y, C_PSI, C_V, C_BETA, C_R, C_DELTA_CMD, C_DELTA, C_DELTA_MPC, C_FXR_CMD, C_FXR, C_E, C_DPSI, C_C,
  C_PHASE, C_V_REF, C_BETA_REF, C_R_REF, C_DELTA_REF, C_FXR_REF, C_OSQP) = range(len(COLUMNS))
 
-STATUSES = ("completed", "spun_out", "left_track", "stalled", "gripped_up", "solver_failed", "diverged")
+
+STATUSES = tuple(EpisodeStatus)
 (COMPLETED, SPUN_OUT, LEFT_TRACK, STALLED, GRIPPED_UP, SOLVER_FAILED, DIVERGED) = range(len(STATUSES))
 RUNNING = -1
 

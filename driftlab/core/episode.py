@@ -47,6 +47,7 @@ from driftlab.core.plant import (
     YAW_RATE,
     make_plant,
 )
+from driftlab.core.statuses import EpisodeStatus
 from driftlab.core.track import LEFT, RIGHT, FigureEight, wrap_angle
 from driftlab.core.variation import MAX_SEED, draw_variation
 
@@ -68,7 +69,7 @@ class EpisodeResult:
 
     @property
     def completed(self) -> bool:
-        return self.status == "completed"
+        return self.status == EpisodeStatus.COMPLETED
 
     def column(self, name: str) -> np.ndarray:
         return self.trajectory[:, COL[name]]
@@ -164,7 +165,7 @@ def run_episode(theta: Theta, config: EpisodeConfig, *, seed: int = 0) -> Episod
                               config.scenario.settle_tolerance_rad)
     if hasattr(plant, "validity"):
         metrics = replace(metrics, plant_validity=plant.validity())
-    if status == "completed":
+    if status == EpisodeStatus.COMPLETED:
         j_value = metrics.objective_j
     else:
         j_value = failure_penalty(metrics.completed_fraction)

@@ -22,6 +22,7 @@ from collections.abc import Sequence
 from dataclasses import asdict, dataclass
 
 from driftlab.core.limits import MAX_ROBUST_SAMPLES
+from driftlab.core.statuses import EpisodeStatus
 
 # Tuning seeds of BO seed s are s * 64 + j (below 2^37 for s < 2^31); rescoring starts above them.
 RESCORE_SEED_BASE = 2**40
@@ -49,7 +50,7 @@ class SampleResult:
 
     @property
     def completed(self) -> bool:
-        return self.status == "completed"
+        return self.status == EpisodeStatus.COMPLETED
 
     def as_dict(self) -> dict:
         return asdict(self)
@@ -80,7 +81,7 @@ def aggregate(samples: Sequence[SampleResult]) -> RobustScore:
     values = [s.J if math.isfinite(s.J) else math.inf for s in samples]
     mean_j = sum(values) / len(values)
     worst = max(range(len(samples)), key=lambda i: (values[i], -i))
-    return RobustScore(status=failed[0].status if failed else "completed", J=mean_j,
+    return RobustScore(status=failed[0].status if failed else EpisodeStatus.COMPLETED, J=mean_j,
                        n_completed=len(samples) - len(failed), representative=worst)
 
 

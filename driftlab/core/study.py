@@ -18,11 +18,14 @@ from driftlab.core.config import EpisodeConfig, Theta, apply_overrides, config_f
 from driftlab.core.errors import ConfigError
 from driftlab.core.limits import JOB_LIMITS, MAX_ROBUST_SAMPLES, check_int
 from driftlab.core.robust import tuning_seeds
+from driftlab.core.statuses import StudyKind
 from driftlab.core.tuning import TuningSpec
 
 MAX_STUDY_SEEDS = 32  # jobs in one seeds study
 MAX_GRID_CELLS = 400  # cells in one robustness study
-STUDY_KINDS = ("seeds", "robustness")
+
+
+STUDY_KINDS = tuple(StudyKind)
 
 
 @dataclass(frozen=True)
@@ -49,7 +52,7 @@ class SeedsStudySpec:
         return [TuningSpec.from_dict({**self.job.to_dict(), "seed": seed}) for seed in self.seeds]
 
     def to_dict(self) -> dict[str, Any]:
-        return {"kind": "seeds", "seeds": list(self.seeds), "spec": self.job.to_dict()}
+        return {"kind": StudyKind.SEEDS, "seeds": list(self.seeds), "spec": self.job.to_dict()}
 
     @classmethod
     def from_dict(cls, data: dict[str, Any]) -> SeedsStudySpec:
@@ -132,7 +135,7 @@ class RobustnessStudySpec:
         return config_to_dict(self.cell_episode_config(settings))
 
     def to_dict(self) -> dict[str, Any]:
-        return {"kind": "robustness", "theta": self.theta, "grid": {k: list(v) for k, v in self.grid.items()},
+        return {"kind": StudyKind.ROBUSTNESS, "theta": self.theta, "grid": {k: list(v) for k, v in self.grid.items()},
                 "config": config_to_dict(self.config), "robust_samples": self.robust_samples, "seed": self.seed,
                 "evaluation_id": self.evaluation_id}
 
@@ -149,9 +152,9 @@ class RobustnessStudySpec:
 
 def study_spec_from_dict(data: dict[str, Any]) -> SeedsStudySpec | RobustnessStudySpec:
     kind = data.get("kind")
-    if kind == "seeds":
+    if kind == StudyKind.SEEDS:
         return SeedsStudySpec.from_dict(data)
-    if kind == "robustness":
+    if kind == StudyKind.ROBUSTNESS:
         return RobustnessStudySpec.from_dict(data)
     raise ConfigError(f"kind must be one of {', '.join(STUDY_KINDS)}, got {kind!r}")
 

@@ -15,6 +15,7 @@ from datetime import datetime
 from sqlalchemy import delete, or_, select, update
 from sqlalchemy.orm import Session
 
+from driftlab.core.statuses import StudyKind
 from driftlab.db import lease
 from driftlab.db.lease import HEARTBEAT_S, LEASE_TIMEOUT_S, new_runner_id
 from driftlab.db.models import Evaluation, Job, JobStatus, Rescore, Study, Trajectory, utcnow
@@ -25,7 +26,7 @@ __all__ = ["HEARTBEAT_S", "LEASE_TIMEOUT_S", "JobStatus", "LeaseHeld", "Transiti
            "requeue"]
 
 
-class TransitionError(Exception):
+class TransitionError(RuntimeError):
     """The job is not in a status that allows this (HTTP 409, CLI exit 2)."""
 
 
@@ -37,7 +38,7 @@ def _study_held_by_another(now: datetime, runner: str | None):
     """SQL: the job belongs to a seeds study that another live runner holds (``driftlab study seeds`` runs its
     jobs one after another and holds the study from the moment it creates it, so no other runner starts one).
     False, not NULL, for a job of no study (NOT NULL would be NULL and filter the job out)."""
-    holders = select(Study.id).where(Study.kind == "seeds", Study.runner_id.is_not(None),
+    holders = select(Study.id).where(Study.kind == StudyKind.SEEDS, Study.runner_id.is_not(None),
                                      Study.heartbeat_at >= lease.stale_before(now))
     if runner is not None:
         holders = holders.where(Study.runner_id != runner)
@@ -84,7 +85,8 @@ def heartbeat(session: Session, *, job_id: int, runner: str) -> bool:
     now = lease.naive(utcnow())
     held = lease.renew(session, Job, row_id=job_id, runner=runner, now=now)
     study_of_job = select(Job.study_id).where(Job.id == job_id).scalar_subquery()
-    session.execute(update(Study).where(Study.id == study_of_job, Study.kind == "seeds", Study.runner_id == runner)
+    session.execute(update(Study)
+                    .where(Study.id == study_of_job, Study.kind == StudyKind.SEEDS, Study.runner_id == runner)
                     .values(heartbeat_at=now).execution_options(synchronize_session=False))
     return held
 

@@ -11,6 +11,8 @@ from typing import Any
 from sqlalchemy import JSON, Float, ForeignKey, Integer, LargeBinary, String, Text, UniqueConstraint
 from sqlalchemy.orm import DeclarativeBase, Mapped, mapped_column, relationship
 
+from driftlab.core.statuses import EpisodeStatus
+
 
 def utcnow() -> datetime:
     return datetime.now(UTC)
@@ -87,7 +89,7 @@ class Evaluation(Base):
 
     @property
     def completed(self) -> bool:
-        return self.status == "completed"
+        return self.status == EpisodeStatus.COMPLETED
 
 
 class Trajectory(Base):

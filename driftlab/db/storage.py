@@ -22,6 +22,7 @@ import numpy as np
 from sqlalchemy import Engine, bindparam, create_engine, event, func, select
 from sqlalchemy.orm import Session, sessionmaker
 
+from driftlab.core.statuses import EpisodeStatus
 from driftlab.db import schema
 from driftlab.db.models import Evaluation, Job, JobStatus, Trajectory
 
@@ -172,7 +173,7 @@ def add_evaluation(session: Session, *, job_id: int, theta: dict[str, float], J:
                             trigger_points=trigger_points, wall_ms=wall_ms, seeds=seeds,
                             trajectory_seed=trajectory_seed)
     if (max_trajectories is None or count_trajectories(session, job_id=job_id) < max_trajectories
-            or _beats_best(session, job_id=job_id, J=J, completed=status == "completed")):
+            or _beats_best(session, job_id=job_id, J=J, completed=status == EpisodeStatus.COMPLETED)):
         evaluation.trajectory = Trajectory(columns=list(columns), rows=int(trajectory.shape[0]),
                                            data=packed if packed is not None else pack_trajectory(trajectory))
     session.add(evaluation)
@@ -249,8 +250,8 @@ def _lowest_j(status_filter) -> Any:
 
 # Built once: a dashboard and every script poll these, and building a statement costs more than SQLite's answer.
 _COUNT = select(func.count()).select_from(Evaluation).where(Evaluation.job_id == bindparam("job_id"))
-_COUNT_AND_BEST = select(func.count(), _lowest_j(Evaluation.status == "completed"),
-                         _lowest_j(Evaluation.status != "completed")
+_COUNT_AND_BEST = select(func.count(), _lowest_j(Evaluation.status == EpisodeStatus.COMPLETED),
+                         _lowest_j(Evaluation.status != EpisodeStatus.COMPLETED)
                          ).select_from(Evaluation).where(Evaluation.job_id == bindparam("job_id"))
 
 

@@ -15,6 +15,7 @@ from typing import Any
 from sqlalchemy import delete, or_, select, update
 from sqlalchemy.orm import Session
 
+from driftlab.core.statuses import StudyKind
 from driftlab.db import lease, lifecycle, storage
 from driftlab.db.lifecycle import JobStatus, TransitionError
 from driftlab.db.models import Job, Study, StudyCell, utcnow
@@ -85,7 +86,7 @@ def store_cell(session: Session, *, cell_id: int, status: str, J: float | None, 
 def study_status(session: Session, study: Study) -> str:
     """A robustness study's own status; a seeds study's from its jobs: running if any runs, else queued if
     any waits, else paused, failed, or finished when all are."""
-    if study.kind != "seeds":
+    if study.kind != StudyKind.SEEDS:
         return study.status
     statuses = {j.status for j in study_jobs(session, study_id=study.id)}
     for status in (JobStatus.RUNNING, JobStatus.QUEUED, JobStatus.PAUSED, JobStatus.FAILED):
@@ -98,7 +99,7 @@ def study_status(session: Session, study: Study) -> str:
 def next_claimable_study(session: Session) -> int | None:
     """The oldest queued robustness study, or one whose runner died."""
     stale = (Study.status == JobStatus.RUNNING) & lease.is_stale(Study, utcnow())
-    query = (select(Study.id).where(Study.kind == "robustness", or_(Study.status == JobStatus.QUEUED, stale))
+    query = (select(Study.id).where(Study.kind == StudyKind.ROBUSTNESS, or_(Study.status == JobStatus.QUEUED, stale))
              .order_by(Study.id).limit(1))
     return session.scalar(query)
 
@@ -106,7 +107,7 @@ def next_claimable_study(session: Session) -> int | None:
 def claim_study(session: Session, *, study_id: int, runner: str) -> bool:
     """Take the study's lease (from queued, or from a dead runner); False if another runner was quicker."""
     return lease.take(session, Study, row_id=study_id, runner=runner, from_statuses=(JobStatus.QUEUED,),
-                      now=utcnow(), also=Study.kind == "robustness")
+                      now=utcnow(), also=Study.kind == StudyKind.ROBUSTNESS)
 
 
 def heartbeat_study(session: Session, *, study_id: int, runner: str) -> bool:
@@ -129,7 +130,7 @@ def hold_seeds_study(session: Session, *, study_id: int, runner: str) -> None:
     """
     now = utcnow()
     free = or_(Study.runner_id.is_(None), Study.runner_id == runner, lease.is_stale(Study, now))
-    result = session.execute(update(Study).where(Study.id == study_id, Study.kind == "seeds", free)
+    result = session.execute(update(Study).where(Study.id == study_id, Study.kind == StudyKind.SEEDS, free)
                              .values(runner_id=runner, heartbeat_at=now.replace(tzinfo=None))
                              .execution_options(synchronize_session=False))
     if result.rowcount != 1:
@@ -146,7 +147,7 @@ def let_go_seeds_study(session: Session, *, study_id: int, runner: str) -> None:
 def pause_study(session: Session, *, study_id: int) -> Study:
     """Pauses a robustness study, or each queued or running job of a seeds study (TransitionError if none)."""
     study = get_study(session, study_id=study_id)
-    if study.kind == "seeds":
+    if study.kind == StudyKind.SEEDS:
         jobs = [j for j in study_jobs(session, study_id=study_id) if j.status in (JobStatus.QUEUED, JobStatus.RUNNING)]
         if not jobs:
             raise TransitionError(f"study {study_id} has no queued or running job to pause")
@@ -162,7 +163,7 @@ def pause_study(session: Session, *, study_id: int) -> Study:
 def resume_study(session: Session, *, study_id: int) -> Study:
     """Queues a paused or failed robustness study, or each paused or failed job of a seeds study."""
     study = get_study(session, study_id=study_id)
-    if study.kind == "seeds":
+    if study.kind == StudyKind.SEEDS:
         jobs = [j for j in study_jobs(session, study_id=study_id) if j.status in (JobStatus.PAUSED, JobStatus.FAILED)]
         if not jobs:
             raise TransitionError(f"study {study_id} has no paused or failed job to resume")

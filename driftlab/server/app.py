@@ -16,7 +16,7 @@ from starlette.exceptions import HTTPException as StarletteHTTPException
 from starlette.routing import Match
 
 from driftlab.core.errors import ConfigError
-from driftlab.db import storage
+from driftlab.db import lifecycle, storage
 from driftlab.server.docs_page import add_docs_page
 from driftlab.server.edge import EdgeGuard
 from driftlab.server.evaluation_pages import EvaluationPages
@@ -131,6 +131,11 @@ def create_app(db_url: str, *, workers: int | None = 2, start_worker: bool = Tru
         message = str(exc)
         field = exc.field or message.split(" ", 1)[0].strip("'\":")
         return JSONResponse({"detail": message, "errors": [{"field": field, "message": message}]}, status_code=422)
+
+    @app.exception_handler(lifecycle.TransitionError)
+    async def _conflict(_request: Request, exc: lifecycle.TransitionError):
+        # Not in a status that allows it (pause a finished job, delete a running one): the resource is unchanged.
+        return JSONResponse({"detail": str(exc)}, status_code=409)
 
     @app.exception_handler(storage.NotFound)
     async def _not_found(_request: Request, exc: storage.NotFound):

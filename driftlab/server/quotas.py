@@ -9,6 +9,7 @@ from fastapi import HTTPException
 from sqlalchemy import func, select
 from sqlalchemy.orm import Session
 
+from driftlab.core.statuses import StudyKind
 from driftlab.db.models import Job, JobStatus, Study
 from driftlab.settings import Settings
 
@@ -40,7 +41,7 @@ def check_queue(settings: Settings, session: Session, adding: int) -> None:
 
 
 def check_study(settings: Settings, session: Session, study: Study) -> None:
-    if study.kind == "seeds":
+    if study.kind == StudyKind.SEEDS:
         jobs = list(session.scalars(select(Job).where(Job.study_id == study.id)))
         for job in jobs:
             check_job(settings, job.spec)

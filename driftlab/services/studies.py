@@ -17,6 +17,7 @@ from driftlab.core.config import dotted_config
 from driftlab.core.convergence import band, best_so_far
 from driftlab.core.drivability import check_drivable
 from driftlab.core.errors import ConfigError
+from driftlab.core.statuses import EpisodeStatus, StudyKind
 from driftlab.core.study import RobustnessStudySpec, SeedsStudySpec
 from driftlab.core.tuning import TuningSpec
 from driftlab.db import storage, studies
@@ -60,7 +61,7 @@ def start_study(session: Session, *, doc: dict[str, Any], name: str | None = Non
     kind = doc.get("kind")
     if name is not None and studies.find_study(session, name=name) is not None:
         raise ConfigError(f"name: a study named {name!r} exists")
-    if kind == "seeds":
+    if kind == StudyKind.SEEDS:
         _refuse_fields(doc, kind, ("theta", "evaluation_id", "grid", "config", "robust_samples", "seed"))
         seeds_spec = SeedsStudySpec.from_dict(doc)
         check_drivable(seeds_spec.job.config)  # NotDrivableError (a ConfigError), as for a job
@@ -70,7 +71,7 @@ def start_study(session: Session, *, doc: dict[str, Any], name: str | None = Non
             job_name = storage.unique_job_name(session, f"{study.name}-seed{seed}")
             storage.create_job(session, name=job_name, spec=spec.to_dict(), seed=seed, study_id=study.id)
         return study
-    if kind == "robustness":
+    if kind == StudyKind.ROBUSTNESS:
         _refuse_fields(doc, kind, ("seeds", "spec"))
         spec = RobustnessStudySpec.from_dict(_robustness_doc(session, doc))
         study = studies.create_study(session, name=name or studies.unique_study_name(session, "study"), kind=kind,
@@ -85,7 +86,7 @@ def job_convergence(session: Session, *, job_id: int) -> dict[str, list]:
     rows = session.execute(select(Evaluation.index, Evaluation.J, Evaluation.status)
                            .where(Evaluation.job_id == job_id).order_by(Evaluation.index)).all()
     values = [r.J for r in rows]
-    completed = [r.status == "completed" for r in rows]
+    completed = [r.status == EpisodeStatus.COMPLETED for r in rows]
     return {"index": [r.index for r in rows], "J": values, "completed": completed,
             "best_so_far": best_so_far(values, completed)}
 
@@ -125,7 +126,7 @@ def study_summary(session: Session, study: Study) -> dict[str, Any]:
     """GET /api/studies/{id}: status and job_ids; a seeds study's band, a robustness study's cells."""
     out = {"id": study.id, "name": study.name, "kind": study.kind, "status": studies.study_status(session, study),
            "error": study.error, "spec": study.spec, "created_at": study.created_at.replace(tzinfo=UTC).isoformat()}
-    if study.kind == "seeds":
+    if study.kind == StudyKind.SEEDS:
         return {**out, **_seeds_part(session, study)}
     cells = [_cell_dict(c) for c in studies.cells(session, study_id=study.id)]
     return {**out, "job_ids": [], "theta": study.spec["theta"], "grid": study.spec["grid"],

@@ -18,6 +18,7 @@ from sqlalchemy.orm import Session, sessionmaker
 from driftlab.core.convergence import best_so_far
 from driftlab.core.optimizer import BayesianOptimizer
 from driftlab.core.robust import RobustScore, SampleResult, aggregate
+from driftlab.core.statuses import EpisodeStatus
 from driftlab.core.tuning import TuningSpec
 from driftlab.db import lifecycle, storage
 from driftlab.db.lifecycle import JobStatus
@@ -256,7 +257,7 @@ def _run(factory: sessionmaker[Session], job_id: int, executor: EpisodeExecutor,
             for evaluation in [e for e in evaluations if e.done]:
                 scored = evaluation.score()
                 score = scored[0]
-                if (confirm_seeds and not evaluation.confirming and score.status == "completed"
+                if (confirm_seeds and not evaluation.confirming and score.status == EpisodeStatus.COMPLETED
                         and (best is None or score.J < best)):
                     # A would-be best must hold on more seeds before it counts (the winner's curse: among
                     # hundreds of thetas, some pass a few seeds by luck near a failure boundary).
@@ -274,7 +275,7 @@ def _run(factory: sessionmaker[Session], job_id: int, executor: EpisodeExecutor,
                     n_done = max(n_done, lease.iterations)  # the budget is spent: what is in flight is dropped
                     waiting.clear()
                     continue
-                completed = score.status == "completed"
+                completed = score.status == EpisodeStatus.COMPLETED
                 optimizer.tell(evaluation.theta, score.J if completed else None, score.J)
                 n_done += 1
                 if completed:

@@ -34,10 +34,6 @@ Pages = Annotated[EvaluationPages, Depends(evaluation_pages)]
 Mutating = [Depends(require_token)]
 
 
-def _conflict(exc: lifecycle.TransitionError) -> HTTPException:
-    return HTTPException(409, str(exc))
-
-
 @router.post("", status_code=201, dependencies=Mutating, response_model=Job, responses=errors(409, 422, 503))
 def create_job(body: JobCreate, db: Factory, request: Request) -> dict[str, Any]:
     doc = body.model_dump(exclude_none=True, exclude={"name"})
@@ -82,21 +78,15 @@ def get_job(job_id: JobId, db: Factory) -> dict[str, Any]:
 @router.post("/{job_id}/pause", dependencies=Mutating, response_model=Job, responses=errors(404, 409, 422, 503))
 def pause(job_id: JobId, db: Factory) -> dict[str, Any]:
     """409 unless queued or running; a running job stops after the evaluations in flight."""
-    try:
-        with storage.transaction(db) as session:
-            return job_dict(session, lifecycle.request_pause(session, job_id=job_id))
-    except lifecycle.TransitionError as exc:
-        raise _conflict(exc) from None
+    with storage.transaction(db) as session:
+        return job_dict(session, lifecycle.request_pause(session, job_id=job_id))
 
 
 @router.post("/{job_id}/resume", dependencies=Mutating, response_model=Job, responses=errors(404, 409, 422, 503))
 def resume(job_id: JobId, db: Factory, request: Request) -> dict[str, Any]:
     """409 unless paused or failed."""
-    try:
-        with storage.transaction(db) as session:
-            out = job_dict(session, lifecycle.requeue(session, job_id=job_id))
-    except lifecycle.TransitionError as exc:
-        raise _conflict(exc) from None
+    with storage.transaction(db) as session:
+        out = job_dict(session, lifecycle.requeue(session, job_id=job_id))
     wake_runner(request)
     return out
 
@@ -123,11 +113,8 @@ def extend(job_id: JobId, body: JobPatch, db: Factory, request: Request) -> dict
 @router.delete("/{job_id}", status_code=204, dependencies=Mutating, responses=errors(404, 409, 422, 503))
 def delete(job_id: JobId, db: Factory) -> Response:
     """The job, its evaluations and trajectories; 409 while a runner holds it (pause it first)."""
-    try:
-        with storage.transaction(db) as session:
-            lifecycle.delete_job(session, job_id=job_id)
-    except lifecycle.TransitionError as exc:
-        raise _conflict(exc) from None
+    with storage.transaction(db) as session:
+        lifecycle.delete_job(session, job_id=job_id)
     return Response(status_code=204)
 
 

@@ -7,7 +7,7 @@ from typing import Annotated, Any
 from fastapi import APIRouter, Depends, HTTPException, Query, Request, Response
 from sqlalchemy.orm import Session, sessionmaker
 
-from driftlab.db import lifecycle, storage, studies
+from driftlab.db import storage, studies
 from driftlab.server import quotas
 from driftlab.server.responses import ComparedJob, Study, StudyListItem, errors
 from driftlab.server.routes.deps import factory, require_token, wake_runner
@@ -54,22 +54,16 @@ def get_study(study_id: StudyId, db: Factory) -> dict[str, Any]:
              responses=errors(404, 409, 422, 503))
 def pause(study_id: StudyId, db: Factory) -> dict[str, Any]:
     """409 unless something of it is queued or running."""
-    try:
-        with storage.transaction(db) as session:
-            return study_views.study_summary(session, studies.pause_study(session, study_id=study_id))
-    except lifecycle.TransitionError as exc:
-        raise HTTPException(409, str(exc)) from None
+    with storage.transaction(db) as session:
+        return study_views.study_summary(session, studies.pause_study(session, study_id=study_id))
 
 
 @router.post("/api/studies/{study_id}/resume", dependencies=Mutating, response_model=Study,
              responses=errors(404, 409, 422, 503))
 def resume(study_id: StudyId, db: Factory, request: Request) -> dict[str, Any]:
     """409 unless something of it is paused or failed."""
-    try:
-        with storage.transaction(db) as session:
-            out = study_views.study_summary(session, studies.resume_study(session, study_id=study_id))
-    except lifecycle.TransitionError as exc:
-        raise HTTPException(409, str(exc)) from None
+    with storage.transaction(db) as session:
+        out = study_views.study_summary(session, studies.resume_study(session, study_id=study_id))
     wake_runner(request)
     return out
 
@@ -78,11 +72,8 @@ def resume(study_id: StudyId, db: Factory, request: Request) -> dict[str, Any]:
                responses=errors(404, 409, 422, 503))
 def delete(study_id: StudyId, db: Factory) -> Response:
     """The study with its cells, or its jobs and their evaluations; 409 while any of it runs."""
-    try:
-        with storage.transaction(db) as session:
-            studies.delete_study(session, study_id=study_id)
-    except lifecycle.TransitionError as exc:
-        raise HTTPException(409, str(exc)) from None
+    with storage.transaction(db) as session:
+        studies.delete_study(session, study_id=study_id)
     return Response(status_code=204)
 
 

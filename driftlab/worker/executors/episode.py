@@ -13,6 +13,7 @@ from typing import Any, Protocol
 import numpy as np
 
 from driftlab.core.robust import SampleResult
+from driftlab.core.statuses import EpisodeStatus
 
 
 @dataclass
@@ -31,7 +32,7 @@ class EpisodeOutcome:
 
     @property
     def completed(self) -> bool:
-        return self.status == "completed"
+        return self.status == EpisodeStatus.COMPLETED
 
     def sample(self) -> SampleResult:
         """This episode as one sample of a robust evaluation."""

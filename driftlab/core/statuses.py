@@ -1,0 +1,25 @@
+"""The names a result is stored under: how an episode ended, what kind a study is. Strings (StrEnum) as the
+database, the API and the CLI show them; imported by every layer, so nothing here imports anything of DriftLab."""
+
+from __future__ import annotations
+
+from enum import StrEnum
+
+
+class EpisodeStatus(StrEnum):
+    """How an episode (and an evaluation: its worst seed's) ended; the kernel's status codes index it in order."""
+
+    COMPLETED = "completed"
+    SPUN_OUT = "spun_out"
+    LEFT_TRACK = "left_track"
+    STALLED = "stalled"
+    GRIPPED_UP = "gripped_up"
+    SOLVER_FAILED = "solver_failed"
+    DIVERGED = "diverged"
+
+
+class StudyKind(StrEnum):
+    """A seeds study (one tuning job per seed) or a robustness study (a theta scored on a grid of configs)."""
+
+    SEEDS = "seeds"
+    ROBUSTNESS = "robustness"

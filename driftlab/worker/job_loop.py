@@ -25,6 +25,7 @@ from driftlab.db.lifecycle import JobStatus
 from driftlab.db.models import Job
 from driftlab.settings import Settings
 from driftlab.worker.executors import EpisodeExecutor, EpisodeOutcome
+from driftlab.worker.optimizer_host import OptimizerHost
 from driftlab.worker.slots import EpisodeSlots
 
 
@@ -170,7 +171,7 @@ def _may_ask(waiting: list, evaluations: list[_PendingEvaluation], room: bool) -
 def run_job(factory: sessionmaker[Session], job_id: int, executor: EpisodeExecutor, *, runner: str,
             workers: int = 1, slots: EpisodeSlots | None = None, owner: Hashable | None = None,
             should_stop: Callable[[], bool] = lambda: False,
-            on_progress: Callable[[Progress], None] | None = None) -> str:
+            on_progress: Callable[[Progress], None] | None = None, optimizers: OptimizerHost | None = None) -> str:
     """Runs a job whose lease ``runner`` holds (:func:`claim_job`) until its budget is spent, it is paused
     (the lease is lost), or ``should_stop()`` (the runner shuts down: the job goes back to the queue). Returns
     the status it leaves the job in and releases the lease.
@@ -183,27 +184,28 @@ def run_job(factory: sessionmaker[Session], job_id: int, executor: EpisodeExecut
     driftlab.worker.slots; ``workers`` alone when no ``slots`` are given; ``owner`` names the job there, if the
     caller joined it already); an evaluation's episodes wait for a slot, and a new theta is asked while at most one
     evaluation is unfinished, or while the share has room and none waits (:func:`_may_ask`), so with several samples
-    per evaluation the optimizer stays nearly sequential.
+    per evaluation the optimizer stays nearly sequential. With ``optimizers`` the job's optimizer runs in that host
+    process (driftlab.worker.optimizer_host: the server's), else on this thread.
     """
     slots = slots or EpisodeSlots(workers)
     owner, wake = owner if owner is not None else object(), threading.Event()
     slots.join(owner, wake)
     try:
-        return _run(factory, job_id, executor, runner, slots, owner, wake, should_stop, on_progress)
+        return _run(factory, job_id, executor, runner, slots, owner, wake, should_stop, on_progress, optimizers)
     finally:
         slots.leave(owner)
 
 
 def _run(factory: sessionmaker[Session], job_id: int, executor: EpisodeExecutor, runner: str, slots: EpisodeSlots,
          owner: object, wake: threading.Event, should_stop: Callable[[], bool],
-         on_progress: Callable[[Progress], None] | None) -> str:
+         on_progress: Callable[[Progress], None] | None, optimizers: OptimizerHost | None) -> str:
     with storage.transaction(factory) as session:
         job = storage.get_job(session, job_id=job_id)
         spec = TuningSpec.from_dict(job.spec)
         stored = storage.evaluations(session, job_id=job_id)
         history = [(e.theta, e.J if e.completed else None, e.J) for e in stored]
         best = best_so_far([e.J for e in stored], [e.completed for e in stored])[-1] if stored else None
-    optimizer = restore_optimizer(spec, history)
+    optimizer = optimizers.open(spec, history) if optimizers is not None else restore_optimizer(spec, history)
     config_doc = spec.to_dict()["config"]
     seeds, confirm_seeds = spec.episode_seeds, spec.confirm_seeds
     lease = _Lease(factory, job_id, runner, spec.iterations)
@@ -292,6 +294,9 @@ def _run(factory: sessionmaker[Session], job_id: int, executor: EpisodeExecutor,
         with storage.transaction(factory) as session:
             lifecycle.release(session, job_id=job_id, runner=runner, status=status, error=error[:2000])
         return status
+    finally:
+        if optimizers is not None:
+            optimizer.close()
     if n_done >= lease.iterations:
         status = JobStatus.FINISHED
     elif shutting_down:

@@ -20,6 +20,7 @@ from driftlab.db import lifecycle, rescores, storage, studies
 from driftlab.db.models import Job, Study
 from driftlab.worker.executors import EpisodeExecutor, open_executor
 from driftlab.worker.job_loop import EXECUTOR_LOST, claim_job, run_job
+from driftlab.worker.optimizer_host import OptimizerHost
 from driftlab.worker.rescoring import run_rescore
 from driftlab.worker.slots import EpisodeSlots
 from driftlab.worker.study_runner import run_study
@@ -41,6 +42,8 @@ class JobRunner:
         self._jobs: dict[int, threading.Thread] = {}  # the jobs running now, each on its thread
         self._jobs_lock = threading.Lock()
         self._rescore: threading.Thread | None = None  # the rescore running now, if any
+        # The jobs' asks and tells, off the server's interpreter; below the requests in priority, as the episodes.
+        self._optimizers = OptimizerHost(niceness=10)
         self.current_study_id: int | None = None
 
     @property
@@ -70,6 +73,7 @@ class JobRunner:
             self._thread.join(timeout=30)
         if self._executor is not None:
             self._executor.shutdown()
+        self._optimizers.shutdown()
 
     def _requeue_jobs_waiting_for_the_cluster(self) -> None:
         """Jobs paused because the cluster went away continue once the executor reaches it again."""
@@ -118,7 +122,7 @@ class JobRunner:
     def _run_job(self, job_id: int) -> None:
         try:
             run_job(self.factory, job_id, self._executor, runner=self.runner_id, slots=self._slots, owner=job_id,
-                    should_stop=self._stop.is_set)
+                    should_stop=self._stop.is_set, optimizers=self._optimizers)
         finally:
             with self._jobs_lock:
                 self._jobs.pop(job_id, None)

@@ -118,9 +118,9 @@ def test_trajectory_downloads_parse(server):
     rows = list(csv.reader(io.StringIO(r.text)))[1:]
     header, body = rows[0], rows[1:]
     assert "beta_rad" in header and "t_s" in header
-    assert len(body) == round(evaluation["metrics"]["duration_s"] / 0.05) + 1 or len(body) > 10
     t = [float(row[header.index("t_s")]) for row in body]
-    assert t == sorted(t) and t[0] == 0.0
+    assert len(t) > 10 and t[0] == 0.0
+    assert all(abs(b - a - 0.05) < 1e-9 for a, b in zip(t, t[1:], strict=False))  # one row per 0.05 s control step
     assert {row[header.index("phase")] for row in body} <= {"0", "1", "2", "3", "4", "5"}  # integers, not 2.0
     js = httpx.get(f"{url}/api/evaluations/{evaluation['id']}/trajectory", params={"format": "json"}).json()
     assert js["columns"] == header and len(js["rows"]) == len(body) and js["metadata"] == meta

@@ -12,7 +12,7 @@ from pathlib import Path
 import httpx
 import pytest
 
-from tests.server_process import free_port, start_server, wait_released, wait_status
+from tests.server_process import free_port, start_server, wait_for, wait_released, wait_status
 
 pytestmark = pytest.mark.e2e  # real processes: servers, browsers, Dask, the CLI
 
@@ -59,9 +59,8 @@ def server(tmp_path):
 
 
 def _wait_done(url, job_id, n, timeout_s=120):
-    deadline = time.time() + timeout_s
-    while httpx.get(f"{url}/api/jobs/{job_id}").json()["n_done"] < n and time.time() < deadline:
-        time.sleep(0.1)
+    """Until the job has stored n evaluations (AssertionError after timeout_s)."""
+    return wait_for(f"{url}/api/jobs/{job_id}", lambda job: job["n_done"] >= n, timeout_s, poll_s=0.1)
 
 
 def test_a_second_runner_on_a_running_job_is_refused(server):

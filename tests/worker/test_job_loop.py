@@ -1,7 +1,9 @@
 """The job loop with a fake executor (in-process, cheap episodes that finish in a random order) on a real SQLite
 file: what a job seed fixes, and the deterministic mode that makes the thetas independent of the workers."""
 
+import os
 import random
+import signal
 import threading
 import time
 from concurrent.futures import Future
@@ -13,6 +15,7 @@ from driftlab.core.tuning import TuningSpec
 from driftlab.db import storage
 from driftlab.worker.executors import EpisodeOutcome
 from driftlab.worker.job_loop import claim_job, run_job
+from driftlab.worker.optimizer_host import OptimizerHost
 
 
 class ShuffledExecutor:
@@ -40,16 +43,37 @@ class ShuffledExecutor:
         pass
 
 
-def _thetas(tmp_path, name, deterministic, workers, rng_seed):
+def _thetas(tmp_path, name, deterministic, workers, rng_seed, optimizers=None):
     factory = storage.open_database(f"sqlite:///{tmp_path / (name + '.db')}")
     spec = TuningSpec(iterations=14, seed_points=4, seed=3, robust_samples=2, confirm_samples=1,
                       deterministic=deterministic)
     with storage.transaction(factory) as session:
         job_id = storage.create_job(session, name=name, spec=spec.to_dict(), seed=spec.seed).id
     claim_job(factory, job_id, "runner")
-    assert run_job(factory, job_id, ShuffledExecutor(rng_seed), runner="runner", workers=workers) == "finished"
+    assert run_job(factory, job_id, ShuffledExecutor(rng_seed), runner="runner", workers=workers,
+                   optimizers=optimizers) == "finished"
     with storage.snapshot(factory) as session:
         return [e.theta for e in storage.evaluations(session, job_id=job_id)]
+
+
+def test_the_optimizer_host_asks_what_the_optimizer_asks_on_the_jobs_thread(tmp_path):
+    """The server's jobs ask in a process beside it (driftlab.worker.optimizer_host): the same thetas, bit for bit,
+    and a host that dies mid-job is replaced and restored from what was told."""
+    here = _thetas(tmp_path, "here", True, 1, 0)
+    host = OptimizerHost()
+    try:
+        assert _thetas(tmp_path, "host", True, 1, 0, optimizers=host) == here
+        remote = host.open(TuningSpec(iterations=14, seed_points=4, seed=3), [])
+        first = [remote.ask() for _ in range(2)]
+        for theta in first:
+            remote.tell(theta, 1.0, 1.0)
+        pid = host.call(os.getpid)
+        os.kill(pid, signal.SIGKILL)
+        after = remote.ask()  # a new host, the optimizer restored from the two tells
+        assert host.call(os.getpid) != pid and set(after) == set(first[0])
+        remote.close()
+    finally:
+        host.shutdown()
 
 
 @pytest.mark.parametrize("rng_seed", [1, 2])

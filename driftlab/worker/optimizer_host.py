@@ -1,0 +1,125 @@
+"""Jobs' optimizers in a process beside the server's: ask and tell run there, the job loop only sends thetas and
+values.
+
+An ask is the Bayesian optimizer's whole work (the GP's hyperparameters fitted, the acquisition maximized from many
+starts): 20 ms to 0.7 s of Python. On a thread of the server it held the one interpreter that also answers every
+request; in a 30-client load with one job running it was 19% of what held the server's interpreter. Here it runs on
+another core. Every running job's optimizer lives in the one host process, keyed by a name of its own; the calls
+are the same as on a local optimizer, in the same order, with the same arguments, so a job asks what it asked in
+the server's thread (the host inherits the server's environment, and with it the BLAS thread count).
+
+If the host dies, the next call starts a new one and restores the optimizer from what was told so far, as a job
+resumed after a crash is (driftlab.worker.job_loop.restore_optimizer).
+"""
+
+from __future__ import annotations
+
+import multiprocessing
+import os
+import threading
+import uuid
+from concurrent.futures import ProcessPoolExecutor
+from concurrent.futures.process import BrokenProcessPool
+from typing import Any
+
+from driftlab.core.tuning import TuningSpec
+
+History = list[tuple[dict[str, float], float | None, float]]
+
+# In the host process: the optimizers of the jobs it serves.
+_OPTIMIZERS: dict[str, Any] = {}
+
+
+def _open(key: str, spec_doc: dict[str, Any], history: History) -> None:
+    from driftlab.worker.job_loop import restore_optimizer
+
+    _OPTIMIZERS[key] = restore_optimizer(TuningSpec.from_dict(spec_doc), history)
+
+
+def _ask(key: str) -> dict[str, float]:
+    return _OPTIMIZERS[key].ask()
+
+
+def _tell(key: str, theta: dict[str, float], value: float | None, stored_j: float) -> None:
+    _OPTIMIZERS[key].tell(theta, value, stored_j)
+
+
+def _close(key: str) -> None:
+    _OPTIMIZERS.pop(key, None)
+
+
+def _lower_priority(niceness: int) -> None:
+    if niceness:
+        os.nice(niceness)
+
+
+class OptimizerHost:
+    """The process that holds the running jobs' optimizers (started with the first job, spawned: the server has
+    threads, and a fork would copy their locks)."""
+
+    def __init__(self, niceness: int = 0) -> None:
+        """``niceness`` > 0 lowers the host's CPU priority (a job's work, below the requests the server answers)."""
+        self.niceness = niceness
+        self._pool: ProcessPoolExecutor | None = None
+        self._lock = threading.Lock()
+
+    def open(self, spec: TuningSpec, history: History) -> RemoteOptimizer:
+        """The job's optimizer, in the state it had after telling ``history``."""
+        optimizer = RemoteOptimizer(self, spec.to_dict(), list(history))
+        optimizer.restore()
+        return optimizer
+
+    def call(self, fn, *args) -> Any:
+        return self._current_pool().submit(fn, *args).result()
+
+    def replace_broken(self, broken: ProcessPoolExecutor) -> None:
+        with self._lock:
+            if self._pool is broken:
+                self._pool = None
+        broken.shutdown(wait=False, cancel_futures=True)
+
+    def shutdown(self) -> None:
+        with self._lock:
+            pool, self._pool = self._pool, None
+        if pool is not None:
+            pool.shutdown(wait=True, cancel_futures=True)
+
+    def _current_pool(self) -> ProcessPoolExecutor:
+        with self._lock:
+            if self._pool is None:
+                self._pool = ProcessPoolExecutor(1, mp_context=multiprocessing.get_context("spawn"),
+                                                 initializer=_lower_priority, initargs=(self.niceness,))
+            return self._pool
+
+
+class RemoteOptimizer:
+    """A job's optimizer in the host: ask and tell as on driftlab.core.optimizer.BayesianOptimizer."""
+
+    def __init__(self, host: OptimizerHost, spec_doc: dict[str, Any], history: History) -> None:
+        self._host, self._spec_doc, self._told = host, spec_doc, history
+        self._key = uuid.uuid4().hex
+
+    def restore(self) -> None:
+        self._host.call(_open, self._key, self._spec_doc, self._told)
+
+    def ask(self) -> dict[str, float]:
+        return self._call(_ask, self._key)
+
+    def tell(self, theta: dict[str, float], value: float | None, stored_j: float) -> None:
+        self._call(_tell, self._key, theta, value, stored_j)
+        self._told.append((theta, value, stored_j))
+
+    def close(self) -> None:
+        try:
+            self._host.call(_close, self._key)
+        except BrokenProcessPool:
+            pass  # the host is gone, and this optimizer with it
+
+    def _call(self, fn, *args) -> Any:
+        pool = self._host._current_pool()
+        try:
+            return pool.submit(fn, *args).result()
+        except BrokenProcessPool:
+            self._host.replace_broken(pool)
+            self.restore()
+            return self._host.call(fn, *args)

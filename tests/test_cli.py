@@ -159,8 +159,20 @@ def test_robust_evaluation_stores_each_seed_and_rescore_uses_fresh_ones(tmp_path
 
 
 def test_rescore_of_an_unknown_job_is_one_line_exit_2(tmp_path):
+    from driftlab.db import storage
+
+    storage.close_database(storage.open_database(f"sqlite:///{tmp_path / 't.db'}"))
     out = _run("rescore", "--name", "nope", "--db", str(tmp_path / "t.db"))
     assert out.returncode == 2 and "nope" in out.stderr and len(out.stderr.strip().splitlines()) == 1
+
+
+@pytest.mark.parametrize("command", [["rescore", "--name", "x"], ["report", "--name", "x", "--out", "r"],
+                                     ["study", "show", "--name", "x"]])
+def test_a_reading_command_refuses_a_database_file_that_does_not_exist_and_creates_none(tmp_path, command):
+    typo = tmp_path / "typo.db"
+    out = _run(*command, "--db", str(typo))
+    assert out.returncode == 2 and len(out.stderr.strip().splitlines()) == 1
+    assert f"--db {typo}: no such database file" in out.stderr and not typo.exists()
 
 
 @pytest.mark.parametrize(("preset", "extra", "expected"), [

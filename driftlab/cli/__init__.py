@@ -20,6 +20,7 @@ from driftlab.cli.options import (
     db_url,
     int_in,
     name_text,
+    stored_db_url,
 )
 from driftlab.cli.serve import cmd_serve
 from driftlab.cli.tune import cmd_report, cmd_rescore, cmd_tune, tuning_spec
@@ -30,7 +31,8 @@ def cmd_study(args: argparse.Namespace) -> int:
     from driftlab.cli.study import cmd_study
 
     dask = dask_address(args) if hasattr(args, "dask") else None
-    return cmd_study(args, tuning_spec, db_url(args.db), dask)
+    url = stored_db_url(args.db) if args.kind == "show" else db_url(args.db)
+    return cmd_study(args, tuning_spec, url, dask)
 
 
 def cmd_calibrate(args: argparse.Namespace) -> int:

@@ -108,6 +108,16 @@ def db_url(db: str | None) -> str:
     return database_url(db)
 
 
+def stored_db_url(db: str | None) -> str:
+    """The database of a command that only reads what is stored (rescore, report, study show): a --db file that
+    does not exist is refused instead of created empty (a typo would otherwise say "no job named ...")."""
+    url = db_url(db)
+    if url.startswith("sqlite:///") and not os.path.exists(url[len("sqlite:///"):]):
+        raise ConfigError(f"--db {db or url}: no such database file ({url[len('sqlite:///'):]}); "
+                          "`driftlab tune` or `driftlab serve` creates one")
+    return url
+
+
 def add_job_options(parser: argparse.ArgumentParser) -> None:
     """The options of a tuning job's specification (shared by `tune` and `study seeds`), but its seed."""
     parser.add_argument("--iterations", type=int, help="evaluations in total (default 500 for a new job); on a "

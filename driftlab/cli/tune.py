@@ -8,7 +8,7 @@ import os
 import sys
 import time
 
-from driftlab.cli.options import dask_address, db_url, episode_config, finite, key_values
+from driftlab.cli.options import dask_address, db_url, episode_config, finite, key_values, stored_db_url
 from driftlab.cli.shutdown import stop_on_sigterm
 from driftlab.core.drivability import check_drivable
 from driftlab.core.errors import ConfigError
@@ -127,7 +127,7 @@ def cmd_tune(args: argparse.Namespace) -> int:
 def cmd_rescore(args: argparse.Namespace) -> int:
     from driftlab.worker.scoring import rescore_job
 
-    print(json.dumps(finite(rescore_job(db_url=db_url(args.db), name=args.name, samples=args.samples,
+    print(json.dumps(finite(rescore_job(db_url=stored_db_url(args.db), name=args.name, samples=args.samples,
                                          workers=args.workers, dask_address=dask_address(args)))))
     return 0
 
@@ -140,10 +140,11 @@ def cmd_report(args: argparse.Namespace) -> int:
     if args.study:
         from driftlab.reports.study import write_study_report
 
-        print(json.dumps({"report": str(write_study_report(db_url=db_url(args.db), name=args.study,
+        print(json.dumps({"report": str(write_study_report(db_url=stored_db_url(args.db), name=args.study,
                                                            out_dir=args.out))}))
         return 0
-    path = write_report(db_url=db_url(args.db), name=args.name, out_dir=args.out, baseline_samples=args.baselines,
-                        rescore_samples=args.rescore_samples, dask_address=dask_address(args))
+    path = write_report(db_url=stored_db_url(args.db), name=args.name, out_dir=args.out,
+                        baseline_samples=args.baselines, rescore_samples=args.rescore_samples,
+                        dask_address=dask_address(args))
     print(json.dumps({"report": str(path)}))
     return 0

@@ -2,6 +2,7 @@
 started, paused, resumed, rescored and deleted from the page, through the REST API, with and without a token."""
 
 import os
+import re
 
 import httpx
 import pytest
@@ -76,6 +77,9 @@ def test_a_job_started_from_the_page_pauses_resumes_and_its_plots_follow(server,
 
     # Live: the convergence plot and the search space (models refitted) grow as evaluations land.
     first = _wait_count(page, "#convergence", "data-n", 2)
+    # The time left as a person says it ("about 7 min left"), not "about 6.913 min left".
+    expect(page.locator("#job-status")).to_contain_text(re.compile(r"about (\d+ s|\d+ min|\d+\.\d h) left"),
+                                                        timeout=WAIT_MS)
     _wait_count(page, "#search-space", "data-n-evaluations", 2)
     _wait_count(page, "#slices", "data-n", first)
     assert page.locator("#contour-mean rect").count() > 900  # a 30 x 30 filled contour and its colour bar

@@ -118,12 +118,19 @@ async function refreshSelected(id) {
   if (state.rescoring) await pollRescore();
 }
 
+/** A time left as a person says it: "40 s", "12 min", "2.5 h" (not "0.9025 min"). */
+function duration(seconds) {
+  if (seconds < 90) return `${Math.max(1, Math.round(seconds))} s`;
+  if (seconds < 5400) return `${Math.round(seconds / 60)} min`;
+  return `${(seconds / 3600).toFixed(1)} h`;
+}
+
 function renderJob() {
   const j = state.job;
   $("job-panel").hidden = false;
   $("job-title").textContent = `${j.id} · ${j.name}`;
   const best = j.best ? `best J ${fmt(j.best.J)} (evaluation id ${j.best.id})` : "no completed evaluation yet";
-  const eta = j.eta_s !== null && j.eta_s !== undefined ? `, about ${fmt(j.eta_s / 60)} min left` : "";
+  const eta = j.eta_s !== null && j.eta_s !== undefined ? `, about ${duration(j.eta_s)} left` : "";
   $("job-status").textContent = `status: ${j.status}${j.detail ? ` (${j.detail})` : ""} · ${j.n_done} / ` +
     `${j.iterations} evaluations${eta} · ${best}`;
   $("pause").disabled = !["queued", "running"].includes(j.status);

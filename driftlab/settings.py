@@ -13,6 +13,9 @@ from pathlib import Path
 from pydantic import Field
 from pydantic_settings import BaseSettings, SettingsConfigDict
 
+MAX_TRAJECTORIES_PER_JOB = 5000
+WHAT_IF_PER_MINUTE = 60.0
+
 
 class Settings(BaseSettings):
     """Attributes:
@@ -59,8 +62,8 @@ class Settings(BaseSettings):
     max_episodes_per_job: int = 100_000
     max_episodes_per_study: int = 1_000_000
     max_queued_jobs: int = 100
-    max_trajectories_per_job: int = Field(default=5000, ge=1)
-    what_if_per_minute: float = Field(default=60.0, gt=0.0, le=6000.0)
+    max_trajectories_per_job: int = Field(default=MAX_TRAJECTORIES_PER_JOB, ge=1)
+    what_if_per_minute: float = Field(default=WHAT_IF_PER_MINUTE, gt=0.0, le=6000.0)
     max_rescore_episodes: int = Field(default=5000, ge=1)
     max_heavy_reads: int = Field(default=2, ge=1, le=64)
     max_view_tabs: int = Field(default=20, ge=1, le=1000)
@@ -77,11 +80,10 @@ def default_database_file() -> Path:
     return Path(data_home) / "driftlab" / "driftlab.db"
 
 
-def database_url(db: str | None = None, settings: Settings | None = None) -> str:
+def database_url(db: str | None, settings: Settings) -> str:
     """--db FILE (or URL), then DRIFTLAB_DATABASE_URL, then the shared default file (its folder created)."""
     if db:
         return db if "://" in db else f"sqlite:///{os.path.abspath(db)}"
-    settings = settings or Settings()
     if settings.database_url:
         return settings.database_url
     path = default_database_file()

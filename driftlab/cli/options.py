@@ -6,13 +6,16 @@ import argparse
 import math
 import os
 import sys
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 from driftlab.core.config import PLANT_PRESETS, EpisodeConfig, apply_overrides
 from driftlab.core.errors import ConfigError
 from driftlab.core.robust import MAX_ROBUST_SAMPLES
 from driftlab.core.tuning import DEFAULT_CONFIRM_SAMPLES, DEFAULT_ROBUST_SAMPLES
 from driftlab.names import name_problem
+
+if TYPE_CHECKING:
+    from driftlab.settings import Settings
 
 DB_HELP = ("SQLite file or SQLAlchemy URL (default: DRIFTLAB_DATABASE_URL, else the shared "
            "~/.local/share/driftlab/driftlab.db)")
@@ -97,15 +100,26 @@ def episode_config(args: argparse.Namespace) -> EpisodeConfig:
 
 
 def dask_address(args: argparse.Namespace) -> str | None:
-    from driftlab.settings import Settings
+    return args.dask or settings().dask_address
 
-    return args.dask or Settings().dask_address
+
+def settings() -> Settings:
+    """The DRIFTLAB_* settings of this command (driftlab.settings.Settings), read once."""
+    global _SETTINGS
+    if _SETTINGS is None:
+        from driftlab.settings import Settings
+
+        _SETTINGS = Settings()
+    return _SETTINGS
+
+
+_SETTINGS: Settings | None = None
 
 
 def db_url(db: str | None) -> str:
     from driftlab.settings import database_url
 
-    return database_url(db)
+    return database_url(db, settings())
 
 
 def stored_db_url(db: str | None) -> str:

@@ -13,7 +13,7 @@ import sys
 import time
 from typing import Any
 
-from driftlab.cli.options import key_values, name_text
+from driftlab.cli.options import key_values, name_text, settings
 from driftlab.core.errors import ConfigError
 from driftlab.core.statuses import StudyKind
 
@@ -95,7 +95,7 @@ def _run_seeds_jobs(factory, study_id: int, executor, workers: int, runner: str)
         started = time.perf_counter()
         try:
             statuses[job_id] = run_job(factory, job_id, executor, runner=runner, slots=slots, owner=job_id,
-                                       should_stop=stop.is_set)
+                                       should_stop=stop.is_set, max_trajectories=settings().max_trajectories_per_job)
             sys.stderr.write(f"job {name}: {statuses[job_id]} in {time.perf_counter() - started:.1f} s\n")
         finally:
             done.release()

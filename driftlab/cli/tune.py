@@ -8,7 +8,7 @@ import os
 import sys
 import time
 
-from driftlab.cli.options import dask_address, db_url, episode_config, finite, key_values, stored_db_url
+from driftlab.cli.options import dask_address, db_url, episode_config, finite, key_values, settings, stored_db_url
 from driftlab.cli.shutdown import stop_on_sigterm
 from driftlab.core.drivability import check_drivable
 from driftlab.core.errors import ConfigError
@@ -102,7 +102,8 @@ def cmd_tune(args: argparse.Namespace) -> int:
     if status == lifecycle.JobStatus.RUNNING:  # ours now
         executor, workers = open_executor(args.workers, dask_address(args))
         try:
-            status = run_job(factory, job_id, executor, runner=runner, workers=workers, on_progress=progress)
+            status = run_job(factory, job_id, executor, runner=runner, workers=workers, on_progress=progress,
+                             max_trajectories=settings().max_trajectories_per_job)
         except KeyboardInterrupt:
             with storage.transaction(factory) as session:
                 lifecycle.release(session, job_id=job_id, runner=runner, status=lifecycle.JobStatus.PAUSED)

@@ -33,12 +33,13 @@ from driftlab.worker.executors import LocalProcessExecutor
 from driftlab.worker.job_runner import JobRunner
 
 
-def _start_view(app: FastAPI, factory) -> None:
+def _start_view(app: FastAPI, factory, settings: Settings) -> None:
     """The 3D view and its what-if worker (a process of its own, so a what-if never waits behind a job)."""
     executor = LocalProcessExecutor(1)
     executor.warm_up()
     app.state.what_if_executor = executor
-    app.state.dashboard = Dashboard(factory, run_episode=executor.submit)
+    app.state.dashboard = Dashboard(factory, run_episode=executor.submit,
+                                    what_if_per_minute=settings.what_if_per_minute)
 
 
 def _stop_view(app: FastAPI) -> None:
@@ -72,13 +73,14 @@ def create_app(db_url: str, *, workers: int | None = 2, start_worker: bool = Tru
     """The app; ``start_worker=False, start_view=False`` starts no process and no thread (in-process tests)."""
     settings = settings or Settings()
     factory = storage.open_database(db_url)
-    runner = JobRunner(factory, workers=workers, dask_address=settings.dask_address)
+    runner = JobRunner(factory, workers=workers, dask_address=settings.dask_address,
+                       max_trajectories_per_job=settings.max_trajectories_per_job)
 
     @asynccontextmanager
     async def lifespan(app: FastAPI):
         anyio.to_thread.current_default_thread_limiter().total_tokens = settings.request_threads
         if start_view:
-            _start_view(app, factory)
+            _start_view(app, factory, settings)
         if start_worker:
             runner.start()
         # What startup made (modules, compiled kernels, the view's scene) lives as long as the server: out of the

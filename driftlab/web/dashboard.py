@@ -21,7 +21,7 @@ from driftlab.core.config import apply_overrides, config_from_dict, config_to_di
 from driftlab.core.drivability import check_drivable
 from driftlab.core.errors import ConfigError
 from driftlab.db import storage
-from driftlab.settings import Settings
+from driftlab.settings import WHAT_IF_PER_MINUTE
 from driftlab.web.frames import EpisodeFrames
 from driftlab.web.session import ClientSession
 from driftlab.web.sources import (
@@ -143,11 +143,10 @@ class WhatIfRunner:
 class Dashboard:
     def __init__(self, factory: sessionmaker[Session], *, run_episode: EpisodeRunner | None = None,
                  host: str = "127.0.0.1", port: int = 0, poll_s: float = 0.5,
-                 what_if_per_minute: float | None = None) -> None:
+                 what_if_per_minute: float = WHAT_IF_PER_MINUTE) -> None:
         self.factory = factory
         self.poll_s = poll_s
-        per_minute = Settings().what_if_per_minute if what_if_per_minute is None else what_if_per_minute
-        self.what_if = WhatIfRunner(run_episode, per_minute=per_minute)
+        self.what_if = WhatIfRunner(run_episode, per_minute=what_if_per_minute)
         self.sessions: dict[int, ClientSession] = {}
         self._histories: dict[int, JobHistory] = {}
         self._jobs: list[tuple[int, str, str]] = []

@@ -23,7 +23,7 @@ from driftlab.core.tuning import TuningSpec
 from driftlab.db import lifecycle, storage
 from driftlab.db.lifecycle import JobStatus
 from driftlab.db.models import Job
-from driftlab.settings import Settings
+from driftlab.settings import MAX_TRAJECTORIES_PER_JOB
 from driftlab.worker.executors import EpisodeExecutor, EpisodeOutcome
 from driftlab.worker.optimizer_host import OptimizerHost
 from driftlab.worker.slots import EpisodeSlots
@@ -134,10 +134,11 @@ def claim_job(factory: sessionmaker[Session], job_id: int, runner: str,
 class _Lease:
     """Renews the job's lease every HEARTBEAT_S; tells when it is lost and what the budget is now."""
 
-    def __init__(self, factory: sessionmaker[Session], job_id: int, runner: str, iterations: int) -> None:
+    def __init__(self, factory: sessionmaker[Session], job_id: int, runner: str, iterations: int,
+                 max_trajectories: int) -> None:
         self.factory, self.job_id, self.runner = factory, job_id, runner
         self.iterations = iterations
-        self.max_trajectories = Settings().max_trajectories_per_job
+        self.max_trajectories = max_trajectories
         self.held = True
         self._last = time.monotonic()
 
@@ -171,7 +172,8 @@ def _may_ask(waiting: list, evaluations: list[_PendingEvaluation], room: bool) -
 def run_job(factory: sessionmaker[Session], job_id: int, executor: EpisodeExecutor, *, runner: str,
             workers: int = 1, slots: EpisodeSlots | None = None, owner: Hashable | None = None,
             should_stop: Callable[[], bool] = lambda: False,
-            on_progress: Callable[[Progress], None] | None = None, optimizers: OptimizerHost | None = None) -> str:
+            on_progress: Callable[[Progress], None] | None = None, optimizers: OptimizerHost | None = None,
+            max_trajectories: int = MAX_TRAJECTORIES_PER_JOB) -> str:
     """Runs a job whose lease ``runner`` holds (:func:`claim_job`) until its budget is spent, it is paused
     (the lease is lost), or ``should_stop()`` (the runner shuts down: the job goes back to the queue). Returns
     the status it leaves the job in and releases the lease.
@@ -185,20 +187,23 @@ def run_job(factory: sessionmaker[Session], job_id: int, executor: EpisodeExecut
     caller joined it already); an evaluation's episodes wait for a slot, and a new theta is asked while at most one
     evaluation is unfinished, or while the share has room and none waits (:func:`_may_ask`), so with several samples
     per evaluation the optimizer stays nearly sequential. With ``optimizers`` the job's optimizer runs in that host
-    process (driftlab.worker.optimizer_host: the server's), else on this thread.
+    process (driftlab.worker.optimizer_host: the server's), else on this thread. The job keeps the trajectories of
+    its first ``max_trajectories`` evaluations and of every new best (Settings.max_trajectories_per_job).
     """
     slots = slots or EpisodeSlots(workers)
     owner, wake = owner if owner is not None else object(), threading.Event()
     slots.join(owner, wake)
     try:
-        return _run(factory, job_id, executor, runner, slots, owner, wake, should_stop, on_progress, optimizers)
+        return _run(factory, job_id, executor, runner, slots, owner, wake, should_stop, on_progress, optimizers,
+                    max_trajectories)
     finally:
         slots.leave(owner)
 
 
 def _run(factory: sessionmaker[Session], job_id: int, executor: EpisodeExecutor, runner: str, slots: EpisodeSlots,
          owner: object, wake: threading.Event, should_stop: Callable[[], bool],
-         on_progress: Callable[[Progress], None] | None, optimizers: OptimizerHost | None) -> str:
+         on_progress: Callable[[Progress], None] | None, optimizers: OptimizerHost | None,
+         max_trajectories: int) -> str:
     with storage.transaction(factory) as session:
         job = storage.get_job(session, job_id=job_id)
         spec = TuningSpec.from_dict(job.spec)
@@ -208,7 +213,7 @@ def _run(factory: sessionmaker[Session], job_id: int, executor: EpisodeExecutor,
     optimizer = optimizers.open(spec, history) if optimizers is not None else restore_optimizer(spec, history)
     config_doc = spec.to_dict()["config"]
     seeds, confirm_seeds = spec.episode_seeds, spec.confirm_seeds
-    lease = _Lease(factory, job_id, runner, spec.iterations)
+    lease = _Lease(factory, job_id, runner, spec.iterations, max_trajectories)
     n_done = len(history)
     evaluations: list[_PendingEvaluation] = []
     episodes: dict[Future[EpisodeOutcome], _PendingEvaluation] = {}

@@ -18,6 +18,7 @@ from sqlalchemy.orm import Session, sessionmaker
 
 from driftlab.db import lifecycle, rescores, storage, studies
 from driftlab.db.models import Job, Study
+from driftlab.settings import MAX_TRAJECTORIES_PER_JOB
 from driftlab.worker.executors import EpisodeExecutor, open_executor
 from driftlab.worker.job_loop import EXECUTOR_LOST, claim_job, run_job
 from driftlab.worker.optimizer_host import OptimizerHost
@@ -28,10 +29,11 @@ from driftlab.worker.study_runner import run_study
 
 class JobRunner:
     def __init__(self, factory: sessionmaker[Session], workers: int | None = 2, poll_s: float = 0.2,
-                 dask_address: str | None = None) -> None:
+                 dask_address: str | None = None, max_trajectories_per_job: int = MAX_TRAJECTORIES_PER_JOB) -> None:
         self.factory = factory
         self.workers = workers
         self.dask_address = dask_address
+        self.max_trajectories_per_job = max_trajectories_per_job
         self.poll_s = poll_s
         self.runner_id = lifecycle.new_runner_id("server")
         self._stop = threading.Event()
@@ -122,7 +124,8 @@ class JobRunner:
     def _run_job(self, job_id: int) -> None:
         try:
             run_job(self.factory, job_id, self._executor, runner=self.runner_id, slots=self._slots, owner=job_id,
-                    should_stop=self._stop.is_set, optimizers=self._optimizers)
+                    should_stop=self._stop.is_set, optimizers=self._optimizers,
+                    max_trajectories=self.max_trajectories_per_job)
         finally:
             with self._jobs_lock:
                 self._jobs.pop(job_id, None)

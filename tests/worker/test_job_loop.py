@@ -120,14 +120,13 @@ def test_nothing_is_stored_past_a_budget_lowered_while_evaluations_run(tmp_path)
     assert done == ["finished"]
 
 
-def test_a_long_job_keeps_a_bounded_number_of_trajectories_and_every_best(tmp_path, monkeypatch):
-    monkeypatch.setenv("DRIFTLAB_MAX_TRAJECTORIES_PER_JOB", "5")
+def test_a_long_job_keeps_a_bounded_number_of_trajectories_and_every_best(tmp_path):
     factory = storage.open_database(f"sqlite:///{tmp_path / 'bounded.db'}")
     spec = TuningSpec(iterations=30, seed_points=4, seed=3, robust_samples=1, confirm_samples=0, deterministic=True)
     with storage.transaction(factory) as session:
         job_id = storage.create_job(session, name="bounded", spec=spec.to_dict(), seed=spec.seed).id
     claim_job(factory, job_id, "runner")
-    assert run_job(factory, job_id, ShuffledExecutor(0), runner="runner") == "finished"
+    assert run_job(factory, job_id, ShuffledExecutor(0), runner="runner", max_trajectories=5) == "finished"
     with storage.snapshot(factory) as session:
         stored = storage.evaluations(session, job_id=job_id)
         kept = [e.index for e in stored if e.trajectory is not None]

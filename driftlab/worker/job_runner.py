@@ -62,6 +62,7 @@ class JobRunner:
         else:
             self._executor, self.workers = executor, self.workers or 1
         self._slots = EpisodeSlots(self.workers)
+        self._optimizers.start()
         self._thread = threading.Thread(target=self._loop, name="driftlab-job-runner", daemon=True)
         self._thread.start()
 

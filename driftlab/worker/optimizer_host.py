@@ -23,6 +23,7 @@ from concurrent.futures.process import BrokenProcessPool
 from typing import Any
 
 from driftlab.core.tuning import TuningSpec
+from driftlab.worker.child_process import follow_parent
 
 History = list[tuple[dict[str, float], float | None, float]]
 
@@ -48,9 +49,12 @@ def _close(key: str) -> None:
     _OPTIMIZERS.pop(key, None)
 
 
-def _lower_priority(niceness: int) -> None:
+def _init_host(niceness: int, parent_pid: int) -> None:
     if niceness:
         os.nice(niceness)
+    # The host may be (re)started from a job's thread, which ends with its job: no kernel signal (it follows the
+    # starting thread), the watcher alone (an ask runs Python, so the watcher gets its turn within 0.5 s).
+    follow_parent(parent_pid, kernel_signal=False)
 
 
 class OptimizerHost:
@@ -62,6 +66,10 @@ class OptimizerHost:
         self.niceness = niceness
         self._pool: ProcessPoolExecutor | None = None
         self._lock = threading.Lock()
+
+    def start(self) -> None:
+        """Start the host process now (else the first job's first ask waits ~1 s for it)."""
+        self.call(os.getpid)
 
     def open(self, spec: TuningSpec, history: History) -> RemoteOptimizer:
         """The job's optimizer, in the state it had after telling ``history``."""
@@ -88,7 +96,7 @@ class OptimizerHost:
         with self._lock:
             if self._pool is None:
                 self._pool = ProcessPoolExecutor(1, mp_context=multiprocessing.get_context("spawn"),
-                                                 initializer=_lower_priority, initargs=(self.niceness,))
+                                                 initializer=_init_host, initargs=(self.niceness, os.getpid()))
             return self._pool
 
 

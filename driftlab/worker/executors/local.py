@@ -4,34 +4,11 @@ from __future__ import annotations
 
 import multiprocessing
 import os
-import signal
-import threading
-import time
 from concurrent.futures import Future, ProcessPoolExecutor
 from typing import Any
 
+from driftlab.worker.child_process import follow_parent
 from driftlab.worker.executors.episode import EpisodeOutcome, evaluate_episode
-
-
-def _exit_with_parent(parent_pid: int, period_s: float = 0.5) -> None:
-    """A worker whose parent died (kill -9 included: no cleanup ran) exits within ``period_s`` instead of
-    living on as an orphan; it notices by being re-parented."""
-    while True:
-        time.sleep(period_s)
-        if os.getppid() != parent_pid:
-            os._exit(0)
-
-
-def _die_with_parent() -> None:
-    """Linux: the kernel kills this process the moment its parent dies (PR_SET_PDEATHSIG), even while a compiled
-    episode holds the interpreter and the watcher thread below cannot run."""
-    try:
-        import ctypes
-
-        libc = ctypes.CDLL("libc.so.6", use_errno=True)
-        libc.prctl(1, signal.SIGKILL)  # PR_SET_PDEATHSIG
-    except (OSError, AttributeError):
-        pass  # not Linux: the watcher thread alone
 
 
 def _init_worker(niceness: int, parent_pid: int) -> None:
@@ -39,10 +16,7 @@ def _init_worker(niceness: int, parent_pid: int) -> None:
     os.environ["OMP_NUM_THREADS"] = "1"
     if niceness:
         os.nice(niceness)
-    _die_with_parent()
-    if os.getppid() != parent_pid:  # the parent died before the signal was armed
-        os._exit(0)
-    threading.Thread(target=_exit_with_parent, args=(parent_pid,), name="exit-with-parent", daemon=True).start()
+    follow_parent(parent_pid)
 
 
 class LocalProcessExecutor:

@@ -84,6 +84,9 @@ def test_a_robustness_study_of_a_stored_evaluation_and_its_heatmap(tmp_path):
     (("study", "show", "--name", "nope"), "nope"),
 ])
 def test_bad_study_arguments_exit_2_naming_the_field(tmp_path, args, field):
+    from driftlab.db import storage
+
+    storage.close_database(storage.open_database(f"sqlite:///{tmp_path / 'b.db'}"))  # `show` reads a stored one
     out = _run(*args, "--db", str(tmp_path / "b.db"))
     assert out.returncode == 2, out.stderr
     assert field in out.stderr and len(out.stderr.strip().splitlines()) == 1

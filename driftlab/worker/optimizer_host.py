@@ -58,8 +58,8 @@ def _init_host(niceness: int, parent_pid: int) -> None:
 
 
 class OptimizerHost:
-    """The process that holds the running jobs' optimizers (started with the first job, spawned: the server has
-    threads, and a fork would copy their locks)."""
+    """The process that holds the running jobs' optimizers (started with the runner, :meth:`start`; spawned: the
+    server has threads, and a fork would copy their locks)."""
 
     def __init__(self, niceness: int = 0) -> None:
         """``niceness`` > 0 lowers the host's CPU priority (a job's work, below the requests the server answers)."""
@@ -78,7 +78,7 @@ class OptimizerHost:
         return optimizer
 
     def call(self, fn, *args) -> Any:
-        return self._current_pool().submit(fn, *args).result()
+        return self.current_pool().submit(fn, *args).result()
 
     def replace_broken(self, broken: ProcessPoolExecutor) -> None:
         with self._lock:
@@ -92,7 +92,7 @@ class OptimizerHost:
         if pool is not None:
             pool.shutdown(wait=True, cancel_futures=True)
 
-    def _current_pool(self) -> ProcessPoolExecutor:
+    def current_pool(self) -> ProcessPoolExecutor:
         with self._lock:
             if self._pool is None:
                 self._pool = ProcessPoolExecutor(1, mp_context=multiprocessing.get_context("spawn"),
@@ -120,11 +120,11 @@ class RemoteOptimizer:
     def close(self) -> None:
         try:
             self._host.call(_close, self._key)
-        except BrokenProcessPool:
-            pass  # the host is gone, and this optimizer with it
+        except (BrokenProcessPool, RuntimeError):
+            pass  # the host is gone or shut down, and this optimizer with it
 
     def _call(self, fn, *args) -> Any:
-        pool = self._host._current_pool()
+        pool = self._host.current_pool()
         try:
             return pool.submit(fn, *args).result()
         except BrokenProcessPool:

@@ -7,7 +7,8 @@ optimizer (the job default: six dimensions, 4 + 4 robust seeds), every evaluatio
     each episode returns a real episode's trajectory (so a commit stores what a real one does).
 (b) 2 real local workers (the process pool, real episodes): 8 jobs x 6 evaluations, 2 + 1 robust seeds.
 
-Per evaluation it measures the ask (the job's optimizer, in the job's thread) and the store (one write
+Per evaluation it measures the ask (the job's optimizer: in the job's thread one after another; in the server's
+optimizer host process at once, timed as the job's thread waits for it) and the store (one write
 transaction: the evaluation, its trajectory), and prints their medians, with how busy each resource was:
 "job" the busiest job thread's share of the wall time spent asking, telling and storing (near 100 %: that job's
 optimizer is the limit), "db" the write transactions' share of the wall time (near 100 %: storage is), "work" the
@@ -37,6 +38,7 @@ from driftlab.worker import job_loop  # noqa: E402
 from driftlab.worker.executors import EpisodeOutcome, LocalProcessExecutor, evaluate_episode  # noqa: E402
 from driftlab.worker.job_loop import claim_job, run_job  # noqa: E402
 from driftlab.worker.job_runner import JobRunner  # noqa: E402
+from driftlab.worker.optimizer_host import OptimizerHost  # noqa: E402
 
 SEEDS = list(range(8))
 EPISODE_S = 0.016
@@ -69,6 +71,7 @@ class Meter:
         self.store_s: list[float] = []
         self.thread_s: dict[int, float] = {}
         self._real_restore, self._real_store = job_loop.restore_optimizer, job_loop._store
+        self._real_open = OptimizerHost.open
 
     def _add(self, seconds: float) -> None:
         key = threading.get_ident()
@@ -78,7 +81,12 @@ class Meter:
         meter = self
 
         def restore(spec, history):
-            optimizer = meter._real_restore(spec, history)
+            return timed(meter._real_restore(spec, history))
+
+        def open_in_host(host, spec, history):  # the server's runner: the optimizer in the host process
+            return timed(meter._real_open(host, spec, history))
+
+        def timed(optimizer):
             ask, tell = optimizer.ask, optimizer.tell
 
             def timed_ask():
@@ -104,10 +112,12 @@ class Meter:
             return out
 
         job_loop.restore_optimizer, job_loop._store = restore, store
+        OptimizerHost.open = open_in_host
         return self
 
     def __exit__(self, *exc) -> None:
         job_loop.restore_optimizer, job_loop._store = self._real_restore, self._real_store
+        OptimizerHost.open = self._real_open
 
 
 def _study(db_dir: str, spec: dict, name: str):

@@ -47,6 +47,11 @@ class Settings(BaseSettings):
         request_threads: threads that run the API's request handlers at once (DRIFTLAB_REQUEST_THREADS, default 8;
             FastAPI's own default is 40): the handlers share one interpreter, and 40 threads taking turns at it
             served no more requests than 8, only in a less fair order (the longest waits grew).
+        optimizer_process: the running jobs' optimizers (ask and tell) in one process beside the server
+            (DRIFTLAB_OPTIMIZER_PROCESS=1; default off: each on its job's thread). Measured both ways in
+            docs/benchmarks.md: with one job and 30 API clients on 2 cores, on: 80 requests/s and +30% evaluations
+            of the job; with an 8-job study on a simulated 16-worker cluster, on: 27 evaluations/s against 41 off
+            (the one process takes every job's asks in turn).
         max_rescore_episodes: episodes that queued and running rescores may wait for, all jobs together
             (DRIFTLAB_MAX_RESCORE_EPISODES, default 5000): rescores share the job runner's workers.
     """
@@ -70,6 +75,7 @@ class Settings(BaseSettings):
     header_timeout_s: float = Field(default=10.0, gt=0.0, le=3600.0)
     body_timeout_s: float = Field(default=30.0, gt=0.0, le=3600.0)
     request_threads: int = Field(default=8, ge=2, le=256)
+    optimizer_process: bool = False
 
     def allowed_host_names(self) -> frozenset[str]:
         return frozenset(h.strip() for h in self.allowed_hosts.split(",") if h.strip())

@@ -74,7 +74,8 @@ def create_app(db_url: str, *, workers: int | None = 2, start_worker: bool = Tru
     settings = settings or Settings()
     factory = storage.open_database(db_url)
     runner = JobRunner(factory, workers=workers, dask_address=settings.dask_address,
-                       max_trajectories_per_job=settings.max_trajectories_per_job)
+                       max_trajectories_per_job=settings.max_trajectories_per_job,
+                       optimizer_process=settings.optimizer_process)
 
     @asynccontextmanager
     async def lifespan(app: FastAPI):

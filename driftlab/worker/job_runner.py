@@ -29,7 +29,8 @@ from driftlab.worker.study_runner import run_study
 
 class JobRunner:
     def __init__(self, factory: sessionmaker[Session], workers: int | None = 2, poll_s: float = 0.2,
-                 dask_address: str | None = None, max_trajectories_per_job: int = MAX_TRAJECTORIES_PER_JOB) -> None:
+                 dask_address: str | None = None, max_trajectories_per_job: int = MAX_TRAJECTORIES_PER_JOB,
+                 optimizer_process: bool = False) -> None:
         self.factory = factory
         self.workers = workers
         self.dask_address = dask_address
@@ -44,8 +45,9 @@ class JobRunner:
         self._jobs: dict[int, threading.Thread] = {}  # the jobs running now, each on its thread
         self._jobs_lock = threading.Lock()
         self._rescore: threading.Thread | None = None  # the rescore running now, if any
-        # The jobs' asks and tells, off the server's interpreter; below the requests in priority, as the episodes.
-        self._optimizers = OptimizerHost(niceness=10)
+        # With optimizer_process, the jobs' asks and tells off the server's interpreter (below the requests in
+        # priority, as the episodes); else on each job's thread.
+        self._optimizers = OptimizerHost(niceness=10) if optimizer_process else None
         self.current_study_id: int | None = None
 
     @property
@@ -62,7 +64,8 @@ class JobRunner:
         else:
             self._executor, self.workers = executor, self.workers or 1
         self._slots = EpisodeSlots(self.workers)
-        self._optimizers.start()
+        if self._optimizers is not None:
+            self._optimizers.start()
         self._thread = threading.Thread(target=self._loop, name="driftlab-job-runner", daemon=True)
         self._thread.start()
 
@@ -76,7 +79,8 @@ class JobRunner:
             self._thread.join(timeout=30)
         if self._executor is not None:
             self._executor.shutdown()
-        self._optimizers.shutdown()
+        if self._optimizers is not None:
+            self._optimizers.shutdown()
 
     def _requeue_jobs_waiting_for_the_cluster(self) -> None:
         """Jobs paused because the cluster went away continue once the executor reaches it again."""

@@ -1,5 +1,5 @@
-"""Jobs' optimizers in a process beside the server's: ask and tell run there, the job loop only sends thetas and
-values.
+"""Jobs' optimizers in a process beside the server's (DRIFTLAB_OPTIMIZER_PROCESS=1): ask and tell run there, the job
+loop only sends thetas and values.
 
 An ask is the Bayesian optimizer's whole work (the GP's hyperparameters fitted, the acquisition maximized from many
 starts): 20 ms to 0.7 s of Python. On a thread of the server it held the one interpreter that also answers every

@@ -95,9 +95,10 @@ def test_a_second_server_on_a_taken_port_leaves_the_first_ones_jobs_alone(server
     wait_status(url, job["id"], {"paused"})
 
 
-def test_kill_9_leaves_no_orphan_workers_and_the_next_server_takes_the_job_over(tmp_path):
+@pytest.mark.parametrize("optimizer_process", ["0", "1"])
+def test_kill_9_leaves_no_orphan_workers_and_the_next_server_takes_the_job_over(tmp_path, optimizer_process):
     db = tmp_path / "crash.db"
-    proc, url = start_server(db, free_port())
+    proc, url = start_server(db, free_port(), env_extra={"DRIFTLAB_OPTIMIZER_PROCESS": optimizer_process})
     job = httpx.post(f"{url}/api/jobs", json={"iterations": 30, "seed_points": 5, "robust_samples": 1}).json()
     _wait_done(url, job["id"], 4)
     workers = _children(proc.pid)

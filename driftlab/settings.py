@@ -49,9 +49,9 @@ class Settings(BaseSettings):
             served no more requests than 8, only in a less fair order (the longest waits grew).
         optimizer_process: the running jobs' optimizers (ask and tell) in one process beside the server
             (DRIFTLAB_OPTIMIZER_PROCESS=1; default off: each on its job's thread). Measured both ways in
-            docs/benchmarks.md: with one job and 30 API clients on 2 cores, on: 80 requests/s and +30% evaluations
-            of the job; with an 8-job study on a simulated 16-worker cluster, on: 27 evaluations/s against 41 off
-            (the one process takes every job's asks in turn).
+            docs/benchmarks.md: with one job and 30 API clients on 2 cores, on: 80 requests/s and 145 evaluations
+            of the job in 90 s (off: 65-73 and 88-111); with an 8-job study on a simulated 16-worker cluster, on:
+            27-28 evaluations/s against 39 off (the one process takes every job's asks in turn).
         max_rescore_episodes: episodes that queued and running rescores may wait for, all jobs together
             (DRIFTLAB_MAX_RESCORE_EPISODES, default 5000): rescores share the job runner's workers.
     """

@@ -5,8 +5,8 @@ from __future__ import annotations
 import argparse
 import socket
 
-from driftlab.cli import options
 from driftlab.cli.options import db_url
+from driftlab.cli.options import settings as command_settings
 from driftlab.core.errors import ConfigError
 
 
@@ -17,7 +17,7 @@ def cmd_serve(args: argparse.Namespace) -> int:
     from driftlab.server.app import create_app
     from driftlab.server.slow_clients import with_header_deadline
 
-    settings = options.settings()
+    settings = command_settings()
     if args.host not in ("127.0.0.1", "localhost", "::1") and not settings.token:
         # Reachable from other machines: every client there could start, pause and delete jobs.
         raise ConfigError(f"--host {args.host}: serving beyond this machine needs DRIFTLAB_TOKEN (mutations then "

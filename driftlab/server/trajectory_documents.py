@@ -1,11 +1,11 @@
 """GET /api/evaluations/{id}/trajectory, encoded once per evaluation.
 
 A stored trajectory never changes, and the same few are read again and again (the best of a running job, which every
-dashboard tab and rewatch asks for): decompressing one and writing its ~3000 rows as JSON or CSV takes ~15 ms of the
-one server process, which every other request then waits behind. So the encoded documents of the most recently read
-trajectories are kept, up to MAX_BYTES of text. A document is found again only for the same evaluation of the same
-job (a job id reused after a delete is another job; a renamed job has other metadata) while its trajectory is still
-stored (a job that keeps DRIFTLAB_MAX_TRAJECTORIES_PER_JOB drops older ones).
+dashboard tab and rewatch asks for): decompressing one and writing its rows as JSON or CSV took 7-25 ms of the one
+server process, which every other request then waits behind. So the encoded documents of the most recently read
+trajectories are kept, up to MAX_BYTES of text. Evaluation ids are never reused; a document is found again only
+under its job's current name (the metadata carries it) and while its trajectory is still stored (past
+DRIFTLAB_MAX_TRAJECTORIES_PER_JOB a job stores new evaluations without one).
 """
 
 from __future__ import annotations
@@ -42,7 +42,7 @@ class TrajectoryDocuments:
         if not storage.has_trajectory(session, evaluation_id=evaluation_id):
             storage.trajectory_array(session, evaluation_id=evaluation_id)  # raises NotFound, saying why
         job = storage.get_job(session, job_id=evaluation.job_id)
-        key = (evaluation_id, format, job.id, job.created_at, job.name, evaluation.index)
+        key = (evaluation_id, format, job.name)
         with self._lock:
             if key in self._documents:
                 self._documents.move_to_end(key)

@@ -16,7 +16,6 @@ from dataclasses import dataclass, field
 from sqlalchemy.orm import Session, sessionmaker
 
 from driftlab.core.convergence import best_so_far
-from driftlab.core.optimizer import BayesianOptimizer
 from driftlab.core.robust import RobustScore, SampleResult, aggregate
 from driftlab.core.statuses import EpisodeStatus
 from driftlab.core.tuning import TuningSpec
@@ -25,7 +24,7 @@ from driftlab.db.lifecycle import JobStatus
 from driftlab.db.models import Job
 from driftlab.settings import MAX_TRAJECTORIES_PER_JOB
 from driftlab.worker.executors import EpisodeExecutor, EpisodeOutcome
-from driftlab.worker.optimizer_host import OptimizerHost
+from driftlab.worker.optimizer_host import OptimizerHost, restore_optimizer
 from driftlab.worker.slots import EpisodeSlots
 
 
@@ -42,15 +41,6 @@ class Progress:
         if self.seconds_per_evaluation is None:
             return None
         return (self.iterations - self.n_done) * self.seconds_per_evaluation
-
-
-def restore_optimizer(spec: TuningSpec, history: list[tuple[dict[str, float], float | None, float]]
-                      ) -> BayesianOptimizer:
-    """An optimizer in the state it had after telling ``history`` (theta, J or None if failed, the stored J)."""
-    optimizer = BayesianOptimizer(spec.bounds, **spec.optimizer_options)
-    for theta, value, stored_j in history:
-        optimizer.tell(theta, value, stored_j)
-    return optimizer
 
 
 EXECUTOR_LOST = "episode executor unreachable"

@@ -9,7 +9,7 @@ are the same as on a local optimizer, in the same order, with the same arguments
 the server's thread (the host inherits the server's environment, and with it the BLAS thread count).
 
 If the host dies, the next call starts a new one and restores the optimizer from what was told so far, as a job
-resumed after a crash is (driftlab.worker.job_loop.restore_optimizer).
+resumed after a crash is (:func:`restore_optimizer`, which the job loop uses on its own thread too).
 """
 
 from __future__ import annotations
@@ -22,18 +22,26 @@ from concurrent.futures import ProcessPoolExecutor
 from concurrent.futures.process import BrokenProcessPool
 from typing import Any
 
+from driftlab.core.optimizer import BayesianOptimizer
 from driftlab.core.tuning import TuningSpec
 from driftlab.worker.child_process import follow_parent
 
 History = list[tuple[dict[str, float], float | None, float]]
+
+def restore_optimizer(spec: TuningSpec, history: list[tuple[dict[str, float], float | None, float]]
+                      ) -> BayesianOptimizer:
+    """An optimizer in the state it had after telling ``history`` (theta, J or None if failed, the stored J)."""
+    optimizer = BayesianOptimizer(spec.bounds, **spec.optimizer_options)
+    for theta, value, stored_j in history:
+        optimizer.tell(theta, value, stored_j)
+    return optimizer
+
 
 # In the host process: the optimizers of the jobs it serves.
 _OPTIMIZERS: dict[str, Any] = {}
 
 
 def _open(key: str, spec_doc: dict[str, Any], history: History) -> None:
-    from driftlab.worker.job_loop import restore_optimizer
-
     _OPTIMIZERS[key] = restore_optimizer(TuningSpec.from_dict(spec_doc), history)
 
 

@@ -10,6 +10,7 @@ from typing import TYPE_CHECKING, Any
 
 from driftlab.core.config import PLANT_PRESETS, EpisodeConfig, apply_overrides
 from driftlab.core.errors import ConfigError
+from driftlab.core.plants import installed_names
 from driftlab.core.robust import MAX_ROBUST_SAMPLES
 from driftlab.core.tuning import DEFAULT_CONFIRM_SAMPLES, DEFAULT_ROBUST_SAMPLES
 from driftlab.names import name_problem
@@ -91,7 +92,7 @@ def key_values(items: list[str], what: str) -> dict[str, str]:
     return pairs
 
 
-PLANT_CHOICES = tuple(PLANT_PRESETS)
+PLANT_CHOICES = (*PLANT_PRESETS, *installed_names())  # and any plant installed beside DriftLab
 
 
 def episode_config(args: argparse.Namespace) -> EpisodeConfig:

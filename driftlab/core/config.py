@@ -169,12 +169,11 @@ class EpisodeConfig:
 
     @classmethod
     def preset(cls, plant: str = "default", controller: str = "default") -> EpisodeConfig:
-        """Preset by name. plant: "default" (mismatched), "nominal" (equals the controller's model) or
-        "commonroad_std" (CommonRoad's STD, vehicle 2, with the controller's model of that car);
+        """Preset by name. plant: "default" (mismatched), "nominal" (equals the controller's model),
+        "commonroad_std" (CommonRoad's STD, vehicle 2, with the controller's model of that car), "commonroad_mb",
+        or a plant installed under the entry-point group ``driftlab.plants`` (its own preset);
         controller: "default" (DriftLab's extended MPC) or "paper" (the paper's formulation)."""
-        if plant not in PLANT_PRESETS:
-            raise ConfigError(f"plant must be one of {', '.join(PLANT_PRESETS)}, got {plant!r}")
-        plant_config = PLANT_PRESETS[plant]()
+        plant_config = _plant_preset(plant)
         controllers = {"default": plant_config.plant_type.controller, "paper": MpcConfig.paper}
         if controller not in controllers:
             raise ConfigError(f"controller must be 'default' or 'paper', got {controller!r}")
@@ -194,6 +193,17 @@ def _plant_presets() -> dict[str, Any]:
 
 
 PLANT_PRESETS = _plant_presets()
+
+
+def _plant_preset(name: str) -> PlantConfig:
+    if name in PLANT_PRESETS:
+        return PLANT_PRESETS[name]()
+    from driftlab.core.plants import installed_names, plant_type
+
+    entry = plant_type(name) if name in installed_names() else None
+    if entry is None:
+        raise ConfigError(f"plant must be one of {', '.join((*PLANT_PRESETS, *installed_names()))}, got {name!r}")
+    return entry.preset()
 
 
 def model_vehicle_for(plant: PlantConfig, scenario: ScenarioConfig) -> VehicleParams:

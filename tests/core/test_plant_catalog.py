@@ -60,3 +60,52 @@ def test_a_plant_type_registered_by_a_user_brings_its_own_model_and_weights():
     assert config.vehicle.mass_kg == pytest.approx(VehicleParams().mass_kg * 1.2)
     with pytest.raises(ConfigError, match="built in"):
         register_plant("commonroad_mb", Heavier)
+
+
+def test_a_commonroad_variant_drives_its_own_scaled_parameters():
+    from driftlab.core.commonroad.equilibrium import commonroad_drifts
+    from driftlab.core.commonroad.parameters import CR_CG_HEIGHT, CR_MASS, T, pack_commonroad, package_parameters
+    from driftlab.core.plants import CommonRoadVariant
+
+    scales = {"m": 1.3, "h_s": 1.2, "tire.p_dx1": 0.85, "tire.p_dy1": 0.85}
+    register_plant("scaled_bmw", CommonRoadVariant(scales))
+    variant = plant_type("scaled_bmw")
+    car, published = variant.car(2), package_parameters(2)
+    packed, packed_published = pack_commonroad(car), pack_commonroad(2)
+    assert packed[CR_MASS] == pytest.approx(1.3 * published.m) and packed[CR_CG_HEIGHT] == pytest.approx(
+        1.2 * published.h_s)
+    assert packed[T["p_dy1"]] == pytest.approx(0.85 * published.tire.p_dy1)
+    assert packed[T["p_ky1"]] == packed_published[T["p_ky1"]] and package_parameters(2).m == published.m
+    # Its drift is its own: 15 % less grip drifts slower (V^2 ~ mu g R), and the controller's model follows it.
+    own, bmw = commonroad_drifts(car, 44.0, 0.5)[0], commonroad_drifts(2, 44.0, 0.5)[0]
+    assert own.speed_mps < bmw.speed_mps - 0.5
+    config = EpisodeConfig.preset("scaled_bmw")
+    assert config.plant.model == "scaled_bmw" and config.scenario.sideslip_rad == 0.5
+    assert config.vehicle.mass_kg == pytest.approx(1.3 * published.m)
+    assert config.mpc == plant_type("commonroad_std").controller()  # the base car's weights until calibrated
+
+
+def test_a_variant_with_no_scales_is_its_base_car_bit_for_bit():
+    from driftlab.core.config import Theta
+    from driftlab.core.episode import run_episode
+    from driftlab.core.plants import CommonRoadVariant
+
+    register_plant("same_bmw", CommonRoadVariant({}))
+    same, bmw = EpisodeConfig.preset("same_bmw"), EpisodeConfig.preset("commonroad_std")
+    assert same.vehicle == bmw.vehicle and same.mpc == bmw.mpc
+    ours, theirs = run_episode(Theta(), same, seed=3), run_episode(Theta(), bmw, seed=3)
+    assert ours.J == theirs.J and (ours.trajectory == theirs.trajectory).all()
+
+
+def test_a_variant_refuses_a_parameter_the_package_does_not_have():
+    from driftlab.core.plants import CommonRoadVariant
+
+    register_plant("typo_bmw", CommonRoadVariant({"tire.p_dy9": 0.9}))
+    with pytest.raises(ConfigError, match="p_dy9") as refused:
+        EpisodeConfig.preset("typo_bmw")
+    assert refused.value.field == "plant.model"
+    with pytest.raises(ConfigError, match="commonroad_std or commonroad_mb"):
+        CommonRoadVariant({"m": 1.1}, base="driftlab")
+    with pytest.raises(ConfigError, match="positive"):
+        register_plant("negative_bmw", CommonRoadVariant({"m": -1.0}))
+        EpisodeConfig.preset("negative_bmw")

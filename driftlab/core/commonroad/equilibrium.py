@@ -23,7 +23,14 @@ from itertools import product
 import numpy as np
 from scipy.optimize import root
 
-from driftlab.core.commonroad.parameters import CR_CG_TO_FRONT, CR_MASS, CR_STEER_MAX, CR_WHEEL_RADIUS, pack_commonroad
+from driftlab.core.commonroad.parameters import (
+    CR_CG_TO_FRONT,
+    CR_MASS,
+    CR_STEER_MAX,
+    CR_WHEEL_RADIUS,
+    ParameterSet,
+    pack_commonroad,
+)
 from driftlab.core.commonroad.std import (
     N_STD,
     S_OMEGA_F,
@@ -127,25 +134,27 @@ def _drift(x, radius_m, sideslip_rad, cp) -> PlantDrift:
 
 
 @lru_cache(maxsize=256)
-def _family(vehicle_id: int, radius_m: float, sideslip_rad: float, friction_scale: float, mass_scale: float,
-            right: bool) -> tuple[tuple[PlantDrift, ...], tuple[PlantDrift, ...]]:
-    cp = pack_commonroad(vehicle_id, friction_scale=friction_scale, mass_scale=mass_scale)
+def _family(car: int | ParameterSet, radius_m: float, sideslip_rad: float, friction_scale: float,
+            mass_scale: float, right: bool) -> tuple[tuple[PlantDrift, ...], tuple[PlantDrift, ...]]:
+    cp = pack_commonroad(car, friction_scale=friction_scale, mass_scale=mass_scale)
     holdable, frozen = plant_drifts(radius_m, abs(sideslip_rad) if right else -abs(sideslip_rad), cp)
     return tuple(holdable), tuple(frozen)
 
 
-def commonroad_drifts(vehicle_id: int, radius_m: float, sideslip_rad: float, friction_scale: float = 1.0,
-                      mass_scale: float = 1.0, right: bool = False) -> tuple[PlantDrift, ...]:
-    """The drift family of a CommonRoad vehicle at a radius and |sideslip| (left-hand, or ``right``-hand),
-    fastest first."""
-    return _family(vehicle_id, radius_m, sideslip_rad, friction_scale, mass_scale, right)[0]
+def commonroad_drifts(car: int | ParameterSet, radius_m: float, sideslip_rad: float,
+                      friction_scale: float = 1.0, mass_scale: float = 1.0,
+                      right: bool = False) -> tuple[PlantDrift, ...]:
+    """The drift family of a CommonRoad car (a vehicle id or a ParameterSet) at a radius and |sideslip|
+    (left-hand, or ``right``-hand), fastest first."""
+    return _family(car, radius_m, sideslip_rad, friction_scale, mass_scale, right)[0]
 
 
-def frozen_front_wheel_drifts(vehicle_id: int, radius_m: float, sideslip_rad: float, friction_scale: float = 1.0,
-                              mass_scale: float = 1.0, right: bool = False) -> tuple[PlantDrift, ...]:
+def frozen_front_wheel_drifts(car: int | ParameterSet, radius_m: float, sideslip_rad: float,
+                              friction_scale: float = 1.0, mass_scale: float = 1.0,
+                              right: bool = False) -> tuple[PlantDrift, ...]:
     """The steady states that the package's frozen backward-turning front wheel holds (module docstring), fastest
     first: what a solver that does not check the wheel's sign reports as low-speed, high-wheelspin drifts."""
-    return _family(vehicle_id, radius_m, sideslip_rad, friction_scale, mass_scale, right)[1]
+    return _family(car, radius_m, sideslip_rad, friction_scale, mass_scale, right)[1]
 
 
 def describe_family(drifts: tuple[PlantDrift, ...], frozen: tuple[PlantDrift, ...] = ()) -> str | None:

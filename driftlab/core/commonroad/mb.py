@@ -15,7 +15,7 @@ from functools import lru_cache
 import numpy as np
 from numba import njit
 
-from driftlab.core.commonroad.parameters import CR_TYRE, TYRE_KEYS, package_parameters
+from driftlab.core.commonroad.parameters import CR_TYRE, TYRE_KEYS, ParameterSet, package_parameters
 from driftlab.core.commonroad.std import (
     formula_lateral,
     formula_lateral_comb,
@@ -37,8 +37,8 @@ GRAVITY_MPS2 = 9.81
 
 
 @lru_cache(maxsize=8)
-def _base_vector(vehicle_id: int) -> tuple[float, ...]:
-    p = package_parameters(vehicle_id)
+def _base_vector(car: int | ParameterSet) -> tuple[float, ...]:
+    p = package_parameters(car)
     v = np.zeros(N_MB_PARAMS)
     for i, name in enumerate(MB_KEYS):
         v[i] = getattr(p, name)
@@ -51,11 +51,11 @@ def _base_vector(vehicle_id: int) -> tuple[float, ...]:
     return tuple(float(x) for x in v)
 
 
-def pack_mb(vehicle_id: int, *, friction_scale: float = 1.0, mass_scale: float = 1.0,
+def pack_mb(car: int | ParameterSet, *, friction_scale: float = 1.0, mass_scale: float = 1.0,
             steer_rate_radps: float | None = None) -> np.ndarray:
     """MB's packed parameters, friction (PAC2002's p_dx1, p_dy1) and the sprung mass (with the total mass and the
     sprung inertias) scaled, the steering rate limit replaced (``None``: the package's 0.4 rad/s)."""
-    v = np.array(_base_vector(vehicle_id))
+    v = np.array(_base_vector(car))
     v[MB_TYRE + TYRE_KEYS.index("p_dx1")] *= friction_scale
     v[MB_TYRE + TYRE_KEYS.index("p_dy1")] *= friction_scale
     sprung = v[M_S] * mass_scale

@@ -17,7 +17,7 @@ from scipy.optimize import root
 
 from driftlab.core.commonroad.equilibrium import PlantDrift, commonroad_drifts
 from driftlab.core.commonroad.mb import R_W, A, B, M, mb_derivatives, pack_mb
-from driftlab.core.commonroad.parameters import package_parameters
+from driftlab.core.commonroad.parameters import ParameterSet, package_parameters
 
 _SUSPENSION = [6, 8, 11, 13, 16, 18, 21, 27, 28]  # roll, pitch, heave, front/rear axle roll and heave, compliance
 _STEADY = [3, 5, 10, 15, 20, 7, 9, 12, 14, 17, 19, 22, 23, 24]
@@ -44,10 +44,10 @@ def _residual(u, radius_m, sideslip_rad, cp):
     return out
 
 
-def mb_main_drift(vehicle_id: int, radius_m: float, sideslip_rad: float, right: bool = False,
+def mb_main_drift(car: int | ParameterSet, radius_m: float, sideslip_rad: float, right: bool = False,
                   friction_scale: float = 1.0, mass_scale: float = 1.0) -> PlantDrift | None:
     """The MB car's drift nearest the STD car's (the fastest physical one found), or None."""
-    found = mb_steady_state(vehicle_id, radius_m, sideslip_rad, right, friction_scale, mass_scale)
+    found = mb_steady_state(car, radius_m, sideslip_rad, right, friction_scale, mass_scale)
     return None if found is None else found[0]
 
 
@@ -61,17 +61,17 @@ def _solve(guess, radius_m: float, beta: float, cp):
     return sol.x if _physical(sol, radius_m, beta, cp) else None
 
 
-def _solve_from_std(vehicle_id: int, radius_m: float, beta: float, cp, friction_scale: float, mass_scale: float,
-                    right: bool) -> list[np.ndarray]:
+def _solve_from_std(car: int | ParameterSet, radius_m: float, beta: float, cp, friction_scale: float,
+                    mass_scale: float, right: bool) -> list[np.ndarray]:
     """MB's drifts found from the STD car's drift at the same sideslip as a start."""
     from vehiclemodels.init_mb import init_mb
 
-    std = commonroad_drifts(vehicle_id, radius_m, abs(beta), friction_scale, mass_scale, right=right)
+    std = commonroad_drifts(car, radius_m, abs(beta), friction_scale, mass_scale, right=right)
     if not std:
         return []
     start = std[0]
     rest = np.array(init_mb([0, 0, start.steer_rad, start.speed_mps, 0, start.yaw_rate_radps, beta],
-                            package_parameters(vehicle_id)))[_SUSPENSION]
+                            package_parameters(car)))[_SUSPENSION]
     found = []
     for dv, dd, spin in _GUESSES:
         speed = start.speed_mps + dv
@@ -91,8 +91,8 @@ _WALK_RAD = 0.01
 
 
 @lru_cache(maxsize=512)
-def _drift_unknowns(vehicle_id: int, radius_m: float, abs_sideslip_rad: float, right: bool, friction_scale: float,
-                    mass_scale: float) -> np.ndarray | None:
+def _drift_unknowns(car: int | ParameterSet, radius_m: float, abs_sideslip_rad: float, right: bool,
+                    friction_scale: float, mass_scale: float) -> np.ndarray | None:
     """The solved unknowns of MB's drift (see _state), or None.
 
     Started from STD's drift at the same sideslip (the fastest physical solution found); where that start misses
@@ -100,15 +100,15 @@ def _drift_unknowns(vehicle_id: int, radius_m: float, abs_sideslip_rad: float, r
     family is continuous, but the start from STD misses it at some sideslips (vehicle 2 at 44 m: 0.46, 0.48, 0.55,
     0.6 rad), and "no drift" there would be false. Cached: a sweep over sideslips walks each step once.
     """
-    cp = pack_mb(vehicle_id, friction_scale=friction_scale, mass_scale=mass_scale)
+    cp = pack_mb(car, friction_scale=friction_scale, mass_scale=mass_scale)
     beta = abs_sideslip_rad if right else -abs_sideslip_rad
-    found = _solve_from_std(vehicle_id, radius_m, beta, cp, friction_scale, mass_scale, right)
+    found = _solve_from_std(car, radius_m, beta, cp, friction_scale, mass_scale, right)
     if found:
         return max(found, key=lambda s: s[0])
     if abs(abs_sideslip_rad - _ANCHOR_RAD) < 0.5 * _WALK_RAD:
         return None
     nearer = round(abs_sideslip_rad + math.copysign(_WALK_RAD, _ANCHOR_RAD - abs_sideslip_rad), 6)
-    start = _drift_unknowns(vehicle_id, radius_m, nearer, right, friction_scale, mass_scale)
+    start = _drift_unknowns(car, radius_m, nearer, right, friction_scale, mass_scale)
     if start is None:
         return None
     for k in range(1, 5):  # quarter steps: from 0.67 to 0.68 rad one step, or two, lands on a wheel at -7e9 rad/s
@@ -119,13 +119,13 @@ def _drift_unknowns(vehicle_id: int, radius_m: float, abs_sideslip_rad: float, r
 
 
 @lru_cache(maxsize=64)
-def mb_steady_state(vehicle_id: int, radius_m: float, sideslip_rad: float, right: bool = False,
+def mb_steady_state(car: int | ParameterSet, radius_m: float, sideslip_rad: float, right: bool = False,
                     friction_scale: float = 1.0, mass_scale: float = 1.0
                     ) -> tuple[PlantDrift, np.ndarray, float] | None:
     """(the drift, MB's full 29-state vector in it, the acceleration input), or None."""
-    cp = pack_mb(vehicle_id, friction_scale=friction_scale, mass_scale=mass_scale)
+    cp = pack_mb(car, friction_scale=friction_scale, mass_scale=mass_scale)
     beta = abs(sideslip_rad) if right else -abs(sideslip_rad)
-    x = _drift_unknowns(vehicle_id, radius_m, abs(sideslip_rad), right, friction_scale, mass_scale)
+    x = _drift_unknowns(car, radius_m, abs(sideslip_rad), right, friction_scale, mass_scale)
     if x is None:
         return None
     speed, steer, accel = float(x[0]), float(x[1]), float(x[2])

@@ -66,7 +66,7 @@ def windows_text(vehicle_id: int, radius_m: float, model: Any) -> str:
     paper's tyre with the car's mass, geometry and tyre shape) has a countersteer drift; a job needs both."""
     car = _overlap(countersteer_window(model, vehicle_id, radius_m),
                    countersteer_window(model, vehicle_id, radius_m, right=True))
-    own = model_window(commonroad_model_vehicle(vehicle_id), radius_m)
+    own = model_window(commonroad_model_vehicle(model.car(vehicle_id)), radius_m)
     return (f"On a {radius_m:g} m circle (sideslips 0.20-0.80 rad scanned) CommonRoad vehicle {vehicle_id} drifts with "
             f"countersteer both ways at {_range_text(car)}, the controller's model of it at {_range_text(own)}: a "
             f"job of this car needs a scenario.sideslip_rad in {_range_text(_overlap(car, own))}")
@@ -102,7 +102,7 @@ def model_window(vehicle: VehicleParams, radius_m: float) -> tuple[float, float]
 def _fit(vehicle_id: int, radius_m: float, sideslip_rad: float, model: Any, drive_coupling: bool) -> VehicleParams:
     left = _main_drift(vehicle_id, radius_m, sideslip_rad, False, model)
     right = _main_drift(vehicle_id, radius_m, sideslip_rad, True, model)
-    base = commonroad_model_vehicle(vehicle_id)
+    base = commonroad_model_vehicle(model.car(vehicle_id))
     if drive_coupling:
         base = replace(base, rear_friction_circle=True)
         base = replace(base, rear_coupling=matched_rear_coupling(base, vehicle_id, radius_m, left, right, model))

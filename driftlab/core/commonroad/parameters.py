@@ -7,6 +7,7 @@ refused. Vehicles 2 (BMW 320i) and 3 (VW Vanagon) drive the rear axle.
 
 from __future__ import annotations
 
+from dataclasses import dataclass, fields, is_dataclass, replace
 from functools import lru_cache
 
 import numpy as np
@@ -47,15 +48,67 @@ def check_vehicle(vehicle_id: int) -> None:
                           "a driven rear axle; choose 2 (BMW 320i) or 3 (VW Vanagon)", field="plant.commonroad_vehicle")
 
 
+@dataclass(frozen=True)
+class ParameterSet:
+    """A car of one's own built on a CommonRoad parameter set: the package's vehicle ``vehicle_id`` with some of
+    its parameters scaled. ``scales`` pairs a parameter's name in the package's object (``"m"``, ``"h_s"``,
+    ``"tire.p_dy1"``, ``"steering.max"``) with its factor. Everything that reads a car's parameters takes one of
+    these or a bare vehicle id (the package's set as published); both are hashable, so the drift solvers cache by
+    them.
+    """
+
+    vehicle_id: int
+    scales: tuple[tuple[str, float], ...] = ()
+
+    def __post_init__(self) -> None:
+        check_vehicle(self.vehicle_id)
+        base = _published(self.vehicle_id)
+        for name, factor in self.scales:
+            value = _lookup(base, name)
+            if isinstance(value, bool) or not isinstance(value, int | float):
+                raise ConfigError(f"{name!r} names no number of CommonRoad's parameter set {self.vehicle_id} (a "
+                                  f"field of vehiclemodels' VehicleParameters: 'm', 'I_z', 'h_s', 'tire.p_dy1', ...)",
+                                  field="plant.model")
+            if not (isinstance(factor, int | float) and 0.0 < factor < float("inf")):
+                raise ConfigError(f"the scale of {name!r} must be a positive finite number, got {factor!r}",
+                                  field="plant.model")
+
+    def parameters(self):
+        """The package's parameter object with the scales applied."""
+        p = _published(self.vehicle_id)
+        for name, factor in self.scales:
+            p = _scaled(p, name.split("."), factor)
+        return p
+
+
+def _lookup(obj, dotted: str):
+    for part in dotted.split("."):
+        if not is_dataclass(obj) or part not in {f.name for f in fields(obj)}:
+            return None
+        obj = getattr(obj, part)
+    return obj
+
+
+def _scaled(obj, path: list[str], factor: float):
+    head, rest = path[0], path[1:]
+    value = getattr(obj, head)
+    return replace(obj, **{head: _scaled(value, rest, factor) if rest else value * factor})
+
+
 @lru_cache(maxsize=8)
-def package_parameters(vehicle_id: int):
-    """The package's own parameter object for a vehicle (1, 2 or 3)."""
+def _published(vehicle_id: int):
     return _vehiclemodels().setup_vehicle_parameters(vehicle_id=vehicle_id)
 
 
-@lru_cache(maxsize=8)
-def _base_vector(vehicle_id: int) -> tuple[float, ...]:
-    p = package_parameters(vehicle_id)
+@lru_cache(maxsize=16)
+def package_parameters(car: int | ParameterSet):
+    """The package's parameter object of a car: vehicle id 1, 2 or 3 as published, or a :class:`ParameterSet`."""
+    return car.parameters() if isinstance(car, ParameterSet) else _published(car)
+
+
+@lru_cache(maxsize=16)
+def _base_vector(car: int | ParameterSet) -> tuple[float, ...]:
+    p = package_parameters(car)
     v = np.zeros(N_CR_PARAMS)
     v[CR_MASS], v[CR_YAW_INERTIA], v[CR_CG_TO_FRONT], v[CR_CG_TO_REAR] = p.m, p.I_z, p.a, p.b
     v[CR_CG_HEIGHT], v[CR_WHEEL_RADIUS], v[CR_WHEEL_INERTIA] = p.h_s, p.R_w, p.I_y_w
@@ -69,12 +122,13 @@ def _base_vector(vehicle_id: int) -> tuple[float, ...]:
     return tuple(float(x) for x in v)
 
 
-def pack_commonroad(vehicle_id: int, *, friction_scale: float = 1.0, mass_scale: float = 1.0,
+def pack_commonroad(car: int | ParameterSet, *, friction_scale: float = 1.0, mass_scale: float = 1.0,
                     steer_rate_radps: float | None = None) -> np.ndarray:
-    """The packed parameters of a vehicle, with the plant's friction (PAC2002's peak coefficients p_dx1, p_dy1:
-    the slip stiffnesses stay) and mass (with yaw inertia) scaled, and the steering rate limit replaced
-    (``None``: the package's own, 0.4 rad/s for every vehicle, at which no drift can be caught)."""
-    v = np.array(_base_vector(vehicle_id))
+    """The packed parameters of a car (a vehicle id or a :class:`ParameterSet`), with the plant's friction
+    (PAC2002's peak coefficients p_dx1, p_dy1: the slip stiffnesses stay) and mass (with yaw inertia) scaled, and
+    the steering rate limit replaced (``None``: the package's own, 0.4 rad/s for every vehicle, at which no drift
+    can be caught)."""
+    v = np.array(_base_vector(car))
     v[T["p_dx1"]] *= friction_scale
     v[T["p_dy1"]] *= friction_scale
     v[CR_MASS] *= mass_scale
@@ -84,7 +138,7 @@ def pack_commonroad(vehicle_id: int, *, friction_scale: float = 1.0, mass_scale:
     return v
 
 
-def commonroad_model_vehicle(vehicle_id: int):
+def commonroad_model_vehicle(car: int | ParameterSet):
     """The controller's model of a CommonRoad car: mass, geometry, yaw inertia and CG height of the parameter set,
     and the paper's simplified Pacejka (mu, B, C) read off PAC2002's pure lateral formula at zero camber:
     mu = p_dy1, C = p_cy1, B = K / (C D) per unit load = |p_ky1| / (p_cy1 p_dy1) (PAC2002's E, -0.0075 for
@@ -92,7 +146,7 @@ def commonroad_model_vehicle(vehicle_id: int):
     """
     from driftlab.core.vehicle import VehicleParams
 
-    p = package_parameters(vehicle_id)
+    p = package_parameters(car)
     tyre = p.tire
     return VehicleParams(mass_kg=float(p.m), yaw_inertia_kgm2=float(p.I_z), cg_to_front_m=float(p.a),
                          cg_to_rear_m=float(p.b), friction=float(tyre.p_dy1), tyre_c=float(tyre.p_cy1),

@@ -135,8 +135,9 @@ class CommonRoadStdPlant:
 
     def __init__(self, config: PlantConfig) -> None:
         self.config = config
-        self.params = pack_commonroad(config.commonroad_vehicle, friction_scale=config.friction_scale,
-                                      mass_scale=config.mass_scale, steer_rate_radps=config.steer_rate_radps)
+        car = config.plant_type.car(config.commonroad_vehicle)
+        self.params = pack_commonroad(car, friction_scale=config.friction_scale, mass_scale=config.mass_scale,
+                                      steer_rate_radps=config.steer_rate_radps)
         self.actuators = config.actuator_params()
 
     def start_state(self, loop_state: np.ndarray) -> np.ndarray:
@@ -209,7 +210,8 @@ class CommonRoadMbPlant:
 
     def __init__(self, config: PlantConfig) -> None:
         self.config = config
-        self.params = pack_mb(config.commonroad_vehicle, friction_scale=config.friction_scale,
+        self.car = config.plant_type.car(config.commonroad_vehicle)
+        self.params = pack_mb(self.car, friction_scale=config.friction_scale,
                               mass_scale=config.mass_scale, steer_rate_radps=config.steer_rate_radps)
         self.actuators = np.append(config.actuator_params(), 1.0 if config.locked_differential else 0.0)
         self.steady: np.ndarray | None = None
@@ -222,7 +224,7 @@ class CommonRoadMbPlant:
         """Start the suspension as it sits in the car's steady drift there (if one was found)."""
         from driftlab.core.commonroad.mb_equilibrium import mb_steady_state
 
-        found = mb_steady_state(self.config.commonroad_vehicle, radius_m, sideslip_rad, False,
+        found = mb_steady_state(self.car, radius_m, sideslip_rad, False,
                                 self.config.friction_scale, self.config.mass_scale)
         self.steady = None if found is None else found[1]
 
@@ -233,7 +235,7 @@ class CommonRoadMbPlant:
 
         from driftlab.core.commonroad.parameters import package_parameters
 
-        p = package_parameters(self.config.commonroad_vehicle)
+        p = package_parameters(self.car)
         s = loop_state
         z = np.array(init_mb([s[X_POS], s[Y_POS], s[STEER], s[SPEED], s[HEADING], s[YAW_RATE], s[SIDESLIP]], p))
         rear = max(z[3], 0.0) * (1.0 - self.config.initial_rear_slip) / p.R_w

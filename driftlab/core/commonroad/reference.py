@@ -46,14 +46,15 @@ class ReferenceStdPlant:
         from dataclasses import replace
 
         self.config = config
-        base = package_parameters(config.commonroad_vehicle)
+        car = config.plant_type.car(config.commonroad_vehicle)
+        base = package_parameters(car)
         # The package's object, with the plant's steering rate and scales (as pack_commonroad applies them).
         self.p = replace(base, m=base.m * config.mass_scale, I_z=base.I_z * config.mass_scale,
                          steering=replace(base.steering, v_min=-config.steer_rate_radps, v_max=config.steer_rate_radps),
                          tire=replace(base.tire, p_dx1=base.tire.p_dx1 * config.friction_scale,
                                       p_dy1=base.tire.p_dy1 * config.friction_scale))
         self.act = config.actuator_params()
-        self.cp = pack_commonroad(config.commonroad_vehicle, friction_scale=config.friction_scale,
+        self.cp = pack_commonroad(car, friction_scale=config.friction_scale,
                                   mass_scale=config.mass_scale, steer_rate_radps=config.steer_rate_radps)
 
     def start_state(self, loop_state: np.ndarray) -> np.ndarray:

@@ -13,11 +13,11 @@ from importlib.metadata import entry_points
 
 from driftlab.core.errors import ConfigError
 from driftlab.core.plants.base import ExternalPlantType, PlantType, model_reason
-from driftlab.core.plants.commonroad import DRIFTLAB_ONLY, CommonRoadPlantType
+from driftlab.core.plants.commonroad import DRIFTLAB_ONLY, CommonRoadPlantType, CommonRoadVariant
 from driftlab.core.plants.driftlab_plant import DriftLabPlantType
 
-__all__ = ["DRIFTLAB_ONLY", "CommonRoadPlantType", "ExternalPlantType", "PlantType", "built_in_names", "model_reason",
-           "plant_type", "preset_types", "register_plant"]
+__all__ = ["DRIFTLAB_ONLY", "CommonRoadPlantType", "CommonRoadVariant", "ExternalPlantType", "PlantType",
+           "built_in_names", "installed_names", "model_reason", "plant_type", "preset_types", "register_plant"]
 
 _BUILT_IN: dict[str, PlantType] = {entry.name: entry for entry in (
     DriftLabPlantType(),
@@ -63,6 +63,14 @@ def plant_type(name: str) -> PlantType | None:
         if found:
             kind = _REGISTERED[name] = _as_type(name, found[0].load())
     return kind
+
+
+def installed_names() -> tuple[str, ...]:
+    """The plants registered in this process or installed under the entry-point group ``driftlab.plants`` (not
+    loaded: a name costs nothing until a config names it)."""
+    names = dict.fromkeys(_REGISTERED)
+    names.update(dict.fromkeys(e.name for e in entry_points(group="driftlab.plants") if e.name not in _BUILT_IN))
+    return tuple(names)
 
 
 def preset_types() -> dict[str, PlantType]:

@@ -7,6 +7,7 @@ from __future__ import annotations
 import importlib
 from typing import Any
 
+from driftlab.core.commonroad.parameters import ParameterSet
 from driftlab.core.errors import ConfigError
 from driftlab.core.mpc import MpcConfig
 from driftlab.core.plant import PlantConfig
@@ -63,6 +64,10 @@ class CommonRoadPlantType(PlantType):
             raise ConfigError("plant.steer_lag_s must be > 0 for a CommonRoad plant (the steering servo's time "
                               "constant)", field="plant.steer_lag_s")
 
+    def car(self, vehicle_id: int) -> int | ParameterSet:
+        """The parameter set this plant drives for ``plant.commonroad_vehicle`` (the package's, as published)."""
+        return vehicle_id
+
     def build(self, config: PlantConfig, model_vehicle: VehicleParams) -> Any:
         module_name, _, attribute = self.stepper.partition(":")
         return getattr(importlib.import_module(module_name), attribute)(config)
@@ -85,11 +90,11 @@ class CommonRoadPlantType(PlantType):
         if self.multibody:
             from driftlab.core.commonroad.mb_equilibrium import mb_main_drift
 
-            main = mb_main_drift(vehicle_id, radius_m, sideslip_rad, right, friction_scale, mass_scale)
+            main = mb_main_drift(self.car(vehicle_id), radius_m, sideslip_rad, right, friction_scale, mass_scale)
             return () if main is None else (main,)
         from driftlab.core.commonroad.equilibrium import commonroad_drifts
 
-        return commonroad_drifts(vehicle_id, radius_m, sideslip_rad, friction_scale, mass_scale, right=right)
+        return commonroad_drifts(self.car(vehicle_id), radius_m, sideslip_rad, friction_scale, mass_scale, right=right)
 
     def plant_reason(self, config: PlantConfig, vehicle: VehicleParams, radius_m: float, sideslip_rad: float,
                      circle: str) -> str | None:
@@ -109,3 +114,39 @@ class CommonRoadPlantType(PlantType):
         from driftlab.core.commonroad.family import family_summary
 
         return family_summary(self, config, radius_m, beta_rad)
+
+
+class CommonRoadVariant(CommonRoadPlantType):
+    """A car of one's own built on a CommonRoad model and parameter set: some of the set's parameters scaled (mass,
+    CG height, tyre friction, ...). What a user registers under the entry-point group ``driftlab.plants``
+    (docs/calibration.md, "Bring your own car"). It steps, drifts and has its controller's model fitted as its
+    base model does, from its own parameters; it starts from the base car's weights until ``driftlab calibrate``
+    stores a profile of its own.
+
+    Args:
+        scales: a parameter's name in the package's object (``"m"``, ``"h_s"``, ``"tire.p_dy1"``) -> its factor.
+        base: the CommonRoad model it is stepped with (``commonroad_std`` or ``commonroad_mb``).
+        name: its ``plant.model`` (the entry point's name when empty).
+    """
+
+    def __init__(self, scales: dict[str, float], base: str = "commonroad_std", name: str = "") -> None:
+        from driftlab.core.plants import plant_type
+
+        model = plant_type(base)
+        if not isinstance(model, CommonRoadPlantType) or isinstance(model, CommonRoadVariant):
+            raise ConfigError(f"a CommonRoad variant is built on commonroad_std or commonroad_mb, not {base!r}",
+                              field="plant.model")
+        super().__init__(name, model.stepper, multibody=model.multibody, substep_s=model.substep_s,
+                         weights=model.weights)
+        self.base = base
+        self.scales = tuple(sorted((str(key), float(value)) for key, value in scales.items()))
+
+    def __repr__(self) -> str:
+        return f"CommonRoadVariant({self.name!r}, base={self.base!r}, scales={dict(self.scales)!r})"
+
+    def car(self, vehicle_id: int) -> ParameterSet:
+        return ParameterSet(vehicle_id, self.scales)
+
+    def check(self, config: PlantConfig) -> None:
+        super().check(config)
+        self.car(config.commonroad_vehicle)  # names a scaled parameter that does not exist

@@ -20,10 +20,10 @@ def test_calibrate_stores_a_profile_that_the_next_job_of_that_car_takes(tmp_path
     out = _run("calibrate", "--plant", "commonroad_std", "--points", "0.5@44,0.2@44", "--iterations", "3",
                "--seeds", "1", "--workers", "2", "--db", str(db), "--out", str(out_file))
     assert out.returncode == 0, out.stderr
-    summary = json.loads(out.stdout)
+    summary, = json.loads(out.stdout)["profiles"]  # the point outside the window got none
     assert summary["profile_id"] == 1 and summary["plant_model"] == "commonroad_std" and summary["episodes"] == 1
     assert "skipped 0.2 rad @ R 44 m" in out.stderr  # outside the window: not run, and said why
-    profile = json.loads(out_file.read_text())
+    profile, = json.loads(out_file.read_text())["profiles"]
     assert profile["command"].startswith("driftlab calibrate --plant commonroad_std --points 0.5@44,0.2@44")
     assert profile["skipped"][0]["sideslip_rad"] == 0.2 and profile["start"]["per_point"][0]["episodes"] == 1
     assert profile["score"] <= profile["start"]["score"]  # the warm start is among the sets tried
@@ -38,3 +38,25 @@ def test_calibrate_stores_a_profile_that_the_next_job_of_that_car_takes(tmp_path
     assert profile_id == 1 and all(mpc[k] == v for k, v in profile["weights"].items())
     bad = _run("calibrate", "--plant", "commonroad_std", "--points", "0.5/44", "--db", str(db))
     assert bad.returncode == 2 and "--points" in bad.stderr and len(bad.stderr.strip().splitlines()) == 1
+
+
+def test_each_point_is_calibrated_on_its_own_from_the_scenarios_drift_outwards(tmp_path):
+    db, out_file = tmp_path / "points.db", tmp_path / "points.json"
+    out = _run("calibrate", "--plant", "commonroad_std", "--points", "0.45@44,0.5@44", "--iterations", "2",
+               "--seeds", "1", "--workers", "2", "--db", str(db), "--out", str(out_file))
+    assert out.returncode == 0, out.stderr
+    first, second = json.loads(out_file.read_text())["profiles"]
+    assert [p["sideslip_rad"] for p in first["points"] + second["points"]] == [0.5, 0.45]  # the scenario's first
+    assert [p["profile_id"] for p in json.loads(out.stdout)["profiles"]] == [1, 2]
+    # The second search tried what the first found (when it found other weights than the car's own) right after
+    # the car's own, and each known set once.
+    tried_first = second["known"][0]
+    if first["weights"] != first["start"]["weights"]:
+        assert tried_first["from"] == "profile 1 (0.5 rad @ R 44 m)" and tried_first["weights"] == first["weights"]
+    else:
+        assert tried_first["from"] == "driftlab's shipped weights"  # (2 iterations: the own set and one more)
+    together = _run("calibrate", "--plant", "commonroad_std", "--points", "0.45@44,0.5@44", "--iterations", "1",
+                    "--seeds", "1", "--workers", "2", "--one-set", "--db", str(db))
+    assert together.returncode == 0, together.stderr
+    profile, = json.loads(together.stdout)["profiles"]
+    assert len(profile["per_point"]) == 2 and profile["profile_id"] == 3

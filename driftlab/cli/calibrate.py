@@ -1,6 +1,7 @@
-"""`driftlab calibrate`: a car's MPC weights found by DriftLab's optimizer over points of its drift window
-(driftlab.core.calibration), stored as a new version of the car's profile (driftlab.db.profiles) that new jobs of
-that car take, and written as a JSON file."""
+"""`driftlab calibrate`: a car's MPC weights found by DriftLab's optimizer at points of its drift window
+(driftlab.core.calibration), each point on its own (or all of them together, ``--one-set``), stored as the car's
+profiles (driftlab.db.profiles), of which a new job of that car takes the one for its drift
+(driftlab.services.profiles), and written as a JSON file."""
 
 from __future__ import annotations
 
@@ -9,7 +10,7 @@ import json
 import shlex
 import sys
 import time
-from dataclasses import asdict
+from dataclasses import asdict, replace
 from importlib.metadata import version
 from typing import Any
 
@@ -68,15 +69,13 @@ def _model_candidates(base, args) -> list[dict[str, Any]]:
     return [{}, {"plant.model_drive_coupling": not base.plant.model_drive_coupling}]
 
 
-def _calibrate_model(base, points, executor, args) -> tuple[Any, list, list]:
+def _calibrate_model(base, points, executor, args, known) -> tuple[Any, list, list] | None:
+    """One candidate model's search over ``points`` (None: none of them is inside its window)."""
     inside, outside = split_drivable(base, points)
-    for point, reason in outside:
-        sys.stderr.write(f"skipped {point.label()}: {reason}\n")
     if not inside:
-        raise ConfigError("--points: none of the points is inside the car's drift window (`driftlab equilibrium "
-                          f"--window --plant {args.plant}` prints it)")
+        return None
     calibration = calibrate(base, inside, _run_batch(executor), iterations=args.iterations, seeds=args.seeds,
-                            seed=args.seed, on_progress=_progress)
+                            seed=args.seed, known=[mpc for _, mpc in known], on_progress=_progress)
     return calibration, inside, outside
 
 
@@ -85,52 +84,95 @@ def _summary(result, points) -> dict[str, Any]:
             "episodes": len(result.episodes), "per_point": result.per_point(points)}
 
 
-def cmd_calibrate(args: argparse.Namespace) -> int:
-    from driftlab.core.config import apply_overrides
-    from driftlab.db import profiles, storage
-    from driftlab.worker.executors import open_executor
+def _groups(given, points: list[CalibrationPoint], one_set: bool) -> list[list[CalibrationPoint]]:
+    """The searches to run: all the points together (``--one-set``), or each point on its own, from the scenario's
+    own drift outwards, so that each search knows what the nearer ones found."""
+    if one_set:
+        return [points]
+    from driftlab.services.profiles import drift_distance
 
-    given = episode_config(args)
-    points = parse_points(args.points) or default_points(given)
-    started = time.perf_counter()
-    factory = storage.open_database(db_url(args.db))
-    executor, _ = open_executor(args.workers, dask_address(args))
+    scenario = given.scenario
+    return [[p] for p in sorted(points, key=lambda p: drift_distance(scenario.sideslip_rad, scenario.left_radius_m,
+                                                                     asdict(p)))]
+
+
+def _calibrate_group(given, points, executor, args, known) -> dict[str, Any]:
+    """The weights for ``points``, each candidate model searched and the better one kept: the profile's document."""
+    from driftlab.core.config import apply_overrides
+
     candidates = []
-    try:
-        for change in _model_candidates(given, args):
-            base = apply_overrides(given, change) if change else given
-            sys.stderr.write(f"calibrating the controller's model with plant.model_drive_coupling="
-                             f"{str(base.plant.model_drive_coupling).lower()}\n")
-            candidates.append((base, *_calibrate_model(base, points, executor, args)))
-    finally:
-        executor.shutdown()
+    for change in _model_candidates(given, args):
+        base = apply_overrides(given, change) if change else given
+        sys.stderr.write(f"calibrating {', '.join(p.label() for p in points)} with plant.model_drive_coupling="
+                         f"{str(base.plant.model_drive_coupling).lower()}\n")
+        found = _calibrate_model(base, points, executor, args, known)
+        if found is not None:
+            candidates.append((base, *found))
     base, calibration, inside, outside = min(candidates, key=lambda c: (c[1].best.score, -c[1].best.completed))
     best, start = calibration.best, calibration.tried[0]
     radii = sorted({p.radius_m for p, _ in inside})
     window = [drift_window(config, config.scenario.left_radius_m, 0.2, 1.0).as_dict()
               for config in (next(c for p, c in inside if p.radius_m == r) for r in radii)]
-    document: dict[str, Any] = {
+    return {
         "plant_model": base.plant.model, "vehicle_id": base.plant.commonroad_vehicle,
         "plant": config_to_dict(base)["plant"], "mpc": {**config_to_dict(base)["mpc"], **best.weights},
         **_summary(best, calibration.points), "start": _summary(start, calibration.points),
         "candidates": [{"model_drive_coupling": b.plant.model_drive_coupling, **_summary(c.best, c.points)}
                        for b, c, _, _ in candidates],
+        "known": [{"from": label, **_summary(result, calibration.points)}
+                  for (label, _), result in zip(known, calibration.known_results(), strict=True) if result],
         "points": [asdict(p) for p in calibration.points],
         "skipped": [{**asdict(p), "reason": reason} for p, reason in outside],
         "window": window, "seeds": calibration.seeds, "iterations": args.iterations, "theta": "untuned",
-        "command": "driftlab " + " ".join(shlex.quote(a) for a in args.argv),
-        "driftlab_version": version("driftlab"), "wall_s": round(time.perf_counter() - started, 1)}
+        "command": "driftlab " + " ".join(shlex.quote(a) for a in args.argv), "driftlab_version": version("driftlab")}
+
+
+SUMMARY_KEYS = ("profile_id", "plant_model", "vehicle_id", "score", "completed", "episodes", "per_point", "start",
+                "candidates", "window", "weights", "wall_s")
+
+
+def cmd_calibrate(args: argparse.Namespace) -> int:
+    from driftlab.db import profiles, storage
+    from driftlab.services.profiles import known_weight_sets
+    from driftlab.worker.executors import open_executor
+
+    given = episode_config(args)
+    points = parse_points(args.points) or default_points(given)
+    inside, outside = split_drivable(given, points)
+    for point, reason in outside:
+        sys.stderr.write(f"skipped {point.label()}: {reason}\n")
+    if not inside:
+        raise ConfigError("--points: none of the points is inside the car's drift window (`driftlab equilibrium "
+                          f"--window --plant {args.plant}` prints it)")
+    factory = storage.open_database(db_url(args.db))
     with storage.transaction(factory) as session:
-        profile = profiles.add_profile(session, plant_model=base.plant.model,
-                                       vehicle_id=base.plant.commonroad_vehicle, document=document)
-        document = {"profile_id": profile.id, **document}
-    storage.close_database(factory)
+        known = known_weight_sets(session, given.mpc)
+    executor, _ = open_executor(args.workers, dask_address(args))
+    documents = []
+    try:
+        for group in _groups(given, [p for p, _ in inside], args.one_set):
+            started = time.perf_counter()
+            sys.stderr.write(f"after the car's own weights, {len(known)} weight sets known to drive other cars or "
+                             f"drifts: {'; '.join(label for label, _ in known)}\n")
+            document = _calibrate_group(given, group, executor, args, known)
+            document["skipped"] += [{**asdict(p), "reason": reason} for p, reason in outside]
+            document["wall_s"] = round(time.perf_counter() - started, 1)
+            with storage.transaction(factory) as session:
+                profile = profiles.add_profile(session, plant_model=document["plant_model"],
+                                               vehicle_id=document["vehicle_id"], document=document)
+                documents.append({"profile_id": profile.id, **document})
+            found = replace(given.mpc, **document["weights"])
+            if found != given.mpc and all(found != mpc for _, mpc in known):
+                points_text = ", ".join(CalibrationPoint(**p).label() for p in document["points"])
+                known = [(f"profile {profile.id} ({points_text})", found), *known]
+    finally:
+        executor.shutdown()
+        storage.close_database(factory)
     if args.out:
         with open(args.out, "w") as handle:
-            json.dump(finite(document), handle, indent=1)
-    print(json.dumps(finite({k: document[k] for k in ("profile_id", "plant_model", "vehicle_id", "score",
-                                                      "completed", "episodes", "per_point", "start", "candidates",
-                                                      "window", "weights", "wall_s")})))
+            json.dump(finite({"profiles": documents}), handle, indent=1)
+    print(json.dumps(finite({"profiles": [{k: d[k] for k in SUMMARY_KEYS} for d in documents],
+                             "wall_s": round(sum(d["wall_s"] for d in documents), 1)})))
     return 0
 
 
@@ -151,5 +193,8 @@ def add_calibrate_parser(sub, db_help: str, dask_help: str, int_in, plant_choice
                      help="episodes in flight (default: 1 local process, the cluster's threads with --dask)")
     cal.add_argument("--dask", metavar="ADDRESS", help=dask_help)
     cal.add_argument("--db", help=db_help)
-    cal.add_argument("--out", help="also write the profile to this JSON file")
+    cal.add_argument("--one-set", action="store_true",
+                     help="one weight set for all the points (default: each point searched on its own and stored as "
+                          "a profile of its own, which the jobs at that drift take)")
+    cal.add_argument("--out", help="also write the profiles to this JSON file")
     return cal

@@ -105,12 +105,12 @@ def weights_of(x: dict[str, float]) -> dict[str, float]:
     return out
 
 
-def search_point(mpc: MpcConfig) -> dict[str, float]:
-    """``mpc``'s weights as a point of the search space, clipped into the limits."""
-    x = {f"log10_{name}": min(max(math.log10(getattr(mpc, name)), lo), hi)
-         for name, (lo, hi) in LOG_WEIGHT_LIMITS.items()}
-    x.update({name: min(max(getattr(mpc, name), lo), hi) for name, (lo, hi) in LINEAR_LIMITS.items()})
-    return x
+def search_point(mpc: MpcConfig, bounds: dict[str, tuple[float, float]] | None = None) -> dict[str, float]:
+    """``mpc``'s weights as a point of the search space, clipped into ``bounds`` (default: the limits)."""
+    x = {f"log10_{name}": math.log10(getattr(mpc, name)) for name in LOG_WEIGHT_LIMITS}
+    x.update({name: getattr(mpc, name) for name in LINEAR_LIMITS})
+    box = bounds or {**{f"log10_{name}": limits for name, limits in LOG_WEIGHT_LIMITS.items()}, **LINEAR_LIMITS}
+    return {name: min(max(value, box[name][0]), box[name][1]) for name, value in x.items()}
 
 
 def with_weights(config: EpisodeConfig, weights: dict[str, float]) -> EpisodeConfig:
@@ -174,6 +174,11 @@ class Calibration:
     points: list[CalibrationPoint]
     seeds: list[int]
     tried: list[WeightSetResult] = field(default_factory=list)
+    known_tried: list[int] = field(default_factory=list)  # per known weight set, its index in ``tried``
+
+    def known_results(self) -> list[WeightSetResult | None]:
+        """What each known weight set did (None: not reached within the iterations)."""
+        return [self.tried[i] if i < len(self.tried) else None for i in self.known_tried]
 
     @property
     def best(self) -> WeightSetResult | None:
@@ -181,18 +186,27 @@ class Calibration:
 
 
 def calibrate(base: EpisodeConfig, points: Sequence[tuple[CalibrationPoint, EpisodeConfig]], run_batch: RunBatch, *,
-              iterations: int = 150, seeds: int = 3, seed: int = 0,
+              iterations: int = 150, seeds: int = 3, seed: int = 0, known: Sequence[MpcConfig] = (),
               on_progress: Callable[[Calibration], None] | None = None) -> Calibration:
     """Search the MPC weights for ``points`` (the drivable ones, with their configs, :func:`split_drivable`).
 
-    The first weight set is ``base``'s own (the warm start); the next ``seed_points`` of the optimizer start near
-    it (its local phase), then the GP and expected improvement take over.
+    The first weight set is ``base``'s own (the warm start); then each of ``known`` (weight sets that drive other
+    cars: what a calibration of a similar car found is a better guess than a random one), clipped into the box
+    around ``base``'s; the next of the optimizer's ``seed_points`` start near ``base``'s (its local phase), then the
+    GP and expected improvement take over.
     """
     calibration = Calibration([p for p, _ in points], [CALIBRATION_SEED_BASE + j for j in range(seeds)])
-    start = search_point(base.mpc)
-    optimizer = BayesianOptimizer(search_bounds(base.mpc), seed_points=min(20, iterations), seed=seed,
-                                  initial_points=[start], local_points=min(10, iterations), local_radius=0.15,
-                                  local_growth=max(iterations // 2, 1))
+    bounds = search_bounds(base.mpc)
+    starts = [search_point(base.mpc, bounds)]
+    for mpc in known:  # a set tried already (clipped into the same point) is not tried twice
+        x = search_point(mpc, bounds)
+        if x not in starts:
+            starts.append(x)
+        calibration.known_tried.append(starts.index(x))
+    seed_points = min(max(20, len(starts)), iterations)
+    optimizer = BayesianOptimizer(bounds, seed_points=seed_points, seed=seed, initial_points=starts[:seed_points],
+                                  local_points=min(10, seed_points - min(len(starts), seed_points)),
+                                  local_radius=0.15, local_growth=max(iterations // 2, 1))
     documents = [config_to_dict(config) for _, config in points]
     theta = Theta().as_dict()
     for _ in range(iterations):

@@ -5,7 +5,7 @@ from __future__ import annotations
 
 from typing import Any
 
-from sqlalchemy import select
+from sqlalchemy import func, select
 from sqlalchemy.orm import Session
 
 from driftlab.db.models import CarProfile
@@ -19,10 +19,18 @@ def add_profile(session: Session, *, plant_model: str, vehicle_id: int, document
     return profile
 
 
-def latest_profile(session: Session, *, plant_model: str, vehicle_id: int) -> CarProfile | None:
-    return session.scalar(select(CarProfile).where(CarProfile.plant_model == plant_model,
-                                                   CarProfile.vehicle_id == vehicle_id)
-                          .order_by(CarProfile.id.desc()).limit(1))
+def car_profiles(session: Session, *, plant_model: str, vehicle_id: int) -> list[CarProfile]:
+    """Every profile of one car, oldest first."""
+    return list(session.scalars(select(CarProfile).where(CarProfile.plant_model == plant_model,
+                                                         CarProfile.vehicle_id == vehicle_id)
+                                .order_by(CarProfile.id)))
+
+
+def newest_profiles(session: Session) -> list[CarProfile]:
+    """The newest profile of each car (plant model, vehicle), newest first."""
+    newest = (select(func.max(CarProfile.id)).group_by(CarProfile.plant_model, CarProfile.vehicle_id)
+              .scalar_subquery())
+    return list(session.scalars(select(CarProfile).where(CarProfile.id.in_(newest)).order_by(CarProfile.id.desc())))
 
 
 def get_profile(session: Session, *, profile_id: int) -> CarProfile:

@@ -1,16 +1,18 @@
-"""A new job of a calibrated car takes the car's newest profile (driftlab.db.profiles): the controller's model
-``driftlab calibrate`` chose for it (``plant.model_drive_coupling``) and the MPC weights it found, unless the job's
-config names ``mpc.*`` keys itself (or the paper's controller). Both land in the job's stored config like any other
-setting, so the job re-runs bit for bit whatever profiles come later; the job records the profile's id."""
+"""A new job of a calibrated car takes the car's profile (driftlab.db.profiles) that drove the job's drift best
+(:func:`profile_for`): the controller's model ``driftlab calibrate`` chose for it (``plant.model_drive_coupling``)
+and the MPC weights it found, unless the job's config names ``mpc.*`` keys itself (or the paper's controller). Both
+land in the job's stored config like any other setting, so the job re-runs bit for bit whatever profiles come
+later; the job records the profile's id."""
 
 from __future__ import annotations
 
-from dataclasses import replace
+from dataclasses import asdict, replace
 from typing import Any
 
 from sqlalchemy.orm import Session
 
 from driftlab.core.config import apply_overrides, dotted_config
+from driftlab.core.mpc import MpcConfig
 from driftlab.core.tuning import TuningSpec
 from driftlab.db import profiles
 
@@ -20,12 +22,72 @@ def gives_weights(config_document: Any) -> bool:
     return any(key.startswith("mpc.") for key in dotted_config(config_document or {}))
 
 
+def known_weight_sets(session: Session, car: MpcConfig) -> list[tuple[str, MpcConfig]]:
+    """Every weight set DriftLab knows to drive some car, other than ``car``'s own: the newest profile of each
+    calibrated car in this database, newest first, then the weights each plant of the catalog ships
+    (driftlab.core.plants). A calibration tries them after the car's own (driftlab.core.calibration.calibrate)."""
+    from driftlab.core.plants import built_in_names, plant_type
+
+    found: list[tuple[str, MpcConfig]] = []
+    seen = {tuple(sorted(asdict(car).items()))}
+    for profile in profiles.newest_profiles(session):
+        found.append((f"profile {profile.id} ({profile.plant_model}, vehicle {profile.vehicle_id})",
+                      replace(car, **profile.document["weights"])))
+    found += [(f"{name}'s shipped weights", plant_type(name).controller()) for name in built_in_names()]
+    unique = []
+    for label, mpc in found:
+        key = tuple(sorted(asdict(mpc).items()))
+        if key not in seen:
+            seen.add(key)
+            unique.append((label, mpc))
+    return unique
+
+
+# How far apart two drifts are: 0.05 rad of sideslip counts as much as 20 % of the circle's radius (the spacing of
+# the default calibration points, driftlab.core.calibration.default_points).
+SIDESLIP_STEP_RAD = 0.05
+RADIUS_STEP = 0.2
+
+
+def drift_distance(sideslip_rad: float, radius_m: float, point: dict[str, Any]) -> float:
+    """How far a calibrated point (``sideslip_rad``, ``radius_m``) lies from the drift (sideslip, radius)."""
+    return (abs(point["sideslip_rad"] - sideslip_rad) / SIDESLIP_STEP_RAD
+            + abs(point["radius_m"] - radius_m) / (RADIUS_STEP * radius_m))
+
+
+def profile_for(candidates: list[Any], sideslip_rad: float, radius_m: float) -> Any | None:
+    """Of a car's profiles (each with ``id`` and ``document``), the one whose weights drove the calibrated point
+    nearest this drift best: the nearest point first (a profile calibrated at the job's own drift wins), then the
+    share of its episodes completed there, then their mean |e|, then the newest. A calibration over several points
+    finds one weight set for all of them; where a car needs other weights at another drift (the BMW at 0.45 rad
+    does), a calibration at that point alone (the default of ``driftlab calibrate``) gives them, and the jobs there
+    take them. A profile whose weights completed none of their episodes at that point is not taken (the car's
+    default weights are no worse a start). A profile stored without its record (none of this release's) counts as
+    far from every drift, the newest first."""
+    def record_here(profile) -> dict[str, Any] | None:
+        record = profile.document.get("per_point") or []
+        return min(record, key=lambda point: drift_distance(sideslip_rad, radius_m, point), default=None)
+
+    def rank(profile) -> tuple[float, float, float, int]:
+        here = record_here(profile)
+        if here is None:
+            return (float("inf"), 0.0, float("inf"), -profile.id)
+        error = here.get("mean_abs_e_m")
+        return (round(drift_distance(sideslip_rad, radius_m, here), 9),
+                -here["completed"] / max(here["episodes"], 1), float("inf") if error is None else error,
+                -profile.id)
+    usable = [p for p in candidates if (here := record_here(p)) is None or here["completed"] > 0]
+    return min(usable, key=rank, default=None)
+
+
 def with_profile(session: Session, spec: TuningSpec, config_document: Any) -> tuple[TuningSpec, int | None]:
-    """``spec`` with its car's newest profile's weights, and that profile's id (None: none applies)."""
+    """``spec`` with the weights of its car's profile for its drift (:func:`profile_for`), and that profile's id
+    (None: none applies)."""
     if gives_weights(config_document):
         return spec, None
-    plant = spec.config.plant
-    profile = profiles.latest_profile(session, plant_model=plant.model, vehicle_id=plant.commonroad_vehicle)
+    plant, scenario = spec.config.plant, spec.config.scenario
+    profile = profile_for(profiles.car_profiles(session, plant_model=plant.model, vehicle_id=plant.commonroad_vehicle),
+                          scenario.sideslip_rad, scenario.left_radius_m)
     if profile is None:
         return spec, None
     config = spec.config

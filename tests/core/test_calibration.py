@@ -10,6 +10,7 @@ from driftlab.core.calibration import (
     CalibrationPoint,
     calibrate,
     default_points,
+    search_bounds,
     search_point,
     split_drivable,
     weights_of,
@@ -69,3 +70,28 @@ def test_the_search_starts_from_the_cars_weights_and_improves_on_them():
     assert start.completed == 2 and best.completed == 4 and best.score < start.score
     assert 1.6 < math.log10(best.weights["q_sideslip"]) < 2.6
     assert best.per_point([p for p, _ in points])[0]["completed"] == 2
+
+
+def test_weight_sets_known_to_drive_other_cars_are_tried_right_after_the_cars_own():
+    """The landscape of the test above: a known set inside the band completes everywhere from the second set on,
+    and a known set outside the search box is clipped into it."""
+    from dataclasses import replace
+
+    base = EpisodeConfig()
+    points = [(CalibrationPoint(0.4, 44.0), base)]
+
+    def run_batch(batch):
+        out = []
+        for _, doc, _ in batch:
+            x = math.log10(doc["mpc"]["q_sideslip"])
+            ok = 1.6 < x < 2.6
+            out.append(("completed" if ok else "spun_out", (x - 2.2) ** 2 - 1.0, 1.0 if ok else 0.4, 0.1))
+        return out
+
+    good, far = replace(base.mpc, q_sideslip=10 ** 2.2), replace(base.mpc, q_sideslip=1e-6)
+    calibration = calibrate(base, points, run_batch, iterations=5, seeds=1, known=[good, far])
+    sideslip = [math.log10(result.weights["q_sideslip"]) for result in calibration.tried]
+    assert sideslip[1] == pytest.approx(2.2) and calibration.tried[1].completed == 1
+    lo, _ = search_bounds(base.mpc)["log10_q_sideslip"]
+    assert sideslip[2] == pytest.approx(lo)
+    assert calibration.best.weights["q_sideslip"] == pytest.approx(10 ** 2.2)

@@ -38,3 +38,66 @@ def test_a_profile_brings_the_controllers_model_it_was_calibrated_with(tmp_path)
         config = job["spec"]["config"]
         assert job["profile_id"] == profile_id and config["plant"]["model_drive_coupling"] is True
         assert config["vehicle"]["rear_friction_circle"] is True and 0.0 < config["vehicle"]["rear_coupling"] < 1.0
+
+
+def test_a_calibration_knows_each_calibrated_cars_newest_weights_then_the_shipped_ones(tmp_path):
+    from dataclasses import replace
+
+    from driftlab.core.mpc import MpcConfig
+    from driftlab.core.plants import plant_type
+    from driftlab.services.profiles import known_weight_sets
+
+    factory = storage.open_database(f"sqlite:///{tmp_path / 'known.db'}")
+    try:
+        with storage.transaction(factory) as session:
+            profiles.add_profile(session, plant_model="heavy", vehicle_id=2, document={"weights": {"q_speed": 1.0}})
+            heavy = profiles.add_profile(session, plant_model="heavy", vehicle_id=2,
+                                         document={"weights": {"q_speed": 2.0}}).id
+            vanagon = profiles.add_profile(session, plant_model="commonroad_std", vehicle_id=3,
+                                           document={"weights": {"q_speed": 3.0}}).id
+        std = plant_type("commonroad_std").controller()
+        with storage.transaction(factory) as session:
+            known = known_weight_sets(session, std)
+    finally:
+        storage.close_database(factory)
+    labels = [label for label, _ in known]
+    assert labels[:2] == [f"profile {vanagon} (commonroad_std, vehicle 3)", f"profile {heavy} (heavy, vehicle 2)"]
+    assert [mpc.q_speed for _, mpc in known[:2]] == [3.0, 2.0]  # the older profile of the heavy car is not there
+    assert known[0][1] == replace(std, q_speed=3.0)  # a profile's weights on the car's own set
+    shipped = [mpc for label, mpc in known if "shipped" in label]
+    assert MpcConfig() in shipped and plant_type("commonroad_mb").controller() in shipped
+    assert std not in [mpc for _, mpc in known]  # the car's own set is its start, not a known one
+
+
+def _record(sideslip_rad, radius_m, completed, mean_abs_e_m):
+    return {"sideslip_rad": sideslip_rad, "radius_m": radius_m, "completed": completed, "episodes": 4,
+            "mean_abs_e_m": mean_abs_e_m}
+
+
+def test_a_job_takes_the_profile_that_drove_its_own_drift_best(tmp_path):
+    window = [_record(0.45, 44.0, 0, None), _record(0.5, 44.0, 4, 0.2), _record(0.55, 44.0, 4, 1.3),
+              _record(0.5, 32.0, 4, 0.2), _record(0.5, 52.0, 4, 0.3)]
+    with in_process_client(tmp_path / "points.db") as client:
+        with storage.transaction(client.app.state.factory) as session:
+            whole = profiles.add_profile(session, plant_model="commonroad_std", vehicle_id=2, document={
+                "weights": {"q_sideslip": 100.0}, "per_point": window}).id
+            at_045 = profiles.add_profile(session, plant_model="commonroad_std", vehicle_id=2, document={
+                "weights": {"q_sideslip": 200.0}, "per_point": [_record(0.45, 44.0, 4, 0.3)]}).id
+            worse_at_055 = profiles.add_profile(session, plant_model="commonroad_std", vehicle_id=2, document={
+                "weights": {"q_sideslip": 300.0}, "per_point": [_record(0.55, 44.0, 3, 0.4)]}).id
+            profiles.add_profile(session, plant_model="commonroad_std", vehicle_id=2, document={
+                "weights": {"q_sideslip": 400.0}, "per_point": [_record(0.5, 30.0, 0, None)]})
+
+        def taken(sideslip_rad, radius_m=44.0):
+            config = {**CAR, "scenario.sideslip_rad": sideslip_rad, "scenario.left_radius_m": radius_m,
+                      "scenario.right_radius_m": radius_m}
+            job = client.post("/api/jobs", json={"iterations": 1, "config": config})
+            assert job.status_code == 201, job.text
+            return job.json()["profile_id"], job.json()["spec"]["config"]["mpc"]["q_sideslip"]
+
+        assert taken(0.45) == (at_045, 200.0)  # calibrated there, and it completed where the whole set did not
+        assert taken(0.5) == (whole, 100.0)
+        assert taken(0.55) == (whole, 100.0)  # 4 of 4 beat 3 of 4 at the same point, whatever the newer's error
+        assert taken(0.46) == (at_045, 200.0)  # the nearest calibrated point decides
+        assert taken(0.5, 31.0) == (whole, 100.0)  # calibrated at 30 m, but nothing completed with those weights
+    assert worse_at_055 > whole

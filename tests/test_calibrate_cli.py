@@ -38,6 +38,8 @@ def test_calibrate_stores_a_profile_that_the_next_job_of_that_car_takes(tmp_path
     assert profile_id == 1 and all(mpc[k] == v for k, v in profile["weights"].items())
     bad = _run("calibrate", "--plant", "commonroad_std", "--points", "0.5/44", "--db", str(db))
     assert bad.returncode == 2 and "--points" in bad.stderr and len(bad.stderr.strip().splitlines()) == 1
+    bad = _run("calibrate", "--plant", "commonroad_std", "--theta", "dV=0.1,nope=1", "--db", str(db))
+    assert bad.returncode == 2 and "'nope'" in bad.stderr and len(bad.stderr.strip().splitlines()) == 1
 
 
 def test_each_point_is_calibrated_on_its_own_from_the_scenarios_drift_outwards(tmp_path):
@@ -56,7 +58,9 @@ def test_each_point_is_calibrated_on_its_own_from_the_scenarios_drift_outwards(t
     else:
         assert tried_first["from"] == "driftlab's shipped weights"  # (2 iterations: the own set and one more)
     together = _run("calibrate", "--plant", "commonroad_std", "--points", "0.45@44,0.5@44", "--iterations", "1",
-                    "--seeds", "1", "--workers", "2", "--one-set", "--db", str(db))
+                    "--seeds", "1", "--workers", "2", "--one-set", "--theta", "dV=0.1", "--db", str(db),
+                    "--out", str(out_file))
     assert together.returncode == 0, together.stderr
     profile, = json.loads(together.stdout)["profiles"]
     assert len(profile["per_point"]) == 2 and profile["profile_id"] == 3
+    assert json.loads(out_file.read_text())["profiles"][0]["theta"]["dV"] == 0.1

@@ -75,8 +75,16 @@ def _calibrate_model(base, points, executor, args, known) -> tuple[Any, list, li
     if not inside:
         return None
     calibration = calibrate(base, inside, _run_batch(executor), iterations=args.iterations, seeds=args.seeds,
-                            seed=args.seed, known=[mpc for _, mpc in known], on_progress=_progress)
+                            seed=args.seed, known=[mpc for _, mpc in known], theta=_theta(args),
+                            on_progress=_progress)
     return calibration, inside, outside
+
+
+def _theta(args: argparse.Namespace):
+    from driftlab.cli.options import key_values
+    from driftlab.core.config import Theta
+
+    return Theta.from_mapping(key_values(args.theta.split(",") if args.theta else [], "--theta"))
 
 
 def _summary(result, points) -> dict[str, Any]:
@@ -123,7 +131,8 @@ def _calibrate_group(given, points, executor, args, known) -> dict[str, Any]:
                   for (label, _), result in zip(known, calibration.known_results(), strict=True) if result],
         "points": [asdict(p) for p in calibration.points],
         "skipped": [{**asdict(p), "reason": reason} for p, reason in outside],
-        "window": window, "seeds": calibration.seeds, "iterations": args.iterations, "theta": "untuned",
+        "window": window, "seeds": calibration.seeds, "iterations": args.iterations,
+        "theta": _theta(args).as_dict() if args.theta else "untuned",
         "command": "driftlab " + " ".join(shlex.quote(a) for a in args.argv), "driftlab_version": version("driftlab")}
 
 
@@ -137,6 +146,7 @@ def cmd_calibrate(args: argparse.Namespace) -> int:
     from driftlab.worker.executors import open_executor
 
     given = episode_config(args)
+    _theta(args)  # a bad --theta is refused before anything runs
     points = parse_points(args.points) or default_points(given)
     inside, outside = split_drivable(given, points)
     for point, reason in outside:
@@ -193,6 +203,8 @@ def add_calibrate_parser(sub, db_help: str, dask_help: str, int_in, plant_choice
                      help="episodes in flight (default: 1 local process, the cluster's threads with --dask)")
     cal.add_argument("--dask", metavar="ADDRESS", help=dask_help)
     cal.add_argument("--db", help=db_help)
+    cal.add_argument("--theta", help="the theta every weight set drives, c_lr=..,c_rl=..,dV=..,k=.. (any subset; "
+                     "default: the untuned theta), e.g. the best theta a job learned at the point")
     cal.add_argument("--one-set", action="store_true",
                      help="one weight set for all the points (default: each point searched on its own and stored as "
                           "a profile of its own, which the jobs at that drift take)")

@@ -187,13 +187,14 @@ class Calibration:
 
 def calibrate(base: EpisodeConfig, points: Sequence[tuple[CalibrationPoint, EpisodeConfig]], run_batch: RunBatch, *,
               iterations: int = 150, seeds: int = 3, seed: int = 0, known: Sequence[MpcConfig] = (),
-              on_progress: Callable[[Calibration], None] | None = None) -> Calibration:
+              theta: Theta | None = None, on_progress: Callable[[Calibration], None] | None = None) -> Calibration:
     """Search the MPC weights for ``points`` (the drivable ones, with their configs, :func:`split_drivable`).
 
     The first weight set is ``base``'s own (the warm start); then each of ``known`` (weight sets that drive other
     cars: what a calibration of a similar car found is a better guess than a random one), clipped into the box
     around ``base``'s; the next of the optimizer's ``seed_points`` start near ``base``'s (its local phase), then the
-    GP and expected improvement take over.
+    GP and expected improvement take over. Every set drives ``theta`` (default: the untuned one); a theta a job
+    learned at the point lets the weights be searched for the flick that job found.
     """
     calibration = Calibration([p for p, _ in points], [CALIBRATION_SEED_BASE + j for j in range(seeds)])
     bounds = search_bounds(base.mpc)
@@ -208,7 +209,7 @@ def calibrate(base: EpisodeConfig, points: Sequence[tuple[CalibrationPoint, Epis
                                   local_points=min(10, seed_points - min(len(starts), seed_points)),
                                   local_radius=0.15, local_growth=max(iterations // 2, 1))
     documents = [config_to_dict(config) for _, config in points]
-    theta = Theta().as_dict()
+    theta = (theta or Theta()).as_dict()
     for _ in range(iterations):
         x = optimizer.ask()
         weights = weights_of(x)

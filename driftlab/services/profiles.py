@@ -61,9 +61,11 @@ def profile_for(candidates: list[Any], sideslip_rad: float, radius_m: float) -> 
     share of its episodes completed there, then their mean |e|, then the newest. A calibration over several points
     finds one weight set for all of them; where a car needs other weights at another drift (the BMW at 0.45 rad
     does), a calibration at that point alone (the default of ``driftlab calibrate``) gives them, and the jobs there
-    take them. A profile whose weights completed none of their episodes at that point is not taken (the car's
-    default weights are no worse a start). A profile stored without its record (none of this release's) counts as
-    far from every drift, the newest first."""
+    take them. A profile is taken only where it was calibrated less than one step from the job's drift
+    (:func:`drift_distance` < 1) and its weights completed some of their episodes there: weights do not carry over
+    further (the BMW's, found at 0.50 rad, spin out every episode of a job at 0.55; the set shipped for the whole
+    window completes them), so the car's default weights are the job's then. A profile stored without its record
+    (none of this release's) applies anywhere, the newest first."""
     def record_here(profile) -> dict[str, Any] | None:
         record = profile.document.get("per_point") or []
         return min(record, key=lambda point: drift_distance(sideslip_rad, radius_m, point), default=None)
@@ -76,7 +78,8 @@ def profile_for(candidates: list[Any], sideslip_rad: float, radius_m: float) -> 
         return (round(drift_distance(sideslip_rad, radius_m, here), 9),
                 -here["completed"] / max(here["episodes"], 1), float("inf") if error is None else error,
                 -profile.id)
-    usable = [p for p in candidates if (here := record_here(p)) is None or here["completed"] > 0]
+    usable = [p for p in candidates if (here := record_here(p)) is None
+              or (here["completed"] > 0 and drift_distance(sideslip_rad, radius_m, here) < 1.0)]
     return min(usable, key=rank, default=None)
 
 

@@ -101,3 +101,16 @@ def test_a_job_takes_the_profile_that_drove_its_own_drift_best(tmp_path):
         assert taken(0.46) == (at_045, 200.0)  # the nearest calibrated point decides
         assert taken(0.5, 31.0) == (whole, 100.0)  # calibrated at 30 m, but nothing completed with those weights
     assert worse_at_055 > whole
+
+
+def test_weights_are_taken_no_further_than_a_step_from_where_they_were_calibrated():
+    from types import SimpleNamespace
+
+    from driftlab.services.profiles import profile_for
+
+    at_05 = SimpleNamespace(id=1, document={"per_point": [_record(0.5, 44.0, 4, 0.2)]})
+    old = SimpleNamespace(id=2, document={"weights": {}})  # stored before profiles had their record
+    assert profile_for([at_05], 0.54, 44.0) is at_05
+    assert profile_for([at_05], 0.55, 44.0) is None  # a whole step away: the car's default weights
+    assert profile_for([at_05], 0.5, 44.0 * 1.25) is None
+    assert profile_for([at_05, old], 0.55, 44.0) is old

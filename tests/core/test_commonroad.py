@@ -335,10 +335,11 @@ def test_sideslip_window_finds_a_runs_edges_to_the_grid():
 
 def test_a_refused_sideslip_names_where_the_car_and_its_model_both_drift():
     """The window the refusal names, checked point by point: the car's main drift countersteers both ways at its
-    edges and not one step outside, the controller's model has a drift at its upper edge and none one step above."""
+    edges and not one step outside. The model read off the car's tyres drifts up to 0.57 rad; above, its front grip
+    is raised until it does, so the car's own window is the job's."""
     config = EpisodeConfig.preset("commonroad_std")
     with pytest.raises(ConfigError) as refused:
-        apply_overrides(config, {"scenario.sideslip_rad": 0.7})
+        apply_overrides(config, {"scenario.sideslip_rad": 0.3})
     found = re.search(r"needs a scenario.sideslip_rad in (\d\.\d\d)-(\d\.\d\d) rad", str(refused.value))
     assert found and refused.value.field == "scenario.sideslip_rad", str(refused.value)
     low, high = float(found[1]), float(found[2])
@@ -349,8 +350,11 @@ def test_a_refused_sideslip_names_where_the_car_and_its_model_both_drift():
 
     assert car_countersteers(low, False) and car_countersteers(low, True)
     assert not (car_countersteers(round(low - 0.01, 2), False) and car_countersteers(round(low - 0.01, 2), True))
+    assert high == 0.8 and car_countersteers(high, False) and car_countersteers(high, True)  # the end of the scan
     model = pack_params(commonroad_model_vehicle(2))
-    drift_equilibrium(44.0, -high, model)  # raises if the model has no drift there
+    drift_equilibrium(44.0, -0.57, model)  # raises if the model has no drift there
     with pytest.raises(NoEquilibriumError):
-        drift_equilibrium(44.0, -round(high + 0.01, 2), model)
-    apply_overrides(config, {"scenario.sideslip_rad": round((low + high) / 2, 2)})  # inside: accepted
+        drift_equilibrium(44.0, -0.58, model)
+    above = apply_overrides(config, {"scenario.sideslip_rad": 0.6})
+    assert config.vehicle.front_grip_scale == 1.0 and 1.0 < above.vehicle.front_grip_scale <= 1.1
+    drift_equilibrium(44.0, -0.6, pack_params(above.vehicle))

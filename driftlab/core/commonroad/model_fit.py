@@ -63,10 +63,12 @@ def _fitted(vehicle_id: int, radius_m: float, sideslip_rad: float, model: Any, d
 def windows_text(vehicle_id: int, radius_m: float, model: Any) -> str:
     """Where a job of this car on a circle of ``radius_m`` can drift: the sideslips at which the car's own main
     drift countersteers (driftlab.core.commonroad.family) and those at which the controller's model of it (the
-    paper's tyre with the car's mass, geometry and tyre shape) has a countersteer drift; a job needs both."""
+    paper's tyre with the car's mass, geometry and tyre shape, its front grip raised where needed) has a
+    countersteer drift; a job needs both."""
     car = _overlap(countersteer_window(model, vehicle_id, radius_m),
                    countersteer_window(model, vehicle_id, radius_m, right=True))
-    own = model_window(commonroad_model_vehicle(model.car(vehicle_id)), radius_m)
+    own = model_window(replace(commonroad_model_vehicle(model.car(vehicle_id)), front_grip_scale=FRONT_GRIP_LIMIT),
+                       radius_m)
     return (f"On a {radius_m:g} m circle (sideslips 0.20-0.80 rad scanned) CommonRoad vehicle {vehicle_id} drifts with "
             f"countersteer both ways at {_range_text(car)}, the controller's model of it at {_range_text(own)}: a "
             f"job of this car needs a scenario.sideslip_rad in {_range_text(_overlap(car, own))}")
@@ -99,6 +101,12 @@ def model_window(vehicle: VehicleParams, radius_m: float) -> tuple[float, float]
     return sideslip_window(drifts)
 
 
+# Where the model read off the car's tyres has no drift at the car's speed, its front grip is raised in these steps
+# until it has (driftlab.core.vehicle.VehicleParams.front_grip_scale), at most to FRONT_GRIP_LIMIT.
+FRONT_GRIP_STEP = 0.05
+FRONT_GRIP_LIMIT = 2.0
+
+
 def _fit(vehicle_id: int, radius_m: float, sideslip_rad: float, model: Any, drive_coupling: bool) -> VehicleParams:
     left = _main_drift(vehicle_id, radius_m, sideslip_rad, False, model)
     right = _main_drift(vehicle_id, radius_m, sideslip_rad, True, model)
@@ -111,7 +119,26 @@ def _fit(vehicle_id: int, radius_m: float, sideslip_rad: float, model: Any, driv
         # the drive's share of the rear grip, or it answers the drive with the opposite sign (VehicleParams).
         base = replace(base, rear_friction_circle=True)
         base = replace(base, front_grip_scale=matched_front_grip(base, vehicle_id, radius_m, left, right, model))
-    return _placed_at_drift(base, radius_m, sideslip_rad, left, right)
+    return _placed_with_front_grip(base, radius_m, sideslip_rad, left, right)
+
+
+def _placed_with_front_grip(base: VehicleParams, radius_m: float, sideslip_rad: float, left, right) -> VehicleParams:
+    """``base`` placed at the car's drift; where it has no drift there, the same with its front grip raised step by
+    step, the first that has. Above ~0.57 rad the read-off model's equilibrium needs its front tyre past its peak
+    slip (whatever the friction), while the car (PAC2002 with load transfer and combined slip) still countersteers
+    up to 0.8 rad: more front grip gives the model's front tyre the force the drift needs before its peak. Where
+    the read-off model fits, it is kept as it is."""
+    try:
+        return _placed_at_drift(base, radius_m, sideslip_rad, left, right)
+    except ConfigError as first:
+        grip = base.front_grip_scale
+        while grip + FRONT_GRIP_STEP <= FRONT_GRIP_LIMIT + 1e-9:
+            grip = round(grip + FRONT_GRIP_STEP, 6)
+            try:
+                return _placed_at_drift(replace(base, front_grip_scale=grip), radius_m, sideslip_rad, left, right)
+            except ConfigError:
+                continue
+        raise first from None
 
 
 def matched_front_grip(base: VehicleParams, vehicle_id: int, radius_m: float, left, right, model: Any) -> float:

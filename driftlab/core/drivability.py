@@ -17,7 +17,6 @@ import numpy as np
 from driftlab.core.config import EpisodeConfig
 from driftlab.core.errors import ConfigError
 from driftlab.core.plant import PlantConfig
-from driftlab.core.plants import model_reason
 from driftlab.core.vehicle import VehicleParams
 
 
@@ -50,7 +49,7 @@ def _reason(vehicle: VehicleParams, plant: PlantConfig, left_radius_m: float, ri
     entry = plant.plant_type
     circles = [("left", left_radius_m)] + ([("right", right_radius_m)] if right_radius_m != left_radius_m else [])
     for circle, radius in circles:
-        reason = model_reason(vehicle, radius, sideslip_rad, circle)
+        reason = entry.model_reason(vehicle, radius, sideslip_rad, circle)
         if reason is not None:
             return reason + entry.not_drivable_hint
     for circle, radius in circles:

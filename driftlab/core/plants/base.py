@@ -57,6 +57,11 @@ class PlantType(ABC):
         """The default controller's weights for this plant."""
         return MpcConfig()
 
+    def model_reason(self, vehicle: VehicleParams, radius_m: float, sideslip_rad: float, circle: str) -> str | None:
+        """Why the controller's model ``vehicle`` (or, for a plant whose model is refitted at each drift, the model
+        a job at this drift would get) has no countersteer drift on this circle, or None."""
+        return model_reason(vehicle, radius_m, sideslip_rad, circle)
+
     def plant_reason(self, config: PlantConfig, vehicle: VehicleParams, radius_m: float, sideslip_rad: float,
                      circle: str) -> str | None:
         """Why the plant itself cannot hold a countersteer drift on this circle, or None (unknown counts as

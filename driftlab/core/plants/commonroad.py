@@ -5,13 +5,14 @@ Vanagon), its controller's model fitted to the car's own drift (driftlab.core.co
 from __future__ import annotations
 
 import importlib
+from dataclasses import replace
 from typing import Any
 
 from driftlab.core.commonroad.parameters import ParameterSet
 from driftlab.core.errors import ConfigError
 from driftlab.core.mpc import MpcConfig
 from driftlab.core.plant import PlantConfig
-from driftlab.core.plants.base import PlantType
+from driftlab.core.plants.base import PlantType, model_reason
 from driftlab.core.vehicle import VehicleParams
 
 # Settings that shape DriftLab's own car and tyres; a CommonRoad plant has its own (PAC2002 tyres, load transfer,
@@ -95,6 +96,16 @@ class CommonRoadPlantType(PlantType):
         from driftlab.core.commonroad.equilibrium import commonroad_drifts
 
         return commonroad_drifts(self.car(vehicle_id), radius_m, sideslip_rad, friction_scale, mass_scale, right=right)
+
+    def model_reason(self, vehicle: VehicleParams, radius_m: float, sideslip_rad: float, circle: str) -> str | None:
+        """The model fitted at another drift, with its front grip raised as a fit at this one would raise it
+        (driftlab.core.commonroad.model_fit)."""
+        from driftlab.core.commonroad.model_fit import FRONT_GRIP_LIMIT
+
+        reason = model_reason(vehicle, radius_m, sideslip_rad, circle)
+        if reason is None or vehicle.front_grip_scale >= FRONT_GRIP_LIMIT:
+            return reason
+        return model_reason(replace(vehicle, front_grip_scale=FRONT_GRIP_LIMIT), radius_m, sideslip_rad, circle)
 
     def plant_reason(self, config: PlantConfig, vehicle: VehicleParams, radius_m: float, sideslip_rad: float,
                      circle: str) -> str | None:

@@ -110,7 +110,11 @@ def _calibrate_group(given, points, executor, args, known) -> dict[str, Any]:
 
     candidates = []
     for change in _model_candidates(given, args):
-        base = apply_overrides(given, change) if change else given
+        try:
+            base = apply_overrides(given, change) if change else given
+        except ConfigError as exc:  # this model has no fit at the scenario's drift: the other candidates run
+            sys.stderr.write(f"skipped the model with {change}: {exc}\n")
+            continue
         sys.stderr.write(f"calibrating {', '.join(p.label() for p in points)} with plant.model_drive_coupling="
                          f"{str(base.plant.model_drive_coupling).lower()}\n")
         found = _calibrate_model(base, points, executor, args, known)

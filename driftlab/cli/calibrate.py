@@ -16,7 +16,7 @@ from typing import Any
 
 from driftlab.cli.options import dask_address, db_url, episode_config, finite
 from driftlab.core.calibration import CalibrationPoint, calibrate, default_points, split_drivable
-from driftlab.core.config import config_to_dict
+from driftlab.core.config import Theta, apply_overrides, config_to_dict
 from driftlab.core.drivability import drift_window
 from driftlab.core.errors import ConfigError
 
@@ -69,22 +69,42 @@ def _model_candidates(base, args) -> list[dict[str, Any]]:
     return [{}, {"plant.model_drive_coupling": not base.plant.model_drive_coupling}]
 
 
-def _calibrate_model(base, points, executor, args, known) -> tuple[Any, list, list] | None:
+def _calibrate_model(base, points, executor, args, known, theta) -> tuple[Any, list, list] | None:
     """One candidate model's search over ``points`` (None: none of them is inside its window)."""
     inside, outside = split_drivable(base, points)
     if not inside:
         return None
     calibration = calibrate(base, inside, _run_batch(executor), iterations=args.iterations, seeds=args.seeds,
-                            seed=args.seed, known=[mpc for _, mpc in known], theta=_theta(args),
+                            seed=args.seed, known=[mpc for _, mpc in known], theta=theta,
                             on_progress=_progress)
     return calibration, inside, outside
 
 
 def _theta(args: argparse.Namespace):
     from driftlab.cli.options import key_values
-    from driftlab.core.config import Theta
 
     return Theta.from_mapping(key_values(args.theta.split(",") if args.theta else [], "--theta"))
+
+
+def _learned_theta(given, point, last: dict[str, Any], executor, args):
+    """The theta a job at ``point`` would learn with the weights it would take now: the last round's, if they
+    completed anything there, else the car's own (driftlab.services.profiles.profile_for)."""
+    from driftlab.core.calibration import learn_theta, point_config
+
+    record = last["per_point"][0]
+    weights = last["weights"] if record["completed"] else {}
+    config = point_config(given, point)
+    if last["plant"].get("model_drive_coupling") and record["completed"]:
+        config = apply_overrides(config, {"plant.model_drive_coupling": True})
+    config = replace(config, mpc=replace(config.mpc, **weights))
+
+    def progress(n: int, best: float | None) -> None:
+        if n % 10 == 0 or n == 1:
+            sys.stderr.write(f"[theta {n}] best score {best:.3f}\n")
+    theta, score = learn_theta(config, _run_batch(executor), iterations=args.iterations, seeds=args.seeds,
+                               seed=args.seed, on_progress=progress)
+    sys.stderr.write(f"learned at {point.label()}: {theta.as_dict()} (score {score:.3f})\n")
+    return theta
 
 
 def _summary(result, points) -> dict[str, Any]:
@@ -104,10 +124,8 @@ def _groups(given, points: list[CalibrationPoint], one_set: bool) -> list[list[C
                                                                      asdict(p)))]
 
 
-def _calibrate_group(given, points, executor, args, known) -> dict[str, Any]:
+def _calibrate_group(given, points, executor, args, known, theta) -> dict[str, Any]:
     """The weights for ``points``, each candidate model searched and the better one kept: the profile's document."""
-    from driftlab.core.config import apply_overrides
-
     candidates = []
     for change in _model_candidates(given, args):
         try:
@@ -117,7 +135,7 @@ def _calibrate_group(given, points, executor, args, known) -> dict[str, Any]:
             continue
         sys.stderr.write(f"calibrating {', '.join(p.label() for p in points)} with plant.model_drive_coupling="
                          f"{str(base.plant.model_drive_coupling).lower()}\n")
-        found = _calibrate_model(base, points, executor, args, known)
+        found = _calibrate_model(base, points, executor, args, known, theta)
         if found is not None:
             candidates.append((base, *found))
     base, calibration, inside, outside = min(candidates, key=lambda c: (c[1].best.score, -c[1].best.completed))
@@ -136,7 +154,7 @@ def _calibrate_group(given, points, executor, args, known) -> dict[str, Any]:
         "points": [asdict(p) for p in calibration.points],
         "skipped": [{**asdict(p), "reason": reason} for p, reason in outside],
         "window": window, "seeds": calibration.seeds, "iterations": args.iterations,
-        "theta": _theta(args).as_dict() if args.theta else "untuned",
+        "theta": "untuned" if theta == Theta() else theta.as_dict(),
         "command": "driftlab " + " ".join(shlex.quote(a) for a in args.argv), "driftlab_version": version("driftlab")}
 
 
@@ -151,6 +169,9 @@ def cmd_calibrate(args: argparse.Namespace) -> int:
 
     given = episode_config(args)
     _theta(args)  # a bad --theta is refused before anything runs
+    if args.rounds > 1 and args.one_set:
+        raise ConfigError("--rounds: a round learns a theta at one point; with --one-set there are several (use "
+                          "--rounds 1)")
     points = parse_points(args.points) or default_points(given)
     inside, outside = split_drivable(given, points)
     for point, reason in outside:
@@ -168,17 +189,22 @@ def cmd_calibrate(args: argparse.Namespace) -> int:
             started = time.perf_counter()
             sys.stderr.write(f"after the car's own weights, {len(known)} weight sets known to drive other cars or "
                              f"drifts: {'; '.join(label for label, _ in known)}\n")
-            document = _calibrate_group(given, group, executor, args, known)
-            document["skipped"] += [{**asdict(p), "reason": reason} for p, reason in outside]
-            document["wall_s"] = round(time.perf_counter() - started, 1)
-            with storage.transaction(factory) as session:
-                profile = profiles.add_profile(session, plant_model=document["plant_model"],
-                                               vehicle_id=document["vehicle_id"], document=document)
-                documents.append({"profile_id": profile.id, **document})
-            found = replace(given.mpc, **document["weights"])
-            if found != given.mpc and all(found != mpc for _, mpc in known):
-                points_text = ", ".join(CalibrationPoint(**p).label() for p in document["points"])
-                known = [(f"profile {profile.id} ({points_text})", found), *known]
+            theta = _theta(args)
+            for round_number in range(1, args.rounds + 1):
+                if round_number > 1:
+                    theta = _learned_theta(given, group[0], documents[-1], executor, args)
+                document = _calibrate_group(given, group, executor, args, known, theta)
+                document["skipped"] += [{**asdict(p), "reason": reason} for p, reason in outside]
+                document["round"] = round_number
+                document["wall_s"] = round(time.perf_counter() - started, 1)
+                with storage.transaction(factory) as session:
+                    profile = profiles.add_profile(session, plant_model=document["plant_model"],
+                                                   vehicle_id=document["vehicle_id"], document=document)
+                    documents.append({"profile_id": profile.id, **document})
+                found = replace(given.mpc, **document["weights"])
+                if found != given.mpc and all(found != mpc for _, mpc in known):
+                    points_text = ", ".join(CalibrationPoint(**p).label() for p in document["points"])
+                    known = [(f"profile {profile.id} ({points_text})", found), *known]
     finally:
         executor.shutdown()
         storage.close_database(factory)
@@ -209,6 +235,9 @@ def add_calibrate_parser(sub, db_help: str, dask_help: str, int_in, plant_choice
     cal.add_argument("--db", help=db_help)
     cal.add_argument("--theta", help="the theta every weight set drives, c_lr=..,c_rl=..,dV=..,k=.. (any subset; "
                      "default: the untuned theta), e.g. the best theta a job learned at the point")
+    cal.add_argument("--rounds", type=int_in(1, 5), default=1, metavar="N",
+                     help="rounds per point (1..5, default 1): each round after the first learns the theta a job "
+                          "would learn there with the last round's weights, then searches the weights again for it")
     cal.add_argument("--one-set", action="store_true",
                      help="one weight set for all the points (default: each point searched on its own and stored as "
                           "a profile of its own, which the jobs at that drift take)")

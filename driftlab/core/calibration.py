@@ -224,3 +224,32 @@ def calibrate(base: EpisodeConfig, points: Sequence[tuple[CalibrationPoint, Epis
         if on_progress is not None:
             on_progress(calibration)
     return calibration
+
+
+def learn_theta(config: EpisodeConfig, run_batch: RunBatch, *, iterations: int, seeds: int = 3, seed: int = 0,
+                on_progress: Callable[[int, float | None], None] | None = None) -> tuple[Theta, float]:
+    """The theta a job of the job default would learn at ``config``'s drift with its weights (its bounds, start and
+    optimizer settings, driftlab.core.tuning.TuningSpec), in a search of ``iterations`` thetas scored on
+    ``seeds`` calibration seeds as a weight set is (mean J, failures at their penalty). Returns the best theta and
+    its score. A calibration's next round searches the weights again for it: the flick a job finds there is not
+    the untuned one, and at the edge of a car's window the weights for the untuned flick complete nothing."""
+    from driftlab.core.tuning import TuningSpec
+
+    spec = TuningSpec(iterations=iterations, config=config, seed=seed)
+    optimizer = BayesianOptimizer(spec.bounds, **spec.optimizer_options)
+    document, seed_list = config_to_dict(config), [CALIBRATION_SEED_BASE + j for j in range(seeds)]
+    best: tuple[float, dict[str, float]] | None = None
+    for n in range(iterations):
+        x = optimizer.ask()
+        theta = {**Theta().as_dict(), **x}
+        outcomes = run_batch([(theta, document, s) for s in seed_list])
+        episodes = [EpisodeScore(0, s, *outcome) for s, outcome in zip(seed_list, outcomes, strict=True)]
+        score = sum(e.penalized_J for e in episodes) / len(episodes)
+        completed = all(e.completed for e in episodes)
+        optimizer.tell(x, score if completed else None, score)
+        if best is None or score < best[0]:
+            best = (score, theta)
+        if on_progress is not None:
+            on_progress(n + 1, best[0])
+    assert best is not None
+    return Theta.from_mapping(best[1]), best[0]

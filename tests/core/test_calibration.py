@@ -95,3 +95,21 @@ def test_weight_sets_known_to_drive_other_cars_are_tried_right_after_the_cars_ow
     lo, _ = search_bounds(base.mpc)["log10_q_sideslip"]
     assert sideslip[2] == pytest.approx(lo)
     assert calibration.best.weights["q_sideslip"] == pytest.approx(10 ** 2.2)
+
+
+def test_a_round_learns_the_theta_a_job_would_learn_at_the_point():
+    """Episodes replaced by a landscape in theta: every episode completes where dV > 0.1, J lowest at dV 0.2; the
+    untuned theta (dV 0) fails, as it does at the edge of a car's window."""
+    from driftlab.core.calibration import learn_theta
+
+    def run_batch(batch):
+        out = []
+        for theta, _, _ in batch:
+            ok = theta["dV"] > 0.1
+            out.append(("completed" if ok else "gripped_up", (theta["dV"] - 0.2) ** 2 - 1.0, 1.0 if ok else 0.3, 0.2))
+        return out
+
+    progress = []
+    theta, score = learn_theta(EpisodeConfig(), run_batch, iterations=30, seeds=2,
+                               on_progress=lambda n, best: progress.append(n))
+    assert theta.dV > 0.1 and score < 0.0 and progress == list(range(1, 31))

@@ -43,6 +43,6 @@ def test_an_installed_variant_drifts_the_eight_with_the_base_cars_controller(ins
 
 
 def test_an_installed_variant_outside_its_window_is_refused_naming_it(installed):
-    out = _driftlab(installed, "episode", "--plant", "heavy_bmw", "--set", "scenario.sideslip_rad=0.7")
+    out = _driftlab(installed, "episode", "--plant", "heavy_bmw", "--set", "scenario.sideslip_rad=0.3")
     assert out.returncode == 2 and out.stdout == ""
     assert "scenario.sideslip_rad in 0.4" in out.stderr and len(out.stderr.strip().splitlines()) == 1

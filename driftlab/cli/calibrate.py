@@ -94,8 +94,9 @@ def _learned_theta(given, point, last: dict[str, Any], executor, args):
     record = last["per_point"][0]
     weights = last["weights"] if record["completed"] else {}
     config = point_config(given, point)
-    if last["plant"].get("model_drive_coupling") and record["completed"]:
-        config = apply_overrides(config, {"plant.model_drive_coupling": True})
+    coupling = last["plant"].get("model_drive_coupling", False)
+    if record["completed"] and coupling != config.plant.model_drive_coupling:  # the model those weights were for
+        config = apply_overrides(config, {"plant.model_drive_coupling": coupling})
     config = replace(config, mpc=replace(config.mpc, **weights))
 
     def progress(n: int, best: float | None) -> None:
@@ -138,6 +139,8 @@ def _calibrate_group(given, points, executor, args, known, theta) -> dict[str, A
         found = _calibrate_model(base, points, executor, args, known, theta)
         if found is not None:
             candidates.append((base, *found))
+    if not candidates:
+        raise ConfigError(f"--points: no candidate model drifts at {', '.join(p.label() for p in points)}")
     base, calibration, inside, outside = min(candidates, key=lambda c: (c[1].best.score, -c[1].best.completed))
     best, start = calibration.best, calibration.tried[0]
     radii = sorted({p.radius_m for p, _ in inside})
@@ -186,11 +189,11 @@ def cmd_calibrate(args: argparse.Namespace) -> int:
     documents = []
     try:
         for group in _groups(given, [p for p, _ in inside], args.one_set):
-            started = time.perf_counter()
             sys.stderr.write(f"after the car's own weights, {len(known)} weight sets known to drive other cars or "
                              f"drifts: {'; '.join(label for label, _ in known)}\n")
             theta = _theta(args)
             for round_number in range(1, args.rounds + 1):
+                started = time.perf_counter()
                 if round_number > 1:
                     theta = _learned_theta(given, group[0], documents[-1], executor, args)
                 document = _calibrate_group(given, group, executor, args, known, theta)

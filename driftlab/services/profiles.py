@@ -6,7 +6,7 @@ later; the job records the profile's id."""
 
 from __future__ import annotations
 
-from dataclasses import asdict, replace
+from dataclasses import replace
 from typing import Any
 
 from sqlalchemy.orm import Session
@@ -28,23 +28,19 @@ def known_weight_sets(session: Session, car: MpcConfig) -> list[tuple[str, MpcCo
     (driftlab.core.plants). A calibration tries them after the car's own (driftlab.core.calibration.calibrate)."""
     from driftlab.core.plants import built_in_names, plant_type
 
-    found: list[tuple[str, MpcConfig]] = []
-    seen = {tuple(sorted(asdict(car).items()))}
-    for profile in profiles.newest_profiles(session):
-        found.append((f"profile {profile.id} ({profile.plant_model}, vehicle {profile.vehicle_id})",
-                      replace(car, **profile.document["weights"])))
+    found = [(f"profile {profile.id} ({profile.plant_model}, vehicle {profile.vehicle_id})",
+              replace(car, **profile.document["weights"])) for profile in profiles.newest_profiles(session)]
     found += [(f"{name}'s shipped weights", plant_type(name).controller()) for name in built_in_names()]
-    unique = []
+    unique, seen = [], {car}
     for label, mpc in found:
-        key = tuple(sorted(asdict(mpc).items()))
-        if key not in seen:
-            seen.add(key)
+        if mpc not in seen:
+            seen.add(mpc)
             unique.append((label, mpc))
     return unique
 
 
-# How far apart two drifts are: 0.05 rad of sideslip counts as much as 20 % of the circle's radius (the spacing of
-# the default calibration points, driftlab.core.calibration.default_points).
+# How far apart two drifts are: 0.05 rad of sideslip counts as much as 20 % of the circle's radius (about the spacing
+# of the default calibration points, driftlab.core.calibration.default_points: 0.05 rad, 44 to 52 m).
 SIDESLIP_STEP_RAD = 0.05
 RADIUS_STEP = 0.2
 

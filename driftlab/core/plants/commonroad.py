@@ -160,4 +160,4 @@ class CommonRoadVariant(CommonRoadPlantType):
 
     def check(self, config: PlantConfig) -> None:
         super().check(config)
-        self.car(config.commonroad_vehicle)  # names a scaled parameter that does not exist
+        self.car(config.commonroad_vehicle)  # refuses a scaled parameter the package's set does not have

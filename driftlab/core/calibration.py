@@ -137,6 +137,11 @@ class EpisodeScore:
         return self.J if self.completed and math.isfinite(self.J) else failure_penalty(self.completed_fraction)
 
 
+def mean_penalized_J(episodes: Sequence[EpisodeScore]) -> float:
+    """How a calibration scores a set of episodes: their mean J, a failed one at its failure penalty."""
+    return sum(e.penalized_J for e in episodes) / len(episodes)
+
+
 @dataclass
 class WeightSetResult:
     weights: dict[str, float]
@@ -145,7 +150,7 @@ class WeightSetResult:
     @property
     def score(self) -> float:
         """Mean J over every point and seed, failed episodes at their penalty (lower is better)."""
-        return sum(e.penalized_J for e in self.episodes) / len(self.episodes)
+        return mean_penalized_J(self.episodes)
 
     @property
     def completed(self) -> int:
@@ -244,9 +249,8 @@ def learn_theta(config: EpisodeConfig, run_batch: RunBatch, *, iterations: int, 
         theta = {**Theta().as_dict(), **x}
         outcomes = run_batch([(theta, document, s) for s in seed_list])
         episodes = [EpisodeScore(0, s, *outcome) for s, outcome in zip(seed_list, outcomes, strict=True)]
-        score = sum(e.penalized_J for e in episodes) / len(episodes)
-        completed = all(e.completed for e in episodes)
-        optimizer.tell(x, score if completed else None, score)
+        score = mean_penalized_J(episodes)
+        optimizer.tell(x, score if all(e.completed for e in episodes) else None, score)
         if best is None or score < best[0]:
             best = (score, theta)
         if on_progress is not None:

@@ -104,7 +104,7 @@ def test_a_variant_refuses_a_parameter_the_package_does_not_have():
     with pytest.raises(ConfigError, match="p_dy9") as refused:
         EpisodeConfig.preset("typo_bmw")
     assert refused.value.field == "plant.model"
-    with pytest.raises(ConfigError, match="commonroad_std or commonroad_mb"):
+    with pytest.raises(ConfigError, match="built on one of commonroad_std, commonroad_mb"):
         CommonRoadVariant({"m": 1.1}, base="driftlab")
     with pytest.raises(ConfigError, match="positive"):
         register_plant("negative_bmw", CommonRoadVariant({"m": -1.0}))

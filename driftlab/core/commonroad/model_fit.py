@@ -67,8 +67,7 @@ def windows_text(vehicle_id: int, radius_m: float, model: Any) -> str:
     countersteer drift; a job needs both."""
     car = _overlap(countersteer_window(model, vehicle_id, radius_m),
                    countersteer_window(model, vehicle_id, radius_m, right=True))
-    own = model_window(replace(commonroad_model_vehicle(model.car(vehicle_id)), front_grip_scale=FRONT_GRIP_LIMIT),
-                       radius_m)
+    own = model_window(widest_front_grip(commonroad_model_vehicle(model.car(vehicle_id))), radius_m)
     return (f"On a {radius_m:g} m circle (sideslips 0.20-0.80 rad scanned) CommonRoad vehicle {vehicle_id} drifts with "
             f"countersteer both ways at {_range_text(car)}, the controller's model of it at {_range_text(own)}: a "
             f"job of this car needs a scenario.sideslip_rad in {_range_text(_overlap(car, own))}")
@@ -120,6 +119,11 @@ def _fit(vehicle_id: int, radius_m: float, sideslip_rad: float, model: Any, driv
         base = replace(base, rear_friction_circle=True)
         base = replace(base, front_grip_scale=matched_front_grip(base, vehicle_id, radius_m, left, right, model))
     return _placed_with_front_grip(base, radius_m, sideslip_rad, left, right)
+
+
+def widest_front_grip(vehicle: VehicleParams) -> VehicleParams:
+    """``vehicle`` with the most front grip a fit may give it: where it drifts, some fit does."""
+    return replace(vehicle, front_grip_scale=max(vehicle.front_grip_scale, FRONT_GRIP_LIMIT))
 
 
 def _placed_with_front_grip(base: VehicleParams, radius_m: float, sideslip_rad: float, left, right) -> VehicleParams:

@@ -13,22 +13,13 @@ from importlib.metadata import entry_points
 
 from driftlab.core.errors import ConfigError
 from driftlab.core.plants.base import ExternalPlantType, PlantType, model_reason
-from driftlab.core.plants.commonroad import DRIFTLAB_ONLY, CommonRoadPlantType, CommonRoadVariant
+from driftlab.core.plants.commonroad import COMMONROAD_BUILT_INS, DRIFTLAB_ONLY, CommonRoadPlantType, CommonRoadVariant
 from driftlab.core.plants.driftlab_plant import DriftLabPlantType
 
 __all__ = ["DRIFTLAB_ONLY", "CommonRoadPlantType", "CommonRoadVariant", "ExternalPlantType", "PlantType",
            "built_in_names", "installed_names", "model_reason", "plant_type", "preset_types", "register_plant"]
 
-_BUILT_IN: dict[str, PlantType] = {entry.name: entry for entry in (
-    DriftLabPlantType(),
-    CommonRoadPlantType("commonroad_std", "driftlab.core.commonroad.plant:CommonRoadStdPlant", substep_s=0.002,
-                        weights="driftlab.core.commonroad.weights:std_weights", preset_name="commonroad_std"),
-    CommonRoadPlantType("commonroad_mb", "driftlab.core.commonroad.plant:CommonRoadMbPlant", multibody=True,
-                        substep_s=0.001, weights="driftlab.core.commonroad.weights:mb_weights",
-                        preset_name="commonroad_mb"),
-    # The package's own Python functions behind the same actuators: the reference STD is checked against.
-    CommonRoadPlantType("commonroad_std_reference", "driftlab.core.commonroad.reference:ReferenceStdPlant"),
-)}
+_BUILT_IN: dict[str, PlantType] = {entry.name: entry for entry in (DriftLabPlantType(), *COMMONROAD_BUILT_INS)}
 _REGISTERED: dict[str, PlantType] = {}
 
 

@@ -5,7 +5,6 @@ Vanagon), its controller's model fitted to the car's own drift (driftlab.core.co
 from __future__ import annotations
 
 import importlib
-from dataclasses import replace
 from typing import Any
 
 from driftlab.core.commonroad.parameters import ParameterSet
@@ -100,12 +99,10 @@ class CommonRoadPlantType(PlantType):
     def model_reason(self, vehicle: VehicleParams, radius_m: float, sideslip_rad: float, circle: str) -> str | None:
         """The model fitted at another drift, with its front grip raised as a fit at this one would raise it
         (driftlab.core.commonroad.model_fit)."""
-        from driftlab.core.commonroad.model_fit import FRONT_GRIP_LIMIT
+        from driftlab.core.commonroad.model_fit import widest_front_grip
 
         reason = model_reason(vehicle, radius_m, sideslip_rad, circle)
-        if reason is None or vehicle.front_grip_scale >= FRONT_GRIP_LIMIT:
-            return reason
-        return model_reason(replace(vehicle, front_grip_scale=FRONT_GRIP_LIMIT), radius_m, sideslip_rad, circle)
+        return reason and model_reason(widest_front_grip(vehicle), radius_m, sideslip_rad, circle)
 
     def plant_reason(self, config: PlantConfig, vehicle: VehicleParams, radius_m: float, sideslip_rad: float,
                      circle: str) -> str | None:
@@ -127,6 +124,17 @@ class CommonRoadPlantType(PlantType):
         return family_summary(self, config, radius_m, beta_rad)
 
 
+COMMONROAD_BUILT_INS = (
+    CommonRoadPlantType("commonroad_std", "driftlab.core.commonroad.plant:CommonRoadStdPlant", substep_s=0.002,
+                        weights="driftlab.core.commonroad.weights:std_weights", preset_name="commonroad_std"),
+    CommonRoadPlantType("commonroad_mb", "driftlab.core.commonroad.plant:CommonRoadMbPlant", multibody=True,
+                        substep_s=0.001, weights="driftlab.core.commonroad.weights:mb_weights",
+                        preset_name="commonroad_mb"),
+    # The package's own Python functions behind the same actuators: the reference STD is checked against.
+    CommonRoadPlantType("commonroad_std_reference", "driftlab.core.commonroad.reference:ReferenceStdPlant"),
+)
+
+
 class CommonRoadVariant(CommonRoadPlantType):
     """A car of one's own built on a CommonRoad model and parameter set: some of the set's parameters scaled (mass,
     CG height, tyre friction, ...). What a user registers under the entry-point group ``driftlab.plants``
@@ -141,11 +149,10 @@ class CommonRoadVariant(CommonRoadPlantType):
     """
 
     def __init__(self, scales: dict[str, float], base: str = "commonroad_std", name: str = "") -> None:
-        from driftlab.core.plants import plant_type
-
-        model = plant_type(base)
-        if not isinstance(model, CommonRoadPlantType) or isinstance(model, CommonRoadVariant):
-            raise ConfigError(f"a CommonRoad variant is built on commonroad_std or commonroad_mb, not {base!r}",
+        model = next((entry for entry in COMMONROAD_BUILT_INS if entry.name == base), None)
+        if model is None:
+            names = ", ".join(entry.name for entry in COMMONROAD_BUILT_INS)
+            raise ConfigError(f"a CommonRoad variant is built on one of {names}, not {base!r}",
                               field="plant.model")
         super().__init__(name, model.stepper, multibody=model.multibody, substep_s=model.substep_s,
                          weights=model.weights)

@@ -59,12 +59,14 @@ LOCAL_GROWTH = 15
 PAPER_PRESET = {"iterations": 500, "seed_points": 20, "active_set": 400, "model_correction": False}
 
 
-def validate_bounds(bounds: dict[str, Any], model_correction: bool = True) -> dict[str, tuple[float, float]]:
-    """Bounds for a subset of theta's keys (others take DEFAULT_BOUNDS, and MODEL_BOUNDS with
-    ``model_correction``; without it the model corrections stay at 1 and may not be given bounds)."""
+def validate_bounds(bounds: dict[str, Any], model_correction: bool = True,
+                    plant_bounds: dict[str, tuple[float, float]] | None = None) -> dict[str, tuple[float, float]]:
+    """Bounds for a subset of theta's keys (others take DEFAULT_BOUNDS with the plant's own box on top,
+    ``plant_bounds``: driftlab.core.plants.PlantType.theta_bounds, and MODEL_BOUNDS with ``model_correction``;
+    without it the model corrections stay at 1 and may not be given bounds)."""
     if not isinstance(bounds, dict):
         raise ConfigError("bounds must be an object {name: [lo, hi]}")
-    out = {**DEFAULT_BOUNDS, **(MODEL_BOUNDS if model_correction else {})}
+    out = {**DEFAULT_BOUNDS, **(plant_bounds or {}), **(MODEL_BOUNDS if model_correction else {})}
     allowed = THETA_KEYS if model_correction else tuple(DEFAULT_BOUNDS)
     for name, pair in bounds.items():
         if name in MODEL_BOUNDS and not model_correction:
@@ -138,7 +140,8 @@ class TuningSpec:
         if not isinstance(self.deterministic, bool):
             raise ConfigError(f"deterministic must be true or false, got {self.deterministic!r}",
                               field="deterministic")
-        object.__setattr__(self, "bounds", validate_bounds(dict(self.bounds), self.model_correction))
+        object.__setattr__(self, "bounds", validate_bounds(dict(self.bounds), self.model_correction,
+                                                           self.config.plant.plant_type.theta_bounds))
         if self.model_correction:  # every corner of the box must be a valid car, or every episode would raise
             (mu_lo, mu_hi), (c_lo, c_hi) = self.bounds["model_mu_scale"], self.bounds["model_c_scale"]
             for mu, c in ((mu_lo, c_lo), (mu_hi, c_hi)):

@@ -187,3 +187,24 @@ class CarProfile(Base):
     vehicle_id: Mapped[int] = mapped_column(Integer)  # plant.commonroad_vehicle (a CommonRoad parameter set)
     document: Mapped[dict[str, Any]] = mapped_column(JSON)  # driftlab.core.calibration's profile document
     created_at: Mapped[datetime] = mapped_column(default=utcnow)
+
+
+class Calibration(Base):
+    """A calibration asked for through the API (``POST /api/calibrations``; driftlab.services.calibration): queued,
+    run by a runner under a lease like a job, its progress and the profiles it stored so far kept as it runs. A
+    calibration whose runner died starts over when another takes it (the profiles stored stay)."""
+
+    __tablename__ = "calibrations"
+    __table_args__ = {"sqlite_autoincrement": True}
+
+    id: Mapped[int] = mapped_column(primary_key=True)
+    request: Mapped[dict[str, Any]] = mapped_column(JSON)  # CalibrationRequest.as_dict()
+    progress: Mapped[dict[str, Any] | None] = mapped_column(JSON, default=None)  # the latest progress event
+    messages: Mapped[list[str]] = mapped_column(JSON, default=list)  # what the CLI would print, newest last
+    profile_ids: Mapped[list[int]] = mapped_column(JSON, default=list)
+    status: Mapped[str] = mapped_column(String(20), default=RescoreStatus.QUEUED)  # a rescore's statuses
+    error: Mapped[str | None] = mapped_column(String(2000), default=None)
+    runner_id: Mapped[str | None] = mapped_column(String(100), default=None)
+    heartbeat_at: Mapped[datetime | None] = mapped_column(default=None)
+    created_at: Mapped[datetime] = mapped_column(default=utcnow)
+    updated_at: Mapped[datetime] = mapped_column(default=utcnow, onupdate=utcnow)

@@ -22,7 +22,7 @@ from driftlab.server.edge import EdgeGuard
 from driftlab.server.evaluation_pages import EvaluationPages
 from driftlab.server.heavy_reads import HeavyReads
 from driftlab.server.openapi import document_edge
-from driftlab.server.routes import analysis, evaluations, jobs, pages, studies
+from driftlab.server.routes import analysis, calibrations, evaluations, jobs, pages, studies
 from driftlab.server.security_headers import SecurityHeaders
 from driftlab.server.trajectory_documents import TrajectoryDocuments
 from driftlab.server.view import RecordingCache, add_view_routes
@@ -116,6 +116,7 @@ def create_app(db_url: str, *, workers: int | None = 2, start_worker: bool = Tru
     app.include_router(analysis.router)
     app.include_router(evaluations.router)
     app.include_router(studies.router)
+    app.include_router(calibrations.router)
     add_view_routes(app, lambda: app.state.dashboard.port if hasattr(app.state, "dashboard") else None,
                     app.state.recordings,
                     lambda: len(app.state.dashboard.sessions) if hasattr(app.state, "dashboard") else 0,

@@ -232,3 +232,32 @@ class Rescore(BaseModel):
     result: dict[str, Any] | None = Field(default=None, description="samples, completed, completion_rate, J_mean, "
                                           "J_std, J_worst, J_mean_completed, mean_abs_e_m, statuses, seeds")
     error: str | None = None
+
+
+class Calibration(BaseModel):
+    """A calibration asked for through the API (as ``driftlab calibrate``), run by the server's job runner."""
+
+    id: int
+    status: Literal["queued", "running", "finished", "failed", "cancelled"]
+    request: dict[str, Any] = Field(description="plant, sets (dotted config keys), points, iterations, seeds, seed, "
+                                    "rounds, one_set, theta, command")
+    progress: dict[str, Any] | None = Field(default=None, description="the latest: group of groups, round of rounds, "
+                                            "step (weights or theta), tried of of, best_score, best_completed")
+    messages: list[str] = Field(description="what `driftlab calibrate` prints, newest last")
+    profile_ids: list[int] = Field(description="the profiles it stored so far (GET /api/profiles/{id})")
+    error: str | None = None
+    created_at: str
+    updated_at: str
+
+
+class ProfileSummary(BaseModel):
+    """A stored car profile: the car, the points it was calibrated at with what its weights did there."""
+
+    id: int
+    plant_model: str
+    vehicle_id: int
+    created_at: str
+    per_point: list[dict[str, Any]] | None = None
+    round: int | None = None
+    command: str | None = None
+    shipped: str | None = Field(default=None, description="the shipped file and index it was copied from, if any")

@@ -1,5 +1,6 @@
 """Jobs as documents for people: what the dashboard's new-job form starts from (plant presets as ``config`` keys,
-the default bounds, the limits) and how two or more jobs' settings differ (the compare mode's config diff)."""
+the default bounds and each plant's own, the limits) and how two or more jobs' settings differ (the compare mode's
+config diff)."""
 
 from __future__ import annotations
 
@@ -28,10 +29,17 @@ def plant_preset_sets() -> dict[str, dict[str, Any]]:
     return out
 
 
+def plant_bounds() -> dict[str, dict[str, list[float]]]:
+    """Per plant preset, where its jobs' default search box differs from DEFAULT_BOUNDS
+    (driftlab.core.plants.PlantType.theta_bounds)."""
+    return {name: {k: list(v) for k, v in make().plant_type.theta_bounds.items()}
+            for name, make in PLANT_PRESETS.items() if make().plant_type.theta_bounds}
+
+
 def job_form() -> dict[str, Any]:
     """What a new-job form needs: presets, the default config (dotted), bounds and limits."""
     return {"plant_presets": plant_preset_sets(), "default_config": dotted_config(config_to_dict(EpisodeConfig())),
-            "default_bounds": {k: list(v) for k, v in DEFAULT_BOUNDS.items()},
+            "default_bounds": {k: list(v) for k, v in DEFAULT_BOUNDS.items()}, "plant_bounds": plant_bounds(),
             "model_bounds": {k: list(v) for k, v in MODEL_BOUNDS.items()},
             "limits": {k: list(v) for k, v in JOB_LIMITS.items()}, "defaults": TuningSpec().to_dict() | {"config": {}}}
 

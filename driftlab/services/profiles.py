@@ -2,11 +2,19 @@
 (:func:`profile_for`): the controller's model ``driftlab calibrate`` chose for it (``plant.model_drive_coupling``)
 and the MPC weights it found, unless the job's config names ``mpc.*`` keys itself (or the paper's controller). Both
 land in the job's stored config like any other setting, so the job re-runs bit for bit whatever profiles come
-later; the job records the profile's id."""
+later; the job records the profile's id.
+
+Profiles come from two places: this database's own (``driftlab calibrate`` run here) and the ones DriftLab ships
+(``driftlab/profiles/*.json``, each written by ``driftlab calibrate --out`` and naming the command that made it).
+A job takes a shipped profile only where none of the database's own applies; the one it takes is copied into the
+database then (once), so that the job's ``profile_id`` names a stored row like any other."""
 
 from __future__ import annotations
 
-from dataclasses import replace
+import json
+from dataclasses import dataclass, replace
+from functools import lru_cache
+from importlib import resources
 from typing import Any
 
 from sqlalchemy.orm import Session
@@ -79,14 +87,57 @@ def profile_for(candidates: list[Any], sideslip_rad: float, radius_m: float) -> 
     return min(usable, key=rank, default=None)
 
 
+# The key a shipped profile copied into a database carries in its document: "<file name>#<index in the file>".
+SHIPPED_KEY = "shipped"
+
+
+@dataclass(frozen=True)
+class ShippedProfile:
+    """A profile of ``driftlab/profiles/<file>``: ``id`` its place in the file (later is newer), ``key`` where it is."""
+
+    id: int
+    key: str
+    document: dict[str, Any]
+
+
+@lru_cache(maxsize=1)
+def _shipped_files() -> tuple[tuple[str, tuple[dict[str, Any], ...]], ...]:
+    folder = resources.files("driftlab.profiles")
+    return tuple((entry.name, tuple(json.loads(entry.read_text())["profiles"]))
+                 for entry in sorted(folder.iterdir(), key=lambda e: e.name) if entry.name.endswith(".json"))
+
+
+def shipped_profiles(plant_model: str, vehicle_id: int) -> list[ShippedProfile]:
+    """The profiles DriftLab ships for one car (each document as ``driftlab calibrate --out`` wrote it)."""
+    return [ShippedProfile(index + 1, f"{name}#{index}", {k: v for k, v in document.items() if k != "profile_id"})
+            for name, documents in _shipped_files() for index, document in enumerate(documents)
+            if document["plant_model"] == plant_model and document["vehicle_id"] == vehicle_id]
+
+
+def car_profile_for(session: Session, plant_model: str, vehicle_id: int, sideslip_rad: float,
+                    radius_m: float) -> Any | None:
+    """The stored profile a job of this car at this drift takes (:func:`profile_for`): the database's own first;
+    where none of them applies, a shipped one, copied into the database the first time a job takes it."""
+    stored = profiles.car_profiles(session, plant_model=plant_model, vehicle_id=vehicle_id)
+    own = profile_for([p for p in stored if SHIPPED_KEY not in p.document], sideslip_rad, radius_m)
+    if own is not None:
+        return own
+    shipped = profile_for(shipped_profiles(plant_model, vehicle_id), sideslip_rad, radius_m)
+    if shipped is None:
+        return None
+    copied = next((p for p in stored if p.document.get(SHIPPED_KEY) == shipped.key), None)
+    return copied or profiles.add_profile(session, plant_model=plant_model, vehicle_id=vehicle_id,
+                                          document={**shipped.document, SHIPPED_KEY: shipped.key})
+
+
 def with_profile(session: Session, spec: TuningSpec, config_document: Any) -> tuple[TuningSpec, int | None]:
-    """``spec`` with the weights of its car's profile for its drift (:func:`profile_for`), and that profile's id
+    """``spec`` with the weights of its car's profile for its drift (:func:`car_profile_for`), and that profile's id
     (None: none applies)."""
     if gives_weights(config_document):
         return spec, None
     plant, scenario = spec.config.plant, spec.config.scenario
-    profile = profile_for(profiles.car_profiles(session, plant_model=plant.model, vehicle_id=plant.commonroad_vehicle),
-                          scenario.sideslip_rad, scenario.left_radius_m)
+    profile = car_profile_for(session, plant.model, plant.commonroad_vehicle, scenario.sideslip_rad,
+                              scenario.left_radius_m)
     if profile is None:
         return spec, None
     config = spec.config
@@ -96,3 +147,28 @@ def with_profile(session: Session, spec: TuningSpec, config_document: Any) -> tu
         config = apply_overrides(config, {"plant.model_drive_coupling": coupling})  # the model refitted
     mpc = replace(config.mpc, **profile.document["weights"])
     return replace(spec, config=replace(config, mpc=mpc)), profile.id
+
+
+def profile_summary(profile: Any) -> dict[str, Any]:
+    """A stored profile in a few fields: its car, where it was calibrated and how it did there, the command."""
+    document = profile.document
+    return {"id": profile.id, "plant_model": profile.plant_model, "vehicle_id": profile.vehicle_id,
+            "created_at": profile.created_at.isoformat(), "per_point": document.get("per_point"),
+            "round": document.get("round"), "command": document.get("command"),
+            "shipped": document.get(SHIPPED_KEY)}
+
+
+def list_profile_summaries(factory: Any) -> list[dict[str, Any]]:
+    from driftlab.db import storage
+
+    with storage.snapshot(factory) as session:
+        return [profile_summary(p) for p in profiles.list_profiles(session)]
+
+
+def profile_document(factory: Any, profile_id: int) -> dict[str, Any]:
+    """The whole stored profile, as ``driftlab calibrate --out`` writes one (raises storage.NotFound)."""
+    from driftlab.db import storage
+
+    with storage.snapshot(factory) as session:
+        profile = profiles.get_profile(session, profile_id=profile_id)
+        return {"profile_id": profile.id, **profile.document}

@@ -1,7 +1,8 @@
 """The server's background job runner: one thread that claims claimable jobs (queued, or held by a dead runner)
 and runs each on a thread of its own, as many at once as the executor has workers, or else (when no job runs or
-waits) the next claimable robustness study; and beside them one rescore at a time (driftlab.worker.rescoring).
-Every episode runs on the one executor, whose capacity the running jobs and the rescore share
+waits) the next claimable robustness study; and beside them one rescore (driftlab.worker.rescoring) and one
+calibration (driftlab.worker.calibrating) at a time.
+Every episode runs on the one executor, whose capacity the running jobs, the rescore and the calibration share
 (driftlab.worker.slots): a seeds study's jobs run side by side, each with its own optimizer.
 
 Exactly one runner runs a job at a time (the lease in driftlab.db.lifecycle): a `driftlab tune` on the same
@@ -16,9 +17,10 @@ import threading
 from sqlalchemy import select
 from sqlalchemy.orm import Session, sessionmaker
 
-from driftlab.db import lifecycle, rescores, storage, studies
+from driftlab.db import calibrations, lifecycle, rescores, storage, studies
 from driftlab.db.models import Job, Study
 from driftlab.settings import MAX_TRAJECTORIES_PER_JOB
+from driftlab.worker.calibrating import run_stored_calibration
 from driftlab.worker.executors import EpisodeExecutor, open_executor
 from driftlab.worker.job_loop import EXECUTOR_LOST, claim_job, run_job
 from driftlab.worker.optimizer_host import OptimizerHost
@@ -44,7 +46,8 @@ class JobRunner:
         self._slots: EpisodeSlots | None = None
         self._jobs: dict[int, threading.Thread] = {}  # the jobs running now, each on its thread
         self._jobs_lock = threading.Lock()
-        self._rescore: threading.Thread | None = None  # the rescore running now, if any
+        # The rescore and the calibration running now, if any: (kind, id) -> its thread.
+        self._side_tasks: dict[str, threading.Thread] = {}
         # With optimizer_process, the jobs' asks and tells off the server's interpreter (below the requests in
         # priority, as the episodes); else on each job's thread.
         self._optimizers = OptimizerHost(niceness=10) if optimizer_process else None
@@ -154,30 +157,45 @@ class JobRunner:
             thread.start()
         return bool(claimed)
 
-    def _start_claimable_rescore(self) -> None:
-        """One rescore at a time, on its share of the slots beside the jobs (it never waits for the queue)."""
-        if self._rescore is not None and self._rescore.is_alive():
+    def _start_side_tasks(self) -> None:
+        """One rescore and one calibration at a time, each on its share of the slots beside the jobs (neither
+        waits for the queue)."""
+        self._start_side_task("rescore", rescores.next_claimable,
+                              lambda session, row_id: rescores.claim(session, rescore_id=row_id,
+                                                                     runner=self.runner_id),
+                              lambda row_id: run_rescore(self.factory, row_id, self._executor, runner=self.runner_id,
+                                                         slots=self._slots, owner=("rescore", row_id),
+                                                         should_stop=self._stop.is_set))
+        self._start_side_task("calibration", calibrations.next_claimable,
+                              lambda session, row_id: calibrations.claim(session, calibration_id=row_id,
+                                                                         runner=self.runner_id),
+                              lambda row_id: run_stored_calibration(self.factory, row_id, self._executor,
+                                                                    runner=self.runner_id, slots=self._slots,
+                                                                    owner=("calibration", row_id),
+                                                                    should_stop=self._stop.is_set))
+
+    def _start_side_task(self, kind: str, next_claimable, claim, run) -> None:
+        running = self._side_tasks.get(kind)
+        if running is not None and running.is_alive():
             return
         with storage.transaction(self.factory) as session:
-            rescore_id = rescores.next_claimable(session)
-            if rescore_id is None or not rescores.claim(session, rescore_id=rescore_id, runner=self.runner_id):
-                self._rescore = None
+            row_id = next_claimable(session)
+            if row_id is None or not claim(session, row_id):
+                self._side_tasks.pop(kind, None)
                 return
-        self._rescore = threading.Thread(target=self._run_rescore, args=(rescore_id,), daemon=True,
-                                         name=f"driftlab-rescore-{rescore_id}")
-        self._rescore.start()
 
-    def _run_rescore(self, rescore_id: int) -> None:
-        try:
-            run_rescore(self.factory, rescore_id, self._executor, runner=self.runner_id, slots=self._slots,
-                        owner=("rescore", rescore_id), should_stop=self._stop.is_set)
-        finally:
-            self._wake.set()
+        def target() -> None:
+            try:
+                run(row_id)
+            finally:
+                self._wake.set()
+        self._side_tasks[kind] = threading.Thread(target=target, daemon=True, name=f"driftlab-{kind}-{row_id}")
+        self._side_tasks[kind].start()
 
     def _loop(self) -> None:
         try:
             while not self._stop.is_set():
-                self._start_claimable_rescore()
+                self._start_side_tasks()
                 if self._start_claimable_jobs():
                     continue
                 if not self.running_job_ids and self._run_next_study():
@@ -187,7 +205,6 @@ class JobRunner:
         finally:
             with self._jobs_lock:
                 threads = list(self._jobs.values())
-            if self._rescore is not None:
-                threads.append(self._rescore)
+            threads += list(self._side_tasks.values())
             for thread in threads:  # each stops after its episodes in flight (should_stop)
                 thread.join(timeout=30)

@@ -109,3 +109,16 @@ def test_a_variant_refuses_a_parameter_the_package_does_not_have():
     with pytest.raises(ConfigError, match="positive"):
         register_plant("negative_bmw", CommonRoadVariant({"m": -1.0}))
         EpisodeConfig.preset("negative_bmw")
+
+
+def test_a_jobs_default_search_box_is_its_plants():
+    from driftlab.core.tuning import DEFAULT_BOUNDS, TuningSpec
+
+    assert TuningSpec(config=EpisodeConfig()).bounds["k"] == DEFAULT_BOUNDS["k"]  # the paper's, on DriftLab's plant
+    std = TuningSpec(config=EpisodeConfig.preset("commonroad_std"))
+    assert std.bounds["k"][0] < 0.0 < std.bounds["k"][1] and std.bounds["dV"] == (-1.0, 1.0)
+    assert std.bounds["c_lr"] == DEFAULT_BOUNDS["c_lr"]
+    given = TuningSpec(config=EpisodeConfig.preset("commonroad_std"), bounds={"k": [0.0, 0.1]})
+    assert given.bounds["k"] == (0.0, 0.1) and given.bounds["dV"] == (-1.0, 1.0)  # a given bound wins
+    stored = TuningSpec.from_dict(TuningSpec(config=EpisodeConfig()).to_dict())
+    assert stored.bounds == TuningSpec(config=EpisodeConfig()).bounds

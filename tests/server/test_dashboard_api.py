@@ -9,10 +9,9 @@ from driftlab.core.config import Theta
 from driftlab.core.robust import rescore_seeds
 from driftlab.db import rescores as db_rescores
 from driftlab.db import storage
-from driftlab.worker.executors import evaluate_episode
 from driftlab.worker.rescoring import run_rescore
 from driftlab.worker.slots import EpisodeSlots
-from tests.server.conftest import in_process_client
+from tests.server.conftest import InThreadExecutor, in_process_client
 
 
 def _store(api, job_id, n=14):
@@ -146,7 +145,7 @@ def test_rescore_is_queued_stored_and_reports_the_result(api):
     busy = api.post(f"/api/jobs/{job_id}/rescore", json={"samples": 2})
     assert busy.status_code == 409 and "DELETE /api/jobs" in busy.json()["detail"]
     with ThreadPoolExecutor(1) as pool:
-        assert _run_queued(api, _InThread(pool)) == "finished"
+        assert _run_queued(api, InThreadExecutor(pool)) == "finished"
     state = api.get(f"/api/jobs/{job_id}/rescore").json()
     assert state["status"] == "finished" and state["done"] == 2, state
     assert state["result"]["samples"] == 2 and state["result"]["seeds"] == rescore_seeds(2)
@@ -158,12 +157,12 @@ def test_a_stopped_rescore_resumes_with_the_seeds_still_missing(api):
     job_id = _with_a_best(api)
     api.post(f"/api/jobs/{job_id}/rescore", json={"samples": 3})
     with ThreadPoolExecutor(1) as pool:
-        executor = _InThread(pool)
+        executor = InThreadExecutor(pool)
         stop = lambda: executor.submitted >= 1  # noqa: E731  # the runner shuts down after the first episode
         assert _run_queued(api, executor, should_stop=stop) == "queued"
         first = api.get(f"/api/jobs/{job_id}/rescore").json()
         assert first["status"] == "queued" and first["done"] == 1, first
-        resumed = _InThread(pool)
+        resumed = InThreadExecutor(pool)
         assert _run_queued(api, resumed) == "finished"
     assert resumed.submitted == 2  # only the missing seeds ran again
     state = api.get(f"/api/jobs/{job_id}/rescore").json()
@@ -206,21 +205,6 @@ def test_a_rescore_counts_against_the_episodes_per_job_limit(tmp_path):
         assert r.status_code == 422 and r.json()["detail"].startswith("samples: 11 episodes exceed the limit of 10")
 
 
-class _InThread:
-    """The executor interface on a thread pool: the real episodes, in this process."""
-
-    def __init__(self, pool):
-        self.pool = pool
-        self.submitted = 0
-
-    def submit(self, theta, config_doc, seed=0):
-        self.submitted += 1
-        return self.pool.submit(evaluate_episode, theta, config_doc, seed)
-
-    def shutdown(self):
-        pass
-
-
 def test_the_config_diff_names_each_setting_that_differs(api):
     a = api.post("/api/jobs", json={"name": "a", "iterations": 5}).json()
     b = api.post("/api/jobs", json={"name": "b", "iterations": 7, "bounds": {"k": [0.0, 0.05]},
@@ -240,3 +224,4 @@ def test_the_job_form_turns_each_plant_preset_into_config_keys(api):
     assert job.status_code == 201, job.text
     assert job.json()["spec"]["config"]["plant"]["friction_circle"] is False
     assert form["default_bounds"]["k"] == [0.0, 0.12] and form["limits"]["iterations"] == [1, 5000]
+    assert form["plant_bounds"]["commonroad_std"]["k"][0] < 0 and "default" not in form["plant_bounds"]

@@ -114,3 +114,30 @@ def test_weights_are_taken_no_further_than_a_step_from_where_they_were_calibrate
     assert profile_for([at_05], 0.55, 44.0) is None  # a whole step away: the car's default weights
     assert profile_for([at_05], 0.5, 44.0 * 1.25) is None
     assert profile_for([at_05, old], 0.55, 44.0) is old
+
+
+def test_a_fresh_database_takes_the_shipped_profile_for_the_jobs_drift_and_keeps_one_copy(tmp_path):
+    from driftlab.services.profiles import SHIPPED_KEY, profile_for, shipped_profiles
+
+    shipped = shipped_profiles("commonroad_std", 2)
+    assert shipped and all(p.document["command"].startswith("driftlab calibrate --plant commonroad_std")
+                           for p in shipped)
+    point = max((p.document["per_point"][0] for p in shipped), key=lambda r: (r["completed"], -r["sideslip_rad"]))
+    expected = profile_for(shipped, point["sideslip_rad"], point["radius_m"])
+    assert expected is not None
+    radius = point["radius_m"]
+    car = {"plant.model": "commonroad_std", "scenario.sideslip_rad": point["sideslip_rad"],
+           "scenario.left_radius_m": radius, "scenario.right_radius_m": radius}
+    with in_process_client(tmp_path / "shipped.db") as client:
+        first, second = (client.post("/api/jobs", json={"iterations": 1, "config": car}).json() for _ in range(2))
+        assert first["profile_id"] is not None and second["profile_id"] == first["profile_id"]
+        mpc = first["spec"]["config"]["mpc"]
+        assert all(mpc[k] == v for k, v in expected.document["weights"].items())
+        factory = client.app.state.factory
+        with storage.transaction(factory) as session:
+            copied, = profiles.list_profiles(session)
+            assert copied.document[SHIPPED_KEY] == expected.key and copied.document["command"]
+            own = profiles.add_profile(session, plant_model="commonroad_std", vehicle_id=2, document={
+                "weights": WEIGHTS, "per_point": [{**point, "completed": 1, "episodes": 1, "mean_abs_e_m": 0.9}]}).id
+        third = client.post("/api/jobs", json={"iterations": 1, "config": car}).json()
+        assert third["profile_id"] == own  # this database's own calibration wins over what ships

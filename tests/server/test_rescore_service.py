@@ -89,3 +89,20 @@ def test_after_a_clean_stop_the_database_file_alone_holds_every_evaluation(tmp_p
     with sqlite3.connect(copy) as connection:
         assert connection.execute("SELECT count(*) FROM evaluations WHERE job_id = ?", (job_id,)).fetchone() \
             == (n_done,)
+
+
+def test_the_servers_runner_runs_a_calibration_beside_the_jobs(tmp_path):
+    proc, url = start_server(tmp_path / "driftlab.db", free_port(), extra_args=("--workers", "2"))
+    try:
+        queued = httpx.post(f"{url}/api/calibrations", json={
+            "plant": "commonroad_std", "points": "0.5@44", "iterations": 2, "seeds": 1,
+            "config": {"plant.model_drive_coupling": False}})
+        assert queued.status_code == 202, queued.text
+        job = httpx.post(f"{url}/api/jobs", json={"iterations": 2, "robust_samples": 1, "confirm_samples": 0}).json()
+        state = wait_for(f"{url}/api/calibrations/{queued.json()['id']}",
+                         lambda r: r["status"] not in ("queued", "running"), timeout_s=300, poll_s=0.5)
+        assert state["status"] == "finished" and len(state["profile_ids"]) == 1, state
+        wait_status(url, job["id"], {"finished"}, timeout_s=300)  # the job ran beside it
+    finally:
+        proc.terminate()
+        proc.wait(timeout=60)

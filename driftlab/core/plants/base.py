@@ -28,6 +28,7 @@ class PlantType(ABC):
         preset_name: the ``--plant`` preset that starts from it (None: reached only through ``plant.model``).
         default_sideslip_rad: the sideslip its preset drifts at, or None for the scenario's default.
         local_phase: new jobs start their seed points near the uncorrected model (TuningSpec.local_phase).
+        theta_bounds: where a new job's search box differs from the paper's (driftlab.core.tuning.DEFAULT_BOUNDS).
         not_drivable_hint: what to change, appended to the message when the controller's model cannot drift.
     """
 
@@ -36,6 +37,7 @@ class PlantType(ABC):
     preset_name: str | None = None
     default_sideslip_rad: float | None = None
     local_phase: bool = False
+    theta_bounds: dict[str, tuple[float, float]] = {}  # noqa: RUF012  # read only
     not_drivable_hint: str = ""
 
     def preset(self, vehicle_id: int | None = None) -> PlantConfig:

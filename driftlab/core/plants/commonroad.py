@@ -33,6 +33,12 @@ class CommonRoadPlantType(PlantType):
 
     own_car = True
     default_sideslip_rad = 0.5  # a CommonRoad car countersteers only from ~0.45 rad at 44 m (its drift family)
+    # The paper's box assumes the steering feedback on the path error helps (k >= 0) and the model's drift speed is
+    # within 0.3 m/s of the car's. The controller's model of a CommonRoad car is fitted to its drift at one point
+    # and drifts elsewhere at other speeds, and near the edge of the model's window its path answers the feedback
+    # the other way: the job searches the feedback's sign and a wider speed correction (docs/results.md,
+    # "The search box of a CommonRoad car").
+    theta_bounds = {"dV": (-1.0, 1.0), "k": (-0.12, 0.12)}  # noqa: RUF012  # read only
 
     def __init__(self, name: str, stepper: str, *, multibody: bool = False, substep_s: float = 0.002,
                  weights: str | None = None, preset_name: str | None = None) -> None:

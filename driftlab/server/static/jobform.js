@@ -5,10 +5,12 @@
 
 const $ = (id) => document.getElementById(id);
 
+// The search box shown: the default, the chosen plant preset's own box on top (a CommonRoad car's), then the job's.
 function boundsRows(jobForm, bounds, modelCorrection) {
   const table = $("bounds-table");
   table.replaceChildren();
-  const all = { ...jobForm.default_bounds, ...(modelCorrection ? jobForm.model_bounds : {}), ...bounds };
+  const plant = jobForm.plant_bounds[$("job-form").elements.plant_preset.value] || {};
+  const all = { ...jobForm.default_bounds, ...plant, ...(modelCorrection ? jobForm.model_bounds : {}), ...bounds };
   for (const [name, [lo, hi]] of Object.entries(all)) {
     if (!modelCorrection && name in jobForm.model_bounds) continue;
     const tr = table.insertRow();
@@ -45,6 +47,7 @@ export function openForm(jobForm, job) {
   f.elements.plant_preset.value = "default";
   boundsRows(jobForm, job ? job.spec.bounds : {}, spec.model_correction);
   f.elements.model_correction.onchange = () => boundsRows(jobForm, {}, f.elements.model_correction.checked);
+  f.elements.plant_preset.onchange = () => boundsRows(jobForm, {}, f.elements.model_correction.checked);
   f.elements.name.focus();
 }
 

@@ -1,0 +1,87 @@
+"""Stored calibrations (driftlab.db.models.Calibration): queued by a request, claimed by a runner under the same
+lease as a job (driftlab.db.lease), their progress and profiles recorded as they run, cancelled by a request."""
+
+from __future__ import annotations
+
+from typing import Any
+
+from sqlalchemy import select
+from sqlalchemy.orm import Session
+
+from driftlab.db import lease
+from driftlab.db.models import Calibration, RescoreStatus, utcnow
+from driftlab.db.storage import NotFound
+
+ACTIVE = (RescoreStatus.QUEUED, RescoreStatus.RUNNING)
+MESSAGES_KEPT = 200  # the newest messages a calibration keeps (a 5-point, 5-round run says about 60)
+
+
+class CalibrationBusy(Exception):
+    """Another calibration is queued or running (one at a time: each uses every episode slot it is given)."""
+
+
+def queue(session: Session, *, request: dict[str, Any]) -> Calibration:
+    """A new queued calibration (raises CalibrationBusy while one is queued or running)."""
+    active = session.scalar(select(Calibration).where(Calibration.status.in_(ACTIVE)).limit(1))
+    if active is not None:
+        raise CalibrationBusy(f"calibration {active.id} is {active.status}; one runs at a time (cancel it with "
+                              f"DELETE /api/calibrations/{active.id})")
+    calibration = Calibration(request=request, messages=[], profile_ids=[], status=RescoreStatus.QUEUED)
+    session.add(calibration)
+    session.flush()
+    return calibration
+
+
+def get(session: Session, *, calibration_id: int) -> Calibration:
+    calibration = session.get(Calibration, calibration_id)
+    if calibration is None:
+        raise NotFound(f"no calibration {calibration_id}")
+    return calibration
+
+
+def list_all(session: Session) -> list[Calibration]:
+    return list(session.scalars(select(Calibration).order_by(Calibration.id)))
+
+
+def cancel(session: Session, *, calibration_id: int) -> Calibration:
+    """A queued or running calibration stops (its runner sees it at its next event); raises NotFound."""
+    calibration = get(session, calibration_id=calibration_id)
+    if calibration.status not in ACTIVE:
+        raise NotFound(f"calibration {calibration_id} is {calibration.status}, not queued or running")
+    calibration.status = RescoreStatus.CANCELLED
+    calibration.runner_id, calibration.heartbeat_at = None, None
+    return calibration
+
+
+def next_claimable(session: Session) -> int | None:
+    """The oldest queued calibration, or one whose runner died."""
+    stale = (Calibration.status == RescoreStatus.RUNNING) & lease.is_stale(Calibration, utcnow())
+    return session.scalar(select(Calibration.id).where((Calibration.status == RescoreStatus.QUEUED) | stale)
+                          .order_by(Calibration.id).limit(1))
+
+
+def claim(session: Session, *, calibration_id: int, runner: str) -> bool:
+    return lease.take(session, Calibration, row_id=calibration_id, runner=runner,
+                      from_statuses=(RescoreStatus.QUEUED,), now=utcnow())
+
+
+def record(session: Session, *, calibration_id: int, runner: str, progress: dict[str, Any] | None = None,
+           messages: list[str] = (), profile_id: int | None = None) -> bool:
+    """Store what the run reported and renew the lease; False when ``runner`` no longer holds it (cancelled or
+    taken over: stop)."""
+    calibration = session.get(Calibration, calibration_id)
+    if calibration is None or calibration.runner_id != runner or calibration.status != RescoreStatus.RUNNING:
+        return False
+    if progress is not None:
+        calibration.progress = progress
+    if messages:  # new lists: JSON columns track assignment, not mutation
+        calibration.messages = [*calibration.messages, *messages][-MESSAGES_KEPT:]
+    if profile_id is not None:
+        calibration.profile_ids = [*calibration.profile_ids, profile_id]
+    return lease.renew(session, Calibration, row_id=calibration_id, runner=runner)
+
+
+def finish(session: Session, *, calibration_id: int, runner: str, status: RescoreStatus,
+           error: str | None = None) -> None:
+    lease.release(session, Calibration, row_id=calibration_id, runner=runner, status=status, error=error)
+

@@ -1,0 +1,262 @@
+"""A calibration run end to end (``driftlab calibrate`` and ``POST /api/calibrations`` both run it): the points of
+the car's drift window, a weight search per point or group (driftlab.core.calibration) for each candidate model of
+the car, rounds that learn the theta a job would learn there, and each result stored as a car profile
+(driftlab.db.profiles), which the jobs at that drift then take (driftlab.services.profiles).
+
+What it reports goes to ``on_event``: ``{"message": ...}`` lines (what a CLI prints), ``{"progress": ...}`` after
+every weight set or theta tried, and ``{"profile": ...}`` when a profile is stored.
+"""
+
+from __future__ import annotations
+
+import time
+from collections.abc import Callable, Sequence
+from dataclasses import asdict, dataclass, field, replace
+from importlib.metadata import version
+from typing import Any
+
+from sqlalchemy.orm import Session, sessionmaker
+
+from driftlab.core.calibration import (
+    CalibrationPoint,
+    RunBatch,
+    calibrate,
+    default_points,
+    learn_theta,
+    point_config,
+    split_drivable,
+)
+from driftlab.core.config import EpisodeConfig, Theta, apply_overrides, config_to_dict
+from driftlab.core.drivability import drift_window
+from driftlab.core.errors import ConfigError
+from driftlab.core.limits import check_int
+from driftlab.db import profiles, storage
+from driftlab.services.profiles import drift_distance, known_weight_sets
+
+Event = Callable[[dict[str, Any]], None]
+LIMITS = {"iterations": (1, 5000), "seeds": (1, 64), "rounds": (1, 5)}
+
+
+class CalibrationStopped(Exception):
+    """Raised from ``on_event`` to stop a calibration (cancelled, or its runner shuts down)."""
+
+
+def parse_points(text: str | None, field_name: str = "points") -> list[CalibrationPoint] | None:
+    """'0.45@44,0.5@30' -> points (sideslip rad @ radius m)."""
+    if not text:
+        return None
+    points = []
+    for item in text.split(","):
+        beta, _, radius = item.partition("@")
+        try:
+            points.append(CalibrationPoint(abs(float(beta)), float(radius)))
+        except ValueError:
+            raise ConfigError(f"{field_name}: {item.strip()!r} is not SIDESLIP@RADIUS (e.g. 0.5@44)",
+                              field=field_name) from None
+    return points
+
+
+@dataclass(frozen=True)
+class CalibrationRequest:
+    """What to calibrate: the car (``plant`` preset and ``sets``, dotted config keys), the points
+    (``points``: 'SIDESLIP@RADIUS,...'; default :func:`driftlab.core.calibration.default_points`), the search
+    (``iterations`` weight sets per search, ``seeds`` episodes per point, the optimizer's ``seed``), ``rounds``
+    per point, ``one_set`` (one weight set for all the points) and the ``theta`` every set drives (default the
+    untuned one). ``command`` is how it was asked for, stored in every profile."""
+
+    plant: str
+    sets: dict[str, Any] = field(default_factory=dict)
+    points: str | None = None
+    iterations: int = 150
+    seeds: int = 3
+    seed: int = 0
+    rounds: int = 1
+    one_set: bool = False
+    theta: dict[str, float] = field(default_factory=dict)
+    command: str = ""
+
+    def validate(self) -> EpisodeConfig:
+        """The car's config; raises ConfigError naming the field of anything out of range."""
+        for name, (lo, hi) in LIMITS.items():
+            check_int(name, getattr(self, name), lo, hi)
+        check_int("seed", self.seed)
+        if self.rounds > 1 and self.one_set:
+            raise ConfigError("rounds: a round learns a theta at one point; with one_set there are several (use "
+                              "rounds 1)", field="rounds")
+        Theta.from_mapping(self.theta)
+        parse_points(self.points)
+        return apply_overrides(EpisodeConfig.preset(self.plant), self.sets)
+
+    def as_dict(self) -> dict[str, Any]:
+        return asdict(self)
+
+
+def _model_candidates(base: EpisodeConfig, sets: dict[str, Any]) -> list[dict[str, Any]]:
+    """The controller's models to calibrate: for a car with its own tyres (a CommonRoad car) both the paper's
+    independent rear forces and the rear friction circle matched to the car's drive answer, unless the request
+    chose one; the weights are searched for each and the better model kept."""
+    if not base.plant.plant_type.own_car or "plant.model_drive_coupling" in sets:
+        return [{}]
+    return [{}, {"plant.model_drive_coupling": not base.plant.model_drive_coupling}]
+
+
+def _summary(result, points) -> dict[str, Any]:
+    return {"weights": result.weights, "score": result.score, "completed": result.completed,
+            "episodes": len(result.episodes), "per_point": result.per_point(points)}
+
+
+def _groups(given: EpisodeConfig, points: list[CalibrationPoint], one_set: bool) -> list[list[CalibrationPoint]]:
+    """The searches to run: all the points together (``one_set``), or each point on its own, from the scenario's
+    own drift outwards, so that each search knows what the nearer ones found."""
+    if one_set:
+        return [points]
+    scenario = given.scenario
+    return [[p] for p in sorted(points, key=lambda p: drift_distance(scenario.sideslip_rad, scenario.left_radius_m,
+                                                                     asdict(p)))]
+
+
+def _round_centre(given: EpisodeConfig, last: dict[str, Any]) -> EpisodeConfig:
+    """Where a round after the first searches: around the last round's weights where they completed something at
+    the point (a round may so reach a decade further than the one before it), else around the car's own."""
+    if not last["per_point"][0]["completed"]:
+        return given
+    return replace(given, mpc=replace(given.mpc, **last["weights"]))
+
+
+@dataclass
+class _Run:
+    """One calibration's context while it runs."""
+
+    request: CalibrationRequest
+    given: EpisodeConfig
+    run_batch: RunBatch
+    on_event: Event
+    known: list[tuple[str, Any]]
+    stage: dict[str, Any] = field(default_factory=dict)
+
+    def say(self, message: str) -> None:
+        self.on_event({"message": message})
+
+    def progress(self, **values: Any) -> None:
+        self.on_event({"progress": {**self.stage, **values}})
+
+
+def _calibrate_group(run: _Run, centre: EpisodeConfig, points: Sequence[CalibrationPoint], theta: Theta
+                     ) -> dict[str, Any]:
+    """The weights for ``points``, each candidate model searched and the better one kept: the profile's document."""
+    request, candidates = run.request, []
+    for change in _model_candidates(run.given, request.sets):
+        try:
+            base = apply_overrides(centre, change) if change else centre
+        except ConfigError as exc:  # this model has no fit at the scenario's drift: the other candidates run
+            run.say(f"skipped the model with {change}: {exc}")
+            continue
+        inside, outside = split_drivable(base, points)
+        if not inside:
+            continue
+        coupling = base.plant.model_drive_coupling
+        run.say(f"calibrating {', '.join(p.label() for p in points)} with plant.model_drive_coupling="
+                f"{str(coupling).lower()}")
+        run.stage.update(step="weights", model_drive_coupling=coupling)
+
+        def progress(calibration) -> None:
+            best, last = calibration.best, calibration.tried[-1]
+            run.progress(tried=len(calibration.tried), of=request.iterations, best_score=best.score,
+                         best_completed=best.completed, last_score=last.score, last_completed=last.completed,
+                         episodes=len(last.episodes))
+        calibration = calibrate(base, inside, run.run_batch, iterations=request.iterations, seeds=request.seeds,
+                                seed=request.seed, known=[mpc for _, mpc in run.known], theta=theta,
+                                on_progress=progress)
+        candidates.append((base, calibration, inside, outside))
+    if not candidates:
+        raise ConfigError(f"points: no candidate model drifts at {', '.join(p.label() for p in points)}",
+                          field="points")
+    base, calibration, inside, outside = min(candidates, key=lambda c: (c[1].best.score, -c[1].best.completed))
+    best, start = calibration.best, calibration.tried[0]
+    radii = sorted({p.radius_m for p, _ in inside})
+    window = [drift_window(config, config.scenario.left_radius_m, 0.2, 1.0).as_dict()
+              for config in (next(c for p, c in inside if p.radius_m == r) for r in radii)]
+    return {
+        "plant_model": base.plant.model, "vehicle_id": base.plant.commonroad_vehicle,
+        "plant": config_to_dict(base)["plant"], "mpc": {**config_to_dict(base)["mpc"], **best.weights},
+        **_summary(best, calibration.points), "start": _summary(start, calibration.points),
+        "candidates": [{"model_drive_coupling": b.plant.model_drive_coupling, **_summary(c.best, c.points)}
+                       for b, c, _, _ in candidates],
+        "known": [{"from": label, **_summary(result, calibration.points)}
+                  for (label, _), result in zip(run.known, calibration.known_results(), strict=True) if result],
+        "points": [asdict(p) for p in calibration.points],
+        "skipped": [{**asdict(p), "reason": reason} for p, reason in outside],
+        "window": window, "seeds": calibration.seeds, "iterations": request.iterations,
+        "theta": "untuned" if theta == Theta() else theta.as_dict(),
+        "command": request.command, "driftlab_version": version("driftlab")}
+
+
+def _learned_theta(run: _Run, point: CalibrationPoint, last: dict[str, Any]) -> Theta:
+    """The theta a job at ``point`` would learn with the weights it would take now: the last round's, if they
+    completed anything there, else the car's own (driftlab.services.profiles.profile_for)."""
+    request = run.request
+    record = last["per_point"][0]
+    weights = last["weights"] if record["completed"] else {}
+    config = point_config(run.given, point)
+    coupling = last["plant"].get("model_drive_coupling", False)
+    if record["completed"] and coupling != config.plant.model_drive_coupling:  # the model those weights were for
+        config = apply_overrides(config, {"plant.model_drive_coupling": coupling})
+    config = replace(config, mpc=replace(config.mpc, **weights))
+    run.stage.update(step="theta")
+    theta, score = learn_theta(config, run.run_batch, iterations=request.iterations, seeds=request.seeds,
+                               seed=request.seed,
+                               on_progress=lambda n, best: run.progress(tried=n, of=request.iterations,
+                                                                        best_score=best))
+    run.say(f"learned at {point.label()}: {theta.as_dict()} (score {score:.3f})")
+    return theta
+
+
+def run_calibration(request: CalibrationRequest, factory: sessionmaker[Session], run_batch: RunBatch, *,
+                    on_event: Event = lambda event: None) -> list[dict[str, Any]]:
+    """Runs ``request`` on ``run_batch`` (the caller's executor), storing each profile as it is found; returns the
+    profiles' documents, each with its ``profile_id``. Raises ConfigError (a bad request, no point inside the
+    car's window) before any episode runs, and whatever ``on_event`` raises (CalibrationStopped) as it comes."""
+    given = request.validate()
+    points = parse_points(request.points) or default_points(given)
+    inside, outside = split_drivable(given, points)
+    for point, reason in outside:
+        on_event({"message": f"skipped {point.label()}: {reason}"})
+    if not inside:
+        raise ConfigError("points: none of the points is inside the car's drift window (`driftlab equilibrium "
+                          f"--window --plant {request.plant}` prints it)", field="points")
+    with storage.transaction(factory) as session:
+        known = known_weight_sets(session, given.mpc)
+    run = _Run(request, given, run_batch, on_event, known)
+    groups = _groups(given, [p for p, _ in inside], request.one_set)
+    documents: list[dict[str, Any]] = []
+    for number, group in enumerate(groups, 1):
+        run.say(f"after the car's own weights, {len(run.known)} weight sets known to drive other cars or drifts: "
+                f"{'; '.join(label for label, _ in run.known)}")
+        theta, centre = Theta.from_mapping(request.theta), given
+        for round_number in range(1, request.rounds + 1):
+            run.stage = {"group": number, "groups": len(groups), "round": round_number, "rounds": request.rounds,
+                         "points": [p.label() for p in group]}
+            started = time.perf_counter()
+            if round_number > 1:
+                theta = _learned_theta(run, group[0], documents[-1])
+                centre = _round_centre(given, documents[-1])
+            document = _calibrate_group(run, centre, group, theta)
+            document["skipped"] += [{**asdict(p), "reason": reason} for p, reason in outside]
+            document["round"] = round_number
+            document["wall_s"] = round(time.perf_counter() - started, 1)
+            documents.append(_store(factory, run, document))
+    return documents
+
+
+def _store(factory: sessionmaker[Session], run: _Run, document: dict[str, Any]) -> dict[str, Any]:
+    """Stores a profile; its weights become known to the searches after it."""
+    with storage.transaction(factory) as session:
+        profile = profiles.add_profile(session, plant_model=document["plant_model"],
+                                       vehicle_id=document["vehicle_id"], document=document)
+        stored = {"profile_id": profile.id, **document}
+    found = replace(run.given.mpc, **document["weights"])
+    if found != run.given.mpc and all(found != mpc for _, mpc in run.known):
+        points_text = ", ".join(CalibrationPoint(**p).label() for p in document["points"])
+        run.known = [(f"profile {stored['profile_id']} ({points_text})", found), *run.known]
+    run.on_event({"profile": stored})
+    return stored

@@ -1,0 +1,87 @@
+"""Calibration through the API, as `driftlab calibrate` runs it: queued, run by the job runner on its share of the
+workers with real episodes, followed (progress, messages, profiles), cancelled; its profiles readable and taken by
+the next job of that car."""
+
+from concurrent.futures import ThreadPoolExecutor
+
+import pytest
+
+from driftlab.db import calibrations as db_calibrations
+from driftlab.db import storage
+from driftlab.worker.calibrating import run_stored_calibration
+from driftlab.worker.slots import EpisodeSlots
+from tests.server.conftest import InThreadExecutor
+
+CAR = {"plant": "commonroad_std", "points": "0.5@44", "iterations": 2, "seeds": 1,
+       "config": {"plant.model_drive_coupling": False}}
+
+
+def _run_queued(api, executor):
+    """What the server's runner does with the next queued calibration (driftlab.worker.job_runner)."""
+    factory = api.app.state.factory
+    with storage.transaction(factory) as session:
+        calibration_id = db_calibrations.next_claimable(session)
+        assert db_calibrations.claim(session, calibration_id=calibration_id, runner="test-runner")
+    return run_stored_calibration(factory, calibration_id, executor, runner="test-runner", slots=EpisodeSlots(1),
+                                  owner=("calibration", calibration_id))
+
+
+@pytest.mark.parametrize(("change", "field"), [({"iterations": 0}, "iterations"), ({"seeds": 65}, "seeds"),
+                                                ({"rounds": 2, "one_set": True}, "rounds"),
+                                                ({"points": "0.5/44"}, "points"), ({"plant": "nope"}, "plant"),
+                                                ({"theta": {"nope": 1.0}}, "nope"),
+                                                ({"config": {"plant.mass_scale": "1.1"}}, "plant.mass_scale")])
+def test_a_bad_calibration_request_names_its_field_and_stores_nothing(api, change, field):
+    r = api.post("/api/calibrations", json={**CAR, **change})
+    assert r.status_code == 422 and field in r.text, r.text
+    assert api.get("/api/calibrations").json() == []
+
+
+def test_a_calibration_runs_reports_its_progress_and_its_profile_drives_the_next_job(api):
+    queued = api.post("/api/calibrations", json=CAR)
+    assert queued.status_code == 202 and queued.json()["status"] == "queued", queued.text
+    busy = api.post("/api/calibrations", json=CAR)
+    assert busy.status_code == 409 and "DELETE /api/calibrations/" in busy.json()["detail"]
+    with ThreadPoolExecutor(1) as pool:
+        executor = InThreadExecutor(pool)
+        assert _run_queued(api, executor) == "finished"
+    assert executor.submitted == 2  # two weight sets on one point and seed (the model was chosen)
+    state = api.get(f"/api/calibrations/{queued.json()['id']}").json()
+    assert state["status"] == "finished" and state["error"] is None, state
+    assert state["progress"]["tried"] == 2 and state["progress"]["of"] == 2 and state["progress"]["step"] == "weights"
+    assert any(m.startswith("calibrating 0.5 rad @ R 44 m") for m in state["messages"])
+    profile_id, = state["profile_ids"]
+    summary, = api.get("/api/profiles").json()
+    assert summary["id"] == profile_id and summary["command"].startswith("POST /api/calibrations")
+    document = api.get(f"/api/profiles/{profile_id}")
+    assert document.status_code == 200 and "attachment" in document.headers["content-disposition"]
+    assert document.json()["per_point"][0]["episodes"] == 1 and document.json()["iterations"] == 2
+    if document.json()["per_point"][0]["completed"]:  # its weights drove the point: a job there takes them
+        job = api.post("/api/jobs", json={"iterations": 1, "config": {"plant.model": "commonroad_std",
+                                                                          "scenario.sideslip_rad": 0.5}}).json()
+        assert job["profile_id"] == profile_id
+        mpc = job["spec"]["config"]["mpc"]
+        assert all(mpc[k] == v for k, v in document.json()["weights"].items())
+    assert api.get("/api/profiles/999").status_code == 404
+    assert api.get("/api/calibrations/999").status_code == 404
+
+
+def test_a_cancelled_calibration_stops_at_its_next_episode_and_keeps_what_it_stored(api):
+    calibration_id = api.post("/api/calibrations", json={**CAR, "iterations": 50}).json()["id"]
+
+    class CancelsAfterThree(InThreadExecutor):
+        def submit(self, theta, config_doc, seed=0):
+            if self.submitted == 3:
+                assert api.delete(f"/api/calibrations/{calibration_id}").json()["status"] == "cancelled"
+            return super().submit(theta, config_doc, seed)
+
+    with ThreadPoolExecutor(1) as pool:
+        executor = CancelsAfterThree(pool)
+        assert _run_queued(api, executor) == "cancelled"
+    assert executor.submitted <= 4  # it stopped after the weight set in flight, not after 50 sets
+    state = api.get(f"/api/calibrations/{calibration_id}").json()
+    assert state["status"] == "cancelled" and state["profile_ids"] == []
+    assert api.delete(f"/api/calibrations/{calibration_id}").status_code == 404  # nothing left to cancel
+    with storage.snapshot(api.app.state.factory) as session:
+        assert db_calibrations.next_claimable(session) is None  # no runner takes it up again
+    assert api.post("/api/calibrations", json=CAR).status_code == 202  # and another may start

@@ -17,6 +17,7 @@ from numba import njit
 
 from driftlab.core.blas_threads import with_one_blas_thread
 from driftlab.core.equilibrium import Equilibrium, drift_equilibrium
+from driftlab.core.errors import NoEquilibriumError
 from driftlab.core.mpc import KN, MpcConfig, ReferenceQp
 from driftlab.core.track import LEFT
 from driftlab.core.vehicle import VehicleParams, drift_derivatives_vec, pack_params
@@ -56,6 +57,17 @@ def _reference_equilibria(vehicle: VehicleParams, left_radius_m: float, right_ra
         # of its seeds).
         return left, left.mirrored()
     return left, drift_equilibrium(right_radius_m, abs(sideslip_rad), right_params)
+
+
+def no_drift_reason(vehicle: VehicleParams, left_radius_m: float, right_radius_m: float,
+                    sideslip_rad: float) -> str | None:
+    """Why the controller's model ``vehicle`` has no drift to hold on these circles (None: it has one), without
+    building its QPs: what :func:`build_controller_model` would raise."""
+    try:
+        _reference_equilibria(vehicle, left_radius_m, right_radius_m, sideslip_rad)
+    except NoEquilibriumError as exc:
+        return str(exc)
+    return None
 
 
 @lru_cache(maxsize=16)

@@ -29,7 +29,7 @@ from driftlab.core.closed_loop import (
     run_until_constrained,
 )
 from driftlab.core.config import EpisodeConfig, Theta
-from driftlab.core.controller import ControllerModel, build_controller_model
+from driftlab.core.controller import ControllerModel, build_controller_model, no_drift_reason
 from driftlab.core.errors import ConfigError, NoEquilibriumError
 from driftlab.core.metrics import EpisodeMetrics, compute_metrics
 from driftlab.core.mpc import QpSession
@@ -99,6 +99,26 @@ def failure_penalty(completed_fraction: float) -> float:
     return 3.5 + 5.0 * (1.0 - min(max(completed_fraction, 0.0), 1.0))
 
 
+def _refusal_text(theta: Theta, reason: str) -> str:
+    return (f"the controller's model (model_mu_scale {theta.model_mu_scale:g}, model_c_scale "
+            f"{theta.model_c_scale:g}) has no drift to hold: {reason}")
+
+
+def refusal_reason(theta: Theta, config: EpisodeConfig) -> str | None:
+    """Why an episode of ``theta`` would stop before its first step, refused: its model corrections leave the
+    controller's model without a drift on the scenario's circles (None: it runs). Solves the model's two drift
+    equilibria only (~10 ms), none of the QPs."""
+    s = config.scenario
+    reason = no_drift_reason(theta.model_vehicle(config.vehicle), s.left_radius_m, s.right_radius_m, s.sideslip_rad)
+    return None if reason is None else _refusal_text(theta, reason)
+
+
+def runs(config: EpisodeConfig, theta: dict[str, float]) -> bool:
+    """Whether an episode of ``theta`` (any subset of its keys; the others untuned) would run: the optimizer's
+    known constraint (driftlab.core.optimizer.BayesianOptimizer's ``feasible``)."""
+    return refusal_reason(Theta.from_mapping({**Theta().as_dict(), **theta}), config) is None
+
+
 @with_one_blas_thread
 def run_episode(theta: Theta, config: EpisodeConfig, *, seed: int = 0) -> EpisodeResult:
     """Run the paper's figure-8 scenario once (paper Algorithm 1, inner loop) and score it (paper eq. 12).
@@ -118,10 +138,8 @@ def run_episode(theta: Theta, config: EpisodeConfig, *, seed: int = 0) -> Episod
                                        scenario.right_radius_m, scenario.sideslip_rad, theta.k, scenario.lookahead_m)
     except NoEquilibriumError as exc:
         empty = np.zeros((0, len(COLUMNS)))
-        reason = (f"the controller's model (model_mu_scale {theta.model_mu_scale:g}, model_c_scale "
-                  f"{theta.model_c_scale:g}) has no drift to hold: {exc}")
-        metrics = replace(compute_metrics(empty, [], track, COL), failure_reason=reason)
-        return EpisodeResult("diverged", failure_penalty(0.0), metrics, empty,
+        metrics = replace(compute_metrics(empty, [], track, COL), failure_reason=_refusal_text(theta, str(exc)))
+        return EpisodeResult(EpisodeStatus.REFUSED, failure_penalty(0.0), metrics, empty,
                              wall_ms=(time.perf_counter() - started) * 1e3, theta=theta, seed=seed)
     dt = config.mpc.dt_s
     n_steps = int(round(scenario.max_time_s * scenario.laps / dt))

@@ -28,7 +28,7 @@ from __future__ import annotations
 
 import math
 import warnings
-from collections.abc import Mapping, Sequence
+from collections.abc import Callable, Mapping, Sequence
 
 import numpy as np
 from scipy.optimize import minimize
@@ -54,6 +54,7 @@ _FAILURE_CLEARANCE = 0.015  # unit-cube distance over which a failure suppresses
 _CLASSIFIER_POINTS = 150  # the classifier conditions on every failure and a spread of successes, this many
 # After this many failed evaluations in a row, propose near the best success instead (see _retreat).
 _FAILURE_STREAK = 5
+MAX_REFUSED_PER_ASK = 50  # proposals a known constraint may refuse in one ask before the last is asked anyway
 _RETREAT_SPREAD = 0.05  # unit-cube standard deviation of the first retreat; halved every _FAILURE_STREAK more
 
 
@@ -74,12 +75,16 @@ class BayesianOptimizer:
         active_set: most successful observations the GP is fit on.
         seed: random seed (Latin hypercube, candidate sets).
         refit_every: hyperparameter refit period in observations.
+        feasible: a known constraint, cheap to evaluate (theta -> whether it can be evaluated at all; a theta whose
+            controller model has no drift, driftlab.core.episode.runs). A proposal it refuses is never asked: it
+            is kept as a failure the classifier learns from (so the next proposals keep away from it), and the
+            next proposal is made, up to ``MAX_REFUSED_PER_ASK`` times in one ask.
     """
 
     def __init__(self, bounds: Mapping[str, tuple[float, float]], *, seed_points: int = 20, active_set: int = 400,
                  seed: int = 0, refit_every: int = 10, initial_points: Sequence[Mapping[str, float]] = (),
                  local_points: int = 0, local_radius: float | Mapping[str, float] = 0.15,
-                 local_growth: int = 0) -> None:
+                 local_growth: int = 0, feasible: Callable[[dict[str, float]], bool] | None = None) -> None:
         if not bounds:
             raise ConfigError("bounds must name at least one parameter")
         for name, pair in bounds.items():
@@ -115,6 +120,8 @@ class BayesianOptimizer:
         self.y: list[float | None] = []  # None: failed evaluation
         self.pending: list[np.ndarray] = []
         self.failure_scores: list[float] = []  # per told evaluation: a failure's score, inf otherwise
+        self.feasible = feasible
+        self.refused: list[np.ndarray] = []  # unit-cube proposals ``feasible`` refused: failures never asked
         self._hyper_at = -1
         self._regression_hp: Hyperparameters | None = None
         self._clf_at = -1
@@ -123,13 +130,20 @@ class BayesianOptimizer:
     # -- public interface -------------------------------------------------------------------------------
     def ask(self) -> dict[str, float]:
         """The next point to evaluate (it stays pending until told)."""
-        n_issued = len(self.x) + len(self.pending)
-        unused = [d for d in self._seed_design if not self._is_repeat(d)] if n_issued < self.seed_points else []
-        # The first design point not yet told or pending: after a crash, a later design point may have been
-        # stored while an earlier one was lost in flight, and design[n_issued] would then run a point twice.
-        unit = unused[0] if unused else self._propose()
+        for _ in range(MAX_REFUSED_PER_ASK):
+            unit = self._next()
+            if self.feasible is None or self.feasible(self._to_theta(unit)):
+                break
+            self.refused.append(unit)
         self.pending.append(unit)
         return self._to_theta(unit)
+
+    def _next(self) -> np.ndarray:
+        n_issued = len(self.x) + len(self.pending)
+        unused = [d for d in self._seed_design if not self._is_repeat(d)] if n_issued < self.seed_points else []
+        # The first design point not yet told, pending or refused: after a crash, a later design point may have
+        # been stored while an earlier one was lost in flight, and design[n_issued] would then run a point twice.
+        return unused[0] if unused else self._propose()
 
     def tell(self, theta: Mapping[str, float], value: float | None, failure_score: float | None = None) -> None:
         """Record an evaluation: its value, or None for a failed one (with ``failure_score``, lower for one that got
@@ -182,8 +196,9 @@ class BayesianOptimizer:
         return np.random.default_rng([self.seed, len(self.x), len(self.pending)])
 
     def _propose(self) -> np.ndarray:
-        x_all = np.array(self.x) if self.x else np.empty((0, self.dim))
-        ok = np.array([v is not None for v in self.y], dtype=bool)
+        # What was refused counts as failed: the classifier and the clearance from failures keep away from it.
+        x_all = np.array(self.x + self.refused) if self.x or self.refused else np.empty((0, self.dim))
+        ok = np.array([v is not None for v in self.y] + [False] * len(self.refused), dtype=bool)
         x_ok = x_all[ok]
         y_ok = np.array([v for v in self.y if v is not None])
         streak = self._failure_streak()
@@ -360,7 +375,7 @@ class BayesianOptimizer:
         return best_x
 
     def _is_repeat(self, unit: np.ndarray) -> bool:
-        tried = self.x + self.pending
+        tried = self.x + self.pending + self.refused
         return bool(tried) and float(np.min(np.abs(np.array(tried) - unit).max(axis=1))) < 1e-6
 
     def _farthest_candidate(self, x_all: np.ndarray) -> np.ndarray:

@@ -16,6 +16,9 @@ class EpisodeStatus(StrEnum):
     GRIPPED_UP = "gripped_up"
     SOLVER_FAILED = "solver_failed"
     DIVERGED = "diverged"
+    # Never run: theta's model corrections leave the controller's model without a drift to hold (the kernel never
+    # returns it; stored jobs of earlier releases have such evaluations as "diverged").
+    REFUSED = "refused"
 
 
 class StudyKind(StrEnum):

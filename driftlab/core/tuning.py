@@ -8,6 +8,7 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass, field
+from functools import partial
 from typing import Any
 
 from driftlab.core.config import (
@@ -177,6 +178,10 @@ class TuningSpec:
         if self.local_phase and self.model_correction:
             options.update(local_points=min(LOCAL_POINTS, self.seed_points - 1), local_growth=LOCAL_GROWTH,
                            local_radius={name: LOCAL_MODEL_RADIUS for name in MODEL_BOUNDS})
+        if self.model_correction:  # a theta whose corrected model has no drift is refused before it is asked
+            from driftlab.core.episode import runs
+
+            options["feasible"] = partial(runs, self.config)
         return options
 
     @property

@@ -61,11 +61,16 @@ def test_the_phases_in_numbers_add_up_to_the_episode(nominal_run):
     assert max(p["max_abs_e_m"] for p in phases) == float(np.max(np.abs(r.column("e_m")[driving])))
 
 
-def test_a_theta_whose_model_cannot_drift_stops_at_once_saying_why():
-    r = run_episode(Theta(model_c_scale=0.85), EpisodeConfig.preset("commonroad_std"))
-    assert r.status == "diverged" and len(r.trajectory) == 0 and r.metrics.duration_s == 0.0
+def test_a_theta_whose_model_cannot_drift_is_refused_saying_why():
+    from driftlab.core.episode import refusal_reason, runs
+
+    std = EpisodeConfig.preset("commonroad_std")
+    r = run_episode(Theta(model_c_scale=0.85), std)
+    assert r.status == "refused" and len(r.trajectory) == 0 and r.metrics.duration_s == 0.0
     assert "model_c_scale 0.85" in r.metrics.failure_reason and "no drift to hold" in r.metrics.failure_reason
-    assert run_episode(Theta(), EpisodeConfig.preset("commonroad_std")).metrics.failure_reason is None
+    assert refusal_reason(Theta(model_c_scale=0.85), std) == r.metrics.failure_reason  # known before it runs
+    assert not runs(std, {"model_c_scale": 0.85}) and runs(std, {"k": 0.05})
+    assert run_episode(Theta(), std).metrics.failure_reason is None and refusal_reason(Theta(), std) is None
 
 
 def test_path_stays_on_both_circles(nominal_run):

@@ -54,6 +54,28 @@ def test_failing_region_is_learnt_and_avoided():
     assert opt.best[0]["x1"] < 0.0
 
 
+def test_a_known_constraint_is_never_asked_and_the_search_learns_from_it():
+    """Points with x1 > 2.5 are known beforehand not to run (a theta whose model has no drift): none is asked,
+    the constrained minimum is found as when they are evaluated and fail, and with no constraint it changes
+    nothing (the same proposals, bit for bit)."""
+    opt = BayesianOptimizer(BRANIN_BOUNDS, seed_points=10, seed=0, feasible=lambda t: t["x1"] <= 2.5)
+    asked = []
+    for _ in range(50):
+        theta = opt.ask()
+        asked.append(theta)
+        opt.tell(theta, branin(theta))
+    assert all(t["x1"] <= 2.5 for t in asked) and len(opt.refused) > 0
+    assert opt.best[1] - BRANIN_MIN < 1e-2 and opt.best[0]["x1"] < 0.0
+    assert len(opt.refused) < 60  # refusals teach the classifier: far fewer than half the proposals after the design
+    free, constrained = (BayesianOptimizer(BRANIN_BOUNDS, seed_points=6, seed=1, feasible=f)
+                         for f in (None, lambda t: True))
+    for _ in range(12):
+        a, b = free.ask(), constrained.ask()
+        assert a == b
+        free.tell(a, branin(a))
+        constrained.tell(b, branin(b))
+
+
 def test_resume_from_history_gives_the_same_next_proposal():
     uninterrupted = BayesianOptimizer(BRANIN_BOUNDS, seed_points=8, seed=3)
     history = []

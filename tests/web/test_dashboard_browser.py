@@ -188,3 +188,24 @@ def test_clone_with_changes_starts_from_the_jobs_settings(server, browser):
     assert changed == {"iterations"} and clone["iterations"] == 3  # the config in full, bounds, seed: as cloned
     assert not errors, errors
     page.close()
+
+
+def test_a_car_calibrated_from_the_page_shows_its_progress_and_its_profile(server, browser):
+    page, errors = _page(browser, f"{server}/dashboard/")
+    page.locator("#calibration-box summary").click()
+    form = page.locator("#calibration-form")
+    expect(form.locator("select[name=plant]")).to_have_value("commonroad_std")
+    form.locator("textarea[name=sets]").fill("plant.model_drive_coupling=false")
+    form.locator("input[name=points]").fill("0.5@44")
+    form.locator("input[name=iterations]").fill("2")
+    form.locator("input[name=seeds]").fill("1")
+    page.get_by_role("button", name="Calibrate").click()
+    expect(page.locator("#calibration-text")).to_contain_text("finished", timeout=WAIT_MS)
+    calibration = httpx.get(f"{server}/api/calibrations").json()[-1]
+    assert calibration["status"] == "finished" and calibration["request"]["points"] == "0.5@44"
+    profile_id, = calibration["profile_ids"]
+    row = page.locator("#profile-table tbody tr", has_text="commonroad_std 2").first
+    expect(row).to_contain_text("0.5@44")
+    assert row.locator("a").get_attribute("href") == f"/api/profiles/{profile_id}"
+    assert not errors, errors
+    page.close()

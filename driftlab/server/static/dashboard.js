@@ -3,6 +3,7 @@
 // With a token set, open the page as /dashboard/?token=<DRIFTLAB_TOKEN>: the server keeps it in an HttpOnly cookie,
 // takes it out of the address, and every change from this page carries the cookie (never a script's copy).
 "use strict";
+import { calibrationPanel } from "./calibrate.js";
 import { formBody, openForm as fillForm } from "./jobform.js";
 import { renderSpace } from "./searchspace.js";
 import { el, extent, fmt, frame, line, parallel, points, ramp, RAMPS } from "./svgplot.js";
@@ -17,6 +18,7 @@ const state = {
   space: null, spaceKey: "", spaceBusy: false,
   axesChosen: false, // until a parameter is chosen, the contour shows the two most important
   rescoring: false,
+  refreshCalibration: async () => {},
 };
 
 // ----- the API ------------------------------------------------------------------------------------------------
@@ -320,7 +322,7 @@ async function poll() {
 }
 
 async function loop() {
-  try { await poll(); } catch (e) { say(e.message); }
+  try { await poll(); await state.refreshCalibration(); } catch (e) { say(e.message); }
   setTimeout(loop, POLL_MS);
 }
 
@@ -329,6 +331,8 @@ async function start() {
   $("job-form").elements.plant_preset.replaceChildren(
     ...Object.keys(state.form.plant_presets).map((n) => new Option(n, n)));
   wireActions();
+  state.refreshCalibration = calibrationPanel(api, act, Object.keys(state.form.plant_presets));
+  $("calibration-box").addEventListener("toggle", () => act(state.refreshCalibration));
   $("new-job").disabled = false; // enabled once the form can be filled
   const wanted = Number(params.get("job"));
   if (wanted) state.selected = wanted;

@@ -51,7 +51,8 @@ export function openForm(jobForm, job) {
   f.elements.name.focus();
 }
 
-function parseSets(text) {
+// `key=value` lines (the --set syntax) as a config document; a value that is not JSON is text.
+export function parseSets(text) {
   const out = {};
   text.split("\n").map((l) => l.trim()).filter(Boolean).forEach((lineText, i) => {
     const at = lineText.indexOf("=");

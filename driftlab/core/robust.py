@@ -47,13 +47,18 @@ class SampleResult:
     J: float
     completed_fraction: float
     mean_abs_e_m: float | None = None  # mean |lateral error| over the episode (as far as it got) [m]
+    # A plant that reports where it leaves its model's validity (MB): the time a tyre's normal load was negative [s].
+    negative_wheel_load_s: float | None = None
 
     @property
     def completed(self) -> bool:
         return self.status == EpisodeStatus.COMPLETED
 
     def as_dict(self) -> dict:
-        return asdict(self)
+        out = asdict(self)
+        if out["negative_wheel_load_s"] is None:  # as stored before plants reported it
+            del out["negative_wheel_load_s"]
+        return out
 
 
 @dataclass(frozen=True)
@@ -97,7 +102,18 @@ def summarize(samples: Sequence[SampleResult]) -> dict:
             "J_mean_completed": sum(completed) / len(completed) if completed else None,
             "mean_abs_e_m": _mean([s.mean_abs_e_m for s in samples if s.completed and s.mean_abs_e_m is not None]),
             "statuses": {status: sum(s.status == status for s in samples)
-                         for status in sorted({s.status for s in samples})}}
+                         for status in sorted({s.status for s in samples})},
+            **_validity(samples)}
+
+
+def _validity(samples: Sequence[SampleResult]) -> dict:
+    """Where a plant that reports it (MB) left its model's validity: the episodes with any time at a negative
+    tyre load, and the mean and longest such time [s]."""
+    times = [s.negative_wheel_load_s for s in samples if s.negative_wheel_load_s is not None]
+    if not times:
+        return {}
+    return {"negative_wheel_load": {"episodes": sum(t > 0.0 for t in times), "of": len(times),
+                                    "mean_s": sum(times) / len(times), "max_s": max(times)}}
 
 
 def _mean(values: list[float]) -> float | None:

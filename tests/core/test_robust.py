@@ -55,3 +55,16 @@ def test_confirm_samples_share_the_seed_block():
 
     with pytest.raises(ConfigError, match=r"confirm_samples must be an integer in \[0, 4\]"):
         TuningSpec(robust_samples=60, confirm_samples=5)
+
+
+def test_a_plants_validity_is_summed_over_the_samples_that_report_it():
+    from driftlab.core.robust import SampleResult, summarize
+
+    plain = [SampleResult(s, "completed", -1.0, 1.0, 0.2) for s in range(3)]
+    assert "negative_wheel_load" not in summarize(plain)
+    assert "negative_wheel_load_s" not in plain[0].as_dict()  # stored as before
+    mb = [SampleResult(0, "completed", -1.0, 1.0, 0.2, 0.0), SampleResult(1, "spun_out", 8.0, 0.5, 1.0, 0.35),
+          SampleResult(2, "completed", -0.5, 1.0, 0.3, 0.1)]
+    assert summarize(mb)["negative_wheel_load"] == {"episodes": 2, "of": 3, "mean_s": pytest.approx(0.15),
+                                                    "max_s": 0.35}
+    assert SampleResult(**mb[1].as_dict()) == mb[1]

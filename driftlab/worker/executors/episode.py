@@ -37,8 +37,11 @@ class EpisodeOutcome:
     def sample(self) -> SampleResult:
         """This episode as one sample of a robust evaluation."""
         error = self.metrics.get("mean_abs_e_m")
+        validity = self.metrics.get("plant_validity") or {}
+        negative = validity.get("negative_wheel_load_s")
         return SampleResult(self.seed, self.status, float(self.J), float(self.metrics.get("completed_fraction", 0.0)),
-                            float(error) if error is not None and math.isfinite(error) else None)
+                            float(error) if error is not None and math.isfinite(error) else None,
+                            None if negative is None else float(negative))
 
 
 class EpisodeExecutor(Protocol):

@@ -106,7 +106,8 @@ def add_calibrate_parser(sub, db_help: str, dask_help: str, int_in, plant_choice
     cal.add_argument("--theta", help="the theta every weight set drives, c_lr=..,c_rl=..,dV=..,k=.. (any subset; "
                      "default: the untuned theta), e.g. the best theta a job learned at the point")
     cal.add_argument("--rounds", type=int_in(1, 5), default=1, metavar="N",
-                     help="rounds per point (1..5, default 1): each round after the first learns the theta a job "
+                     help="rounds per point (1..5, default 1; a point where no weight set completes the untuned "
+                          "theta gets a second): each round after the first learns the theta a job "
                           "would learn there with the last round's weights, then searches the weights again for it, "
                           "a decade around the last round's")
     cal.add_argument("--one-set", action="store_true",

@@ -85,8 +85,14 @@ class CalibrationRequest:
             raise ConfigError("rounds: a round learns a theta at one point; with one_set there are several (use "
                               "rounds 1)", field="rounds")
         Theta.from_mapping(self.theta)
-        parse_points(self.points)
-        return apply_overrides(EpisodeConfig.preset(self.plant), self.sets)
+        config = apply_overrides(EpisodeConfig.preset(self.plant), self.sets)
+        for point in parse_points(self.points) or []:  # in the scenario's ranges (ScenarioConfig checks them)
+            try:
+                replace(config.scenario, sideslip_rad=point.sideslip_rad, left_radius_m=point.radius_m,
+                        right_radius_m=point.radius_m)
+            except ConfigError as exc:
+                raise ConfigError(f"points: {point.label()}: {exc}", field="points") from None
+        return config
 
     def as_dict(self) -> dict[str, Any]:
         return asdict(self)

@@ -28,7 +28,8 @@ def _run_queued(api, executor):
 
 @pytest.mark.parametrize(("change", "field"), [({"iterations": 0}, "iterations"), ({"seeds": 65}, "seeds"),
                                                 ({"rounds": 2, "one_set": True}, "rounds"),
-                                                ({"points": "0.5/44"}, "points"), ({"plant": "nope"}, "plant"),
+                                                ({"points": "0.5/44"}, "points"), ({"points": "0@0"}, "points"),
+                                                ({"plant": "nope"}, "plant"), ({"theta": {"k": False}}, "k"),
                                                 ({"theta": {"nope": 1.0}}, "nope"),
                                                 ({"config": {"plant.mass_scale": "1.1"}}, "plant.mass_scale")])
 def test_a_bad_calibration_request_names_its_field_and_stores_nothing(api, change, field):

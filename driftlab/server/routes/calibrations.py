@@ -3,13 +3,14 @@ profiles they store."""
 
 from __future__ import annotations
 
-from typing import Annotated, Any
+from typing import Annotated, Any, Literal
 
 from fastapi import APIRouter, Depends, HTTPException, Path, Request, Response
 from pydantic import BaseModel, ConfigDict, Field
 from sqlalchemy.orm import Session, sessionmaker
 
-from driftlab.core.config import dotted_config
+from driftlab.core.config import PLANT_PRESETS, dotted_config
+from driftlab.core.plants import installed_names
 from driftlab.server.responses import Calibration, ProfileSummary, errors
 from driftlab.server.routes.deps import factory, require_token, wake_runner
 from driftlab.server.schemas import check_document_types
@@ -20,15 +21,33 @@ from driftlab.services.profiles import list_profile_summaries, profile_document
 router = APIRouter(tags=["calibration"])
 Factory = Annotated[sessionmaker[Session], Depends(factory)]
 RowId = Annotated[int, Path(ge=1, le=2**63 - 1)]
+PLANT_CHOICES = (*PLANT_PRESETS, *installed_names())
+PlantName = Literal[PLANT_CHOICES]  # type: ignore[valid-type]  # the presets and the plants installed
+NUMBER = r"\d+(\.\d+)?"
+POINTS_PATTERN = rf"^(\s*{NUMBER}@{NUMBER}\s*)(,\s*{NUMBER}@{NUMBER}\s*)*$"
+
+
+class ThetaGiven(BaseModel):
+    """Any subset of theta (the others untuned)."""
+
+    model_config = ConfigDict(extra="forbid")
+
+    c_lr: float | None = Field(default=None, strict=True)
+    c_rl: float | None = Field(default=None, strict=True)
+    dV: float | None = Field(default=None, strict=True)  # noqa: N815  # theta's own name (paper eq. 10)
+    k: float | None = Field(default=None, strict=True)
+    model_mu_scale: float | None = Field(default=None, strict=True)
+    model_c_scale: float | None = Field(default=None, strict=True)
 
 
 class CalibrationCreate(BaseModel):
     model_config = ConfigDict(extra="forbid")
 
-    plant: str = Field(description="a plant preset, as `--plant` (e.g. commonroad_std)")
+    plant: PlantName = Field(description="a plant preset, as `--plant` (e.g. commonroad_std)")
     config: dict[str, Any] = Field(default_factory=dict, description="dotted config keys, as `--set` (e.g. "
                                    "plant.commonroad_vehicle: 3, scenario.sideslip_rad: 0.55)")
-    points: str | None = Field(default=None, max_length=400, description="SIDESLIP@RADIUS,... (default: the "
+    points: str | None = Field(default=None, max_length=400, pattern=POINTS_PATTERN,
+                               description="SIDESLIP@RADIUS,... (default: the "
                                "scenario's drift, 0.05 rad either side, its sideslip on circles 30/44 and 52/44 "
                                "the size)")
     iterations: int = Field(default=150, ge=LIMITS["iterations"][0], le=LIMITS["iterations"][1], strict=True)
@@ -36,8 +55,8 @@ class CalibrationCreate(BaseModel):
     seed: int = Field(default=0, ge=0, le=2**31 - 1, strict=True)
     rounds: int = Field(default=1, ge=LIMITS["rounds"][0], le=LIMITS["rounds"][1], strict=True)
     one_set: bool = Field(default=False, strict=True)
-    theta: dict[str, float] = Field(default_factory=dict, description="the theta every weight set drives (any "
-                                    "subset of c_lr, c_rl, dV, k, model_mu_scale, model_c_scale)")
+    theta: ThetaGiven = Field(default_factory=ThetaGiven, description="the theta every weight set drives (any "
+                              "subset; default the untuned one)")
 
 
 @router.post("/api/calibrations", status_code=202, dependencies=[Depends(require_token)],
@@ -49,7 +68,8 @@ def start_calibration(body: CalibrationCreate, db: Factory, request: Request) ->
     check_document_types({"config": body.config})
     calibration = CalibrationRequest(plant=body.plant, sets=dotted_config(body.config), points=body.points,
                                      iterations=body.iterations, seeds=body.seeds, seed=body.seed,
-                                     rounds=body.rounds, one_set=body.one_set, theta=dict(body.theta),
+                                     rounds=body.rounds, one_set=body.one_set,
+                                     theta=body.theta.model_dump(exclude_none=True),
                                      command=f"POST /api/calibrations {body.model_dump_json(exclude_defaults=True)}")
     try:
         out = calibration_queue.queue(db, calibration)

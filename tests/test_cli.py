@@ -109,6 +109,14 @@ def test_tune_resumes_by_name_and_report_writes_the_tables(tmp_path):
     assert rep.returncode == 0, rep.stderr
     text = (tmp_path / "rep" / "report.md").read_text()
     assert "paper Table I" in text and "best of 2 random" in text and "untuned" in text
+    # the phase table gives the numbers stored with the best evaluation (its drawn seed, re-run)
+    from driftlab.db import storage
+    from driftlab.reports.job import phase_table
+
+    with storage.snapshot(storage.open_database(f"sqlite:///{db}")) as session:
+        best = storage.best_evaluation(session, job_id=storage.get_job_by_name(session, name="smoke").id)
+        stored = best.metrics["phases"]
+    assert len(stored) >= 1 and all(line in text for line in phase_table(stored))
     assert (tmp_path / "rep" / "convergence.png").stat().st_size > 0
     assert (tmp_path / "rep" / "best_episode.png").stat().st_size > 0
 

@@ -150,6 +150,9 @@ def add_job_options(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--deterministic", action="store_true", default=None,
                         help="one evaluation at a time (its seeds still in parallel): the thetas depend on the seed "
                              "and settings only, not on the number of workers or which episode finishes first")
+    parser.add_argument("--warm-start-from", metavar="IDS",
+                        help="start from these stored jobs' evaluations, e.g. 3,4 (job ids): told to the optimizer "
+                             "where a job ran the same config, else its best thetas are asked first")
     parser.add_argument("--seed-points", type=int, help="space-filling evaluations before the GP (default 12)")
     parser.add_argument("--active-set", type=int, help="most evaluations the GP is fit on (default 400)")
     parser.add_argument("--robust-samples", type=int, default=DEFAULT_ROBUST_SAMPLES, metavar="N",

@@ -39,6 +39,18 @@ def tuning_spec(args: argparse.Namespace):
                       deterministic=bool(args.deterministic))
 
 
+def job_ids(text: str) -> list[int]:
+    """``--warm-start-from``'s job ids, e.g. "3,4"."""
+    try:
+        ids = [int(part) for part in text.split(",")]
+    except ValueError:
+        ids = []
+    if not ids or min(ids) < 1:
+        raise ConfigError(f"--warm-start-from must be job ids separated by commas, e.g. 3,4; got {text!r}",
+                          field="warm_start_from")
+    return ids
+
+
 def open_tuning_job(factory, args: argparse.Namespace, runner: str) -> tuple[int, str]:
     """Create the job, or take up the stored one of that name (its settings win; a given --iterations extends
     it); then claim its lease. A job another live runner holds is refused (LeaseHeld: exit 2)."""
@@ -55,6 +67,10 @@ def open_tuning_job(factory, args: argparse.Namespace, runner: str) -> tuple[int
             profile_id = None
             if args.controller != "paper":
                 spec, profile_id = with_profile(session, spec, key_values(args.set or [], "--set"))
+            if args.warm_start_from:
+                from driftlab.services.warm_start import with_warm_start
+
+                spec = with_warm_start(session, spec, job_ids(args.warm_start_from))
             job = storage.create_job(session, name=name, spec=spec.to_dict(), seed=spec.seed, profile_id=profile_id)
             message = f"job {job.name} (id {job.id}): {spec.iterations} iterations"
         else:

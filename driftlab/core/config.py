@@ -179,8 +179,8 @@ class EpisodeConfig:
             raise ConfigError(f"controller must be 'default' or 'paper', got {controller!r}")
         sideslip_rad = plant_config.plant_type.default_sideslip_rad
         scenario = ScenarioConfig() if sideslip_rad is None else ScenarioConfig(sideslip_rad=sideslip_rad)
-        return cls(plant=plant_config, vehicle=model_vehicle_for(plant_config, scenario), scenario=scenario,
-                   mpc=controllers[controller]())
+        return cls(plant=started_in_drift(plant_config, scenario), vehicle=model_vehicle_for(plant_config, scenario),
+                   scenario=scenario, mpc=controllers[controller]())
 
 
 def _plant_presets() -> dict[str, Any]:
@@ -212,6 +212,12 @@ def model_vehicle_for(plant: PlantConfig, scenario: ScenarioConfig) -> VehiclePa
     scenario's (left) radius and sideslip (raises ConfigError naming scenario.sideslip_rad where the car has no
     countersteer drift)."""
     return plant.plant_type.model_vehicle(plant, scenario.left_radius_m, scenario.sideslip_rad)
+
+
+def started_in_drift(plant: PlantConfig, scenario: ScenarioConfig) -> PlantConfig:
+    """The plant's start settings for the scenario's drift (its catalog entry's; a CommonRoad STD car's rear wheel
+    at the slip of its own drift at the scenario's left radius and sideslip)."""
+    return plant.plant_type.started_in_drift(plant, scenario.left_radius_m, scenario.sideslip_rad)
 
 
 def _coerce(section: str, name: str, current: Any, raw: Any) -> Any:
@@ -288,7 +294,8 @@ def _refit_model_vehicle(config: EpisodeConfig, changes: dict[str, dict[str, Any
     weights, switching to a CommonRoad car takes its weights (driftlab.core.commonroad.weights; unless ``mpc.*``
     keys are given), and a
     CommonRoad plant's model is fitted to the car's drift at the scenario's radius and sideslip whenever the plant
-    or the scenario changes (driftlab.core.commonroad.model_fit), unless ``vehicle.*`` keys are given."""
+    or the scenario changes (driftlab.core.commonroad.model_fit), unless ``vehicle.*`` keys are given; the plant
+    then starts in the car's drift (:func:`started_in_drift`) unless ``plant.initial_rear_slip`` is given."""
     plant_switched = "model" in changes.get("plant", {}) or "commonroad_vehicle" in changes.get("plant", {})
     if plant_switched and "mpc" not in changes:  # and the default controller's weights for that car
         config = replace(config, mpc=config.plant.plant_type.controller())
@@ -296,7 +303,10 @@ def _refit_model_vehicle(config: EpisodeConfig, changes: dict[str, dict[str, Any
         return config
     if not config.plant.plant_type.own_car and not plant_switched:
         return config
-    return replace(config, vehicle=model_vehicle_for(config.plant, config.scenario))
+    config = replace(config, vehicle=model_vehicle_for(config.plant, config.scenario))
+    if "initial_rear_slip" in changes.get("plant", {}):
+        return config
+    return replace(config, plant=started_in_drift(config.plant, config.scenario))
 
 
 def dotted_config(document: Any) -> dict[str, Any]:

@@ -104,12 +104,16 @@ def _transition_times(t: np.ndarray, beta: np.ndarray, beta_ref: np.ndarray, tri
 
 
 def phase_segments(t_s: np.ndarray, phase: np.ndarray, e_m: np.ndarray, beta_err_rad: np.ndarray,
-                   speed_mps: np.ndarray) -> list[dict]:
+                   speed_mps: np.ndarray, beta_rad: np.ndarray, steer_rad: np.ndarray,
+                   beta_ref_rad: np.ndarray, settle_tolerance_rad: float = 0.05) -> list[dict]:
     """Each run of one planner phase (paper section III-A: sustained drift, inertia drift, ...), in order, the
-    finish excluded: its name, start and end [s] (the end is the next run's start), mean and max |e| [m], mean
-    |beta - beta_ref| [rad], speed at its start, its lowest speed and the loss between them [m/s]. A flick's
+    finish excluded: its name, start and end [s] (the end is the next run's start), mean and max |e| [m], mean and
+    RMS |beta - beta_ref| [rad], the share of its steps steered against the turn (countersteer: the steering angle
+    has the sideslip's sign), speed at its start, its lowest speed and the loss between them [m/s]. A flick's
     (``inertia_*``) runs from its trigger to the sideslip settling on the new side, so its speed loss is the
-    "minimal velocity loss" the paper claims for the inertia drift."""
+    "minimal velocity loss" the paper claims for the inertia drift; a flick also gives the time from its trigger
+    to the sideslip changing sign (``flip_s``) and to it settling within the scenario's tolerance of the new
+    reference (``settle_s``; None where it never did)."""
     starts = [0, *(int(i) + 1 for i in np.flatnonzero(np.diff(phase)))]  # Python ints: the metrics are JSON
     ends = [*starts[1:], len(t_s)]
     segments = []
@@ -118,13 +122,20 @@ def phase_segments(t_s: np.ndarray, phase: np.ndarray, e_m: np.ndarray, beta_err
             continue
         run = slice(start, end)
         lowest = float(np.min(speed_mps[run]))
-        segments.append({
+        segment = {
             "phase": Phase(int(phase[start])).name.lower(), "start_s": float(t_s[start]),
             "end_s": float(t_s[end] if end < len(t_s) else t_s[-1]), "steps": end - start,
             "mean_abs_e_m": float(np.mean(np.abs(e_m[run]))), "max_abs_e_m": float(np.max(np.abs(e_m[run]))),
             "mean_abs_beta_err_rad": float(np.mean(np.abs(beta_err_rad[run]))),
+            "rms_beta_err_rad": float(np.sqrt(np.mean(beta_err_rad[run] ** 2))),
+            "countersteer_share": float(np.mean(steer_rad[run] * beta_rad[run] > 0.0)),
             "start_speed_mps": float(speed_mps[start]), "min_speed_mps": lowest,
-            "speed_loss_mps": float(speed_mps[start]) - lowest})
+            "speed_loss_mps": float(speed_mps[start]) - lowest}
+        if Phase(int(phase[start])) in (Phase.INERTIA_LEFT_TO_RIGHT, Phase.INERTIA_RIGHT_TO_LEFT):
+            flip, settle = _transition_times(t_s, beta_rad, beta_ref_rad, float(t_s[start]), settle_tolerance_rad)
+            segment["flip_s"] = None if math.isnan(flip) else flip
+            segment["settle_s"] = None if math.isnan(settle) else settle
+        segments.append(segment)
     return segments
 
 
@@ -164,5 +175,6 @@ def compute_metrics(traj: np.ndarray, trigger_times_s: list[float], track: Figur
         trigger_times_s=[float(x) for x in trigger_times_s],
         duration_s=float(t[-1]),
         lap_mean_abs_e_m=lap_mean_abs_e_m(e, cumulative, track),
-        phases=phase_segments(t, phase, e, beta_err, traj[:, col["V_mps"]]),
+        phases=phase_segments(t, phase, e, beta_err, traj[:, col["V_mps"]], beta, traj[:, col["delta_rad"]],
+                              beta_ref, settle_tolerance_rad),
     )

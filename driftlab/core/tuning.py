@@ -22,6 +22,7 @@ from driftlab.core.config import (
 from driftlab.core.errors import ConfigError
 from driftlab.core.limits import JOB_LIMITS, MAX_ROBUST_SAMPLES, check_int
 from driftlab.core.robust import tuning_seeds
+from driftlab.core.warm_start import WarmStart
 
 # Around the band where the default controller completes the 8 on the default plant (benchmarks/mismatch_sweep.py:
 # c outside [0.005, 0.04] or k above 0.12 fail nearly always).
@@ -106,6 +107,8 @@ class TuningSpec:
         local_phase: with the model corrections, start near the uncorrected model (LOCAL_POINTS, LOCAL_GROWTH);
             off: the seed points fill the whole box (jobs stored before revision 10). None (the default): on for
             DriftLab's own plants, off for any other (see LOCAL_POINTS); stored as what it resolved to.
+        warm_start: what the job takes from other jobs' evaluations before its own (driftlab.core.warm_start):
+            evaluations of its own config told first, or other configs' best thetas asked first. None: a cold start.
         deterministic: the next theta is asked only once every evaluation asked before is stored and told, so the
             sequence of thetas is a function of the seed and the settings whatever the number of workers or
             their speed. Off (the default): a new theta is asked as soon as a worker is free, and the order in
@@ -125,6 +128,7 @@ class TuningSpec:
     model_correction: bool = True
     local_phase: bool | None = None
     deterministic: bool = False
+    warm_start: WarmStart | None = None
 
     def __post_init__(self) -> None:
         for name in ("iterations", "seed_points", "active_set", "seed", "robust_samples"):
@@ -143,6 +147,8 @@ class TuningSpec:
                               field="deterministic")
         object.__setattr__(self, "bounds", validate_bounds(dict(self.bounds), self.model_correction,
                                                            self.config.plant.plant_type.theta_bounds))
+        if self.warm_start is not None:
+            self.warm_start.check(self.bounds)
         if self.model_correction:  # every corner of the box must be a valid car, or every episode would raise
             (mu_lo, mu_hi), (c_lo, c_hi) = self.bounds["model_mu_scale"], self.bounds["model_c_scale"]
             for mu, c in ((mu_lo, c_lo), (mu_hi, c_hi)):
@@ -153,11 +159,14 @@ class TuningSpec:
                                       f"vehicle's range ({exc})", field="bounds") from None
 
     def to_dict(self) -> dict[str, Any]:
-        return {"iterations": self.iterations, "seed_points": self.seed_points, "active_set": self.active_set,
-                "seed": self.seed, "robust_samples": self.robust_samples, "confirm_samples": self.confirm_samples,
-                "bounds": {k: list(v) for k, v in self.bounds.items()}, "model_correction": self.model_correction,
-                "local_phase": self.local_phase, "deterministic": self.deterministic,
-                "config": config_to_dict(self.config)}
+        out = {"iterations": self.iterations, "seed_points": self.seed_points, "active_set": self.active_set,
+               "seed": self.seed, "robust_samples": self.robust_samples, "confirm_samples": self.confirm_samples,
+               "bounds": {k: list(v) for k, v in self.bounds.items()}, "model_correction": self.model_correction,
+               "local_phase": self.local_phase, "deterministic": self.deterministic,
+               "config": config_to_dict(self.config)}
+        if self.warm_start is not None:  # a cold job's document stays what it was
+            out["warm_start"] = self.warm_start.to_dict()
+        return out
 
     @property
     def initial_points(self) -> list[dict[str, float]]:
@@ -173,8 +182,9 @@ class TuningSpec:
     @property
     def optimizer_options(self) -> dict[str, Any]:
         """The optimizer's settings for this job (:class:`driftlab.core.optimizer.BayesianOptimizer`'s keywords)."""
+        warm = list(self.warm_start.initial_points) if self.warm_start is not None else []
         options: dict[str, Any] = {"seed_points": self.seed_points, "active_set": self.active_set, "seed": self.seed,
-                                   "initial_points": self.initial_points}
+                                   "initial_points": warm + self.initial_points}
         if self.local_phase and self.model_correction:
             options.update(local_points=min(LOCAL_POINTS, self.seed_points - 1), local_growth=LOCAL_GROWTH,
                            local_radius={name: LOCAL_MODEL_RADIUS for name in MODEL_BOUNDS})
@@ -198,7 +208,7 @@ class TuningSpec:
     def from_dict(cls, data: dict[str, Any]) -> TuningSpec:
         """From a stored or posted document. ``config`` may be nested sections or flat dotted keys."""
         allowed = {"iterations", "seed_points", "active_set", "seed", "robust_samples", "confirm_samples", "bounds",
-                   "model_correction", "local_phase", "deterministic", "config"}
+                   "model_correction", "local_phase", "deterministic", "config", "warm_start"}
         unknown = set(data) - allowed
         if unknown:
             raise ConfigError(f"unknown field {sorted(unknown)[0]!r}; allowed: {', '.join(sorted(allowed))}")
@@ -207,4 +217,5 @@ class TuningSpec:
         kwargs = {k: data[k] for k in scalars if k in data}
         return cls(**kwargs, bounds=data.get("bounds") or {}, config=config,
                    model_correction=data.get("model_correction", True), local_phase=data.get("local_phase"),
-                   deterministic=data.get("deterministic", False))
+                   deterministic=data.get("deterministic", False),
+                   warm_start=None if data.get("warm_start") is None else WarmStart.from_dict(data["warm_start"]))

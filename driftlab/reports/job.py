@@ -90,10 +90,34 @@ def write_report(*, db_url: str, name: str, out_dir: str, baseline_samples: int 
                      f"{summary['completed']}/{summary['samples']} | "
                      f"{summary['J_mean']:.3f} | {summary['J_worst']:.3f} |")
     lines += _verdict(summaries[0], summaries[1], len(evals), spec.seed_points)
+    lines += ["", f"## The drift and the flicks, phase by phase (best evaluation, seed {shown_seed})", "",
+              *phase_table(best_result.metrics.phases)]
     lines += ["", "![best episode](best_episode.png)", "", "![convergence](convergence.png)", ""]
     path = out / "report.md"
     path.write_text("\n".join(lines))
     return path
+
+
+PHASE_NAMES = {"left_drift": "left drift", "inertia_left_to_right": "flick left -> right", "right_drift":
+               "right drift", "inertia_right_to_left": "flick right -> left", "left_drift_final": "final left drift"}
+
+
+def phase_table(phases: list[dict]) -> list[str]:
+    """Markdown rows of an episode's phases (driftlab.core.metrics.phase_segments): each drift and each flick with
+    its path error, sideslip error, countersteer share, and a flick's sign-change and settle times and speed loss."""
+    def number(value, digits):
+        return "-" if value is None else f"{value:.{digits}f}"
+
+    lines = ["| phase | from-to (s) | mean / max \\|e\\| (m) | RMS beta error (rad) | countersteer | "
+             "sign change (s) | settled (s) | speed loss (m/s) |", "|---" * 8 + "|"]
+    for p in phases:
+        share = p.get("countersteer_share")  # None: stored before it was measured
+        flick = [number(p.get("flip_s"), 2), number(p.get("settle_s"), 2)] if "flip_s" in p else ["", ""]
+        lines.append(f"| {PHASE_NAMES.get(p['phase'], p['phase'])} | {p['start_s']:.2f}-{p['end_s']:.2f} | "
+                     f"{p['mean_abs_e_m']:.2f} / {p['max_abs_e_m']:.2f} | {number(p.get('rms_beta_err_rad'), 3)} | "
+                     f"{'-' if share is None else f'{100 * share:.0f}%'} | {flick[0]} | {flick[1]} | "
+                     f"{p['speed_loss_mps']:.2f} |")
+    return lines
 
 
 def _verdict(learned: dict, untuned: dict, n_evaluations: int, seed_points: int = 20) -> list[str]:

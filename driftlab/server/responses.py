@@ -136,6 +136,8 @@ class Convergence(BaseModel):
 
 class ComparedJob(JobBrief):
     convergence: Convergence
+    best_phases: list[dict[str, Any]] = Field(description="the best evaluation's shown episode phase by phase: "
+                                                          "each drift and flick (metrics.phases)")
 
 
 class Band(BaseModel):

@@ -12,6 +12,7 @@ from driftlab.core.config import THETA_KEYS, check_json_types
 from driftlab.core.errors import ConfigError
 from driftlab.core.limits import JOB_LIMITS
 from driftlab.core.tuning import DEFAULT_CONFIRM_SAMPLES, DEFAULT_ROBUST_SAMPLES, DEFAULT_SEED_POINTS
+from driftlab.core.warm_start import MAX_WARM_JOBS
 from driftlab.names import MAX_NAME_LENGTH, name_problem
 
 MAX_ID = 2**63 - 1  # SQLite's INTEGER; larger ids cannot exist (and used to overflow into a 500)
@@ -96,6 +97,10 @@ class JobCreate(BaseModel):
                                             "workers there are or which episode finishes first")
     config: dict[str, Any] | None = Field(default=None, description="dotted keys as `driftlab --set`, "
                                           "e.g. {\"plant.steer_lag_s\": 0.02}, or nested sections")
+    warm_start_from: list[Annotated[int, Field(ge=1, le=MAX_ID, strict=True)]] | None = Field(
+        default=None, min_length=1, max_length=MAX_WARM_JOBS,
+        description="start from these stored jobs' evaluations: told to the optimizer where a job ran the same "
+                    "config, else its best thetas asked first (the job's spec records which, warm_start)")
 
 
 MAX_NOTES_CHARS = 10_000

@@ -67,11 +67,12 @@ def job_detail(status: str, seconds_per_evaluation: float | None) -> str | None:
 
 def trajectory_metadata(e: Evaluation, job: Job) -> dict[str, Any]:
     """What a downloaded trajectory is: the evaluation, its job, theta, the drawn episode's seed and J (the worst
-    of the evaluation's seeds), the evaluation's J over all its seeds, and the config to re-run it with."""
+    of the evaluation's seeds), the evaluation's J over all its seeds, that episode's phases in numbers
+    (driftlab.core.metrics.phase_segments), and the config to re-run it with."""
     seeds = list(e.seeds or ())
     seed = e.trajectory_seed if e.trajectory_seed is not None else (seeds[0]["seed"] if seeds else 0)
     episode = next((s for s in seeds if s["seed"] == seed), {"J": e.J, "status": e.status})
     return {"evaluation_id": e.id, "job_id": job.id, "job_name": job.name, "index": e.index,
             "theta": {**Theta().as_dict(), **e.theta}, "seed": seed, "J_episode": episode["J"],
             "episode_status": episode["status"], "J": e.J, "status": e.status, "n_seeds": max(len(seeds), 1),
-            "config": job.spec.get("config", {})}
+            "phases": (e.metrics or {}).get("phases", []), "config": job.spec.get("config", {})}

@@ -102,10 +102,18 @@ def job_summary(session: Session, job: Job) -> dict[str, Any]:
 
 
 def compare_jobs(session: Session, *, job_ids: list[int]) -> list[dict[str, Any]]:
-    """Each job's summary, in the order given (NotFound for an unknown id)."""
+    """Each job's summary, in the order given (NotFound for an unknown id), with its best evaluation's phases in
+    numbers (driftlab.core.metrics.phase_segments: the drifts and the flicks side by side)."""
     if not job_ids or len(job_ids) > MAX_COMPARED_JOBS:
         raise ConfigError(f"jobs: give 1 to {MAX_COMPARED_JOBS} job ids, got {len(job_ids)}")
-    return [job_summary(session, storage.get_job(session, job_id=i)) for i in job_ids]
+    summaries = [job_summary(session, storage.get_job(session, job_id=i)) for i in job_ids]
+    return [{**s, "best_phases": _best_phases(session, s["best"])} for s in summaries]
+
+
+def _best_phases(session: Session, best: dict[str, Any] | None) -> list[dict[str, Any]]:
+    if best is None:
+        return []
+    return list((storage.get_evaluation(session, evaluation_id=best["id"]).metrics or {}).get("phases", []))
 
 
 def _seeds_part(session: Session, study: Study) -> dict[str, Any]:

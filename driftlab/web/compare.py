@@ -61,6 +61,10 @@ def _shown(value: Any) -> str:
     return "-" if value is None else str(value)
 
 
+def _time(seconds: float | None) -> str:
+    return "-" if seconds is None else f"{seconds:.2f}"
+
+
 def config_diff_markdown(diff: dict[str, Any]) -> str:
     """The settings that differ between the compared jobs, one column per job (GET /api/compare/config)."""
     jobs = diff["jobs"]
@@ -246,7 +250,19 @@ class ComparePanel:
             value = "-" if best is None or not math.isfinite(best["J"]) else f"{best['J']:.4g} ({best['status']})"
             lines.append(f"| {COLOR_NAMES[n % len(COLOR_NAMES)]} | {plain(job['name'])} (id {job['id']}) | "
                          f"{job['seed']} | {job['n_done']} / {job['iterations']} | {value} |")
-        return "\n".join(lines)
+        return "\n".join(lines + self._flicks_table())
+
+    def _flicks_table(self) -> list[str]:
+        """Each job's best episode through its flicks: sign change and settle times [s], speed loss [m/s], mean
+        |e| [m] (metrics.phases)."""
+        rows = []
+        for n, job in enumerate(self.jobs):
+            flicks = [p for p in job.get("best_phases", []) if "flip_s" in p]
+            cells = "; ".join(f"{_time(p['flip_s'])} / {_time(p['settle_s'])} s, -{p['speed_loss_mps']:.2f} m/s, "
+                              f"|e| {p['mean_abs_e_m']:.2f} m" for p in flicks)
+            rows.append(f"| {COLOR_NAMES[n % len(COLOR_NAMES)]} | {cells or '-'} |")
+        return ["", "| colour | flicks of the best episode: sign change / settled, speed loss, mean \\|e\\| |",
+                "|---|---|", *rows]
 
     def play(self) -> None:
         with self.lock:

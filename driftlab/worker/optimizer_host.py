@@ -30,8 +30,11 @@ History = list[tuple[dict[str, float], float | None, float]]
 
 def restore_optimizer(spec: TuningSpec, history: list[tuple[dict[str, float], float | None, float]]
                       ) -> BayesianOptimizer:
-    """An optimizer in the state it had after telling ``history`` (theta, J or None if failed, the stored J)."""
+    """An optimizer in the state it had after telling ``history`` (theta, J or None if failed, the stored J), told
+    first what the job's warm start takes from jobs of its own config (driftlab.core.warm_start)."""
     optimizer = BayesianOptimizer(spec.bounds, **spec.optimizer_options)
+    for observation in spec.warm_start.told if spec.warm_start is not None else ():
+        optimizer.tell(observation.theta, observation.value, observation.stored_j)
     for theta, value, stored_j in history:
         optimizer.tell(theta, value, stored_j)
     return optimizer

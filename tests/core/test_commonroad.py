@@ -23,7 +23,7 @@ from driftlab.core.commonroad.parameters import (
 )
 from driftlab.core.commonroad.std import std_derivatives
 from driftlab.core.commonroad.weights import std_weights
-from driftlab.core.config import EpisodeConfig, Theta, apply_overrides
+from driftlab.core.config import EpisodeConfig, Theta, apply_overrides, config_from_document, config_to_dict
 from driftlab.core.drivability import drivable_reason
 from driftlab.core.episode import run_episode
 from driftlab.core.equilibrium import drift_equilibrium
@@ -358,3 +358,22 @@ def test_a_refused_sideslip_names_where_the_car_and_its_model_both_drift():
     above = apply_overrides(config, {"scenario.sideslip_rad": 0.6})
     assert config.vehicle.front_grip_scale == 1.0 and 1.0 < above.vehicle.front_grip_scale <= 1.1
     drift_equilibrium(44.0, -0.6, pack_params(above.vehicle))
+
+
+def test_an_std_car_starts_its_rear_wheel_at_the_slip_of_its_own_drift():
+    """A start at another rear slip is a step of the rear force: the VW Vanagon drifts at 0.62 rad with its rear
+    wheel at slip -0.93; started at the old fixed -0.5 it grips up before its first flick, started in its drift it
+    holds the drift to the trigger."""
+    vanagon = {"plant.model": "commonroad_std", "plant.commonroad_vehicle": 3, "scenario.sideslip_rad": 0.62}
+    config = apply_overrides(EpisodeConfig(), vanagon)
+    main = commonroad_drifts(3, 44.0, 0.62)[0]
+    assert config.plant.initial_rear_slip == pytest.approx(main.rear_slip, abs=1e-4) and main.rear_slip < -0.9
+    held = run_episode(Theta(), config, seed=1)
+    assert held.metrics.trigger_times_s, held.status
+    old = run_episode(Theta(), apply_overrides(EpisodeConfig(), {**vanagon, "plant.initial_rear_slip": -0.5}), seed=1)
+    assert old.status == "gripped_up" and not old.metrics.trigger_times_s
+    # A config that names its start (as every stored job's does) keeps it when it is loaded again.
+    assert config_from_document(config_to_dict(old_config := apply_overrides(
+        EpisodeConfig(), {**vanagon, "plant.initial_rear_slip": -0.5}))).plant == old_config.plant
+    assert EpisodeConfig.preset("commonroad_std").plant.initial_rear_slip == pytest.approx(
+        commonroad_drifts(2, 44.0, 0.5)[0].rear_slip, abs=1e-4)

@@ -51,14 +51,28 @@ def test_the_phases_in_numbers_add_up_to_the_episode(nominal_run):
                                            "inertia_right_to_left", "left_drift_final"]
     assert all(a["end_s"] == b["start_s"] for a, b in zip(phases, phases[1:], strict=False))
     flicks = [p for p in phases if p["phase"].startswith("inertia")]
-    for flick, trigger, settle in zip(flicks, r.metrics.trigger_times_s, r.metrics.beta_settle_s, strict=True):
+    for flick, trigger, flip, settle in zip(flicks, r.metrics.trigger_times_s, r.metrics.beta_flip_s,
+                                            r.metrics.beta_settle_s, strict=True):
         assert flick["start_s"] == trigger and flick["end_s"] == pytest.approx(trigger + settle)
+        assert flick["flip_s"] == flip and flick["settle_s"] == settle and 0.0 < flip < settle
         assert flick["speed_loss_mps"] >= 0.0 and flick["mean_abs_beta_err_rad"] > 0.1  # the sideslip crosses over
+    beta, steer = r.column("beta_rad"), r.column("delta_rad")
+    for p in phases:
+        rows = (r.column("t_s") >= p["start_s"]) & (r.column("t_s") < p["end_s"]) & driving_rows(r)
+        assert p["countersteer_share"] == pytest.approx(float(np.mean(beta[rows] * steer[rows] > 0.0)))
+        assert p["rms_beta_err_rad"] >= p["mean_abs_beta_err_rad"] > 0.0
+        assert "flip_s" in p if p["phase"].startswith("inertia") else "flip_s" not in p
+    drifts = [p for p in phases if p["phase"].endswith("drift") or p["phase"].endswith("final")]
+    assert all(p["countersteer_share"] > 0.9 for p in drifts)  # the nominal car drifts against the turn
     driving = r.column("phase") != Phase.FINISHED
     assert sum(p["steps"] for p in phases) == int(np.sum(driving))
     assert sum(p["steps"] * p["mean_abs_e_m"] for p in phases) == pytest.approx(
         float(np.sum(np.abs(r.column("e_m")[driving]))), rel=1e-12)
     assert max(p["max_abs_e_m"] for p in phases) == float(np.max(np.abs(r.column("e_m")[driving])))
+
+
+def driving_rows(r):
+    return r.column("phase") != Phase.FINISHED
 
 
 def test_a_theta_whose_model_cannot_drift_is_refused_saying_why():

@@ -115,6 +115,7 @@ def test_trajectory_downloads_parse(server):
     assert meta["theta"] == {**Theta().as_dict(), **evaluation["theta"]} and meta["J"] == evaluation["J"]
     assert meta["J_episode"] == next(s["J"] for s in evaluation["seeds"] if s["seed"] == seed)
     assert meta["n_seeds"] == len(evaluation["seeds"]) and meta["config"] == job["spec"]["config"]
+    assert meta["phases"] == evaluation["metrics"]["phases"] and meta["phases"][0]["phase"] == "left_drift"
     rows = list(csv.reader(io.StringIO(r.text)))[1:]
     header, body = rows[0], rows[1:]
     assert "beta_rad" in header and "t_s" in header

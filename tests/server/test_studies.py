@@ -88,6 +88,7 @@ def test_compare_gives_each_jobs_best_n_done_and_convergence(server, seeds_study
         assert row["best"]["theta"] == best["theta"]
         assert row["convergence"]["J"] == [e["J"] for e in evaluations]
         assert row["convergence"]["best_so_far"] == _best_so_far(evaluations)
+        assert row["best_phases"] == best["metrics"]["phases"]  # the drifts and flicks side by side
     assert httpx.get(f"{server}/api/compare", params={"jobs": "999999"}).status_code == 404
     for bad in ("", "a,b", "0", ",".join(["1"] * 21)):
         r = httpx.get(f"{server}/api/compare", params={"jobs": bad})

@@ -84,6 +84,11 @@ def test_compare_mode_overlays_a_seeds_study_and_plays_its_best_episodes_togethe
     for job_id in seeds["job_ids"]:  # one row per job, its best J as the API has it
         job = httpx.get(f"{url}/api/jobs/{job_id}").json()
         page.get_by_text(f"{job['name']} (id {job_id})").first.wait_for(timeout=10_000)
+    # Each job's best episode through its flicks, as stored (metrics.phases).
+    first = httpx.get(f"{url}/api/compare", params={"jobs": str(seeds["job_ids"][0])}).json()[0]
+    flick = next(p for p in first["best_phases"] if "flip_s" in p)
+    page.get_by_text(f"{flick['flip_s']:.2f} / {flick['settle_s']:.2f} s, -{flick['speed_loss_mps']:.2f} m/s",
+                     exact=False).first.wait_for(timeout=10_000)
     plot = page.locator(".uplot", has=page.get_by_text("Compare: best J so far (completed)"))
     plot.wait_for(timeout=10_000)
     # The config diff: a seeds study's jobs differ in their seed only.

@@ -90,6 +90,18 @@ def test_a_job_started_from_the_page_pauses_resumes_and_its_plots_follow(server,
     wait_released(server, job["id"])
     paused_at = httpx.get(f"{server}/api/jobs/{job['id']}").json()["n_done"]
     _wait_count(page, "#convergence", "data-n", paused_at - 1)  # the page has every stored evaluation
+    # The best evaluation's drift and flicks in numbers, as stored (and as the report gives them).
+    best = httpx.get(f"{server}/api/jobs/{job['id']}").json()["best"]
+    phases = httpx.get(f"{server}/api/evaluations/{best['id']}").json()["metrics"]["phases"]
+    rows = page.locator("#phase-table tbody tr")
+    expect(rows).to_have_count(len(phases), timeout=WAIT_MS)
+    first_flick = next(i for i, p in enumerate(phases) if p["phase"].startswith("inertia"))
+    cells = rows.nth(first_flick).locator("td").all_text_contents()
+    flick = phases[first_flick]
+    assert cells[0] == "flick left → right" and cells[5] == f"{flick['flip_s']:.2f}"
+    assert cells[2] == f"{flick['mean_abs_e_m']:.2f} / {flick['max_abs_e_m']:.2f}"
+    assert cells[7] == f"{flick['speed_loss_mps']:.2f}"
+    expect(page.locator("#phase-caption")).to_contain_text(f"evaluation id {best['id']}")
     expect(page.get_by_role("button", name="Resume")).to_be_enabled()
 
     page.get_by_role("button", name="Resume").click()

@@ -55,6 +55,11 @@ class PlantType(ABC):
         """The controller's vehicle for this plant driving (radius, sideslip)."""
         return VehicleParams()
 
+    def started_in_drift(self, config: PlantConfig, radius_m: float, sideslip_rad: float) -> PlantConfig:
+        """``config`` with its start settings for an episode that begins in the plant's own drift at (radius,
+        sideslip); most plants need none."""
+        return config
+
     def controller(self) -> MpcConfig:
         """The default controller's weights for this plant."""
         return MpcConfig()

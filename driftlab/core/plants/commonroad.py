@@ -5,12 +5,13 @@ Vanagon), its controller's model fitted to the car's own drift (driftlab.core.co
 from __future__ import annotations
 
 import importlib
+from dataclasses import replace
 from typing import Any
 
 from driftlab.core.commonroad.parameters import ParameterSet
 from driftlab.core.errors import ConfigError
 from driftlab.core.mpc import MpcConfig
-from driftlab.core.plant import PlantConfig
+from driftlab.core.plant import PLANT_LIMITS, PlantConfig
 from driftlab.core.plants.base import PlantType, model_reason
 from driftlab.core.vehicle import VehicleParams
 
@@ -83,6 +84,20 @@ class CommonRoadPlantType(PlantType):
 
         return fitted_model_vehicle(config.commonroad_vehicle, radius_m, sideslip_rad, self,
                                     drive_coupling=config.model_drive_coupling)
+
+    def started_in_drift(self, config: PlantConfig, radius_m: float, sideslip_rad: float) -> PlantConfig:
+        """The rear wheel starts at the slip ratio of the car's own (left-hand) drift there: any other start is a
+        step of the rear force the first seconds spend recovering from, or do not (the VW Vanagon drifts at 0.62
+        rad, 44 m with its rear wheel at -0.93; started at -0.5 it grips up within 3 s). The multi-body car
+        starts every wheel in its own drift already (driftlab.core.commonroad.plant.CommonRoadMbPlant)."""
+        if self.multibody:
+            return config
+        family = self.drifts(config.commonroad_vehicle, radius_m, sideslip_rad, False, config.friction_scale,
+                             config.mass_scale)
+        if not family:
+            return config
+        low, high = PLANT_LIMITS["initial_rear_slip"]
+        return replace(config, initial_rear_slip=min(max(round(family[0].rear_slip, 4), low), high))
 
     def controller(self) -> MpcConfig:
         if self.weights is None:

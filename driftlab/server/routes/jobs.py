@@ -27,6 +27,7 @@ from driftlab.server.schemas import (
 )
 from driftlab.server.serialize import evaluation_dict, evaluations_csv, job_dict
 from driftlab.services.profiles import with_profile
+from driftlab.services.warm_start import with_warm_start
 
 router = APIRouter(prefix="/api/jobs", tags=["jobs"])
 Factory = Annotated[sessionmaker[Session], Depends(factory)]
@@ -36,7 +37,7 @@ Mutating = [Depends(require_token)]
 
 @router.post("", status_code=201, dependencies=Mutating, response_model=Job, responses=errors(409, 422, 503))
 def create_job(body: JobCreate, db: Factory, request: Request) -> dict[str, Any]:
-    doc = body.model_dump(exclude_none=True, exclude={"name"})
+    doc = body.model_dump(exclude_none=True, exclude={"name", "warm_start_from"})
     check_document_types(doc)
     if "bounds" in doc:
         doc["bounds"] = {k: list(v) for k, v in doc["bounds"].items()}
@@ -50,6 +51,8 @@ def create_job(body: JobCreate, db: Factory, request: Request) -> dict[str, Any]
         quotas.check_queue(settings, session, 1)
         name = body.name or storage.unique_job_name(session, "job")
         spec, profile_id = with_profile(session, spec, doc.get("config"))
+        if body.warm_start_from:
+            spec = with_warm_start(session, spec, body.warm_start_from)
         out = job_dict(session, storage.create_job(session, name=name, spec=spec.to_dict(), seed=spec.seed,
                                                    profile_id=profile_id))
     wake_runner(request)

@@ -140,6 +140,33 @@ function renderJob() {
   if (document.activeElement !== $("extend-to")) $("extend-to").value = j.iterations;
   if (!$("notes").dataset.loaded) { $("notes").value = j.notes || ""; $("notes").dataset.loaded = "1"; }
   $("view-link").href = "/viser/";
+  renderPhases();
+}
+
+const PHASE_NAMES = { left_drift: "left drift", inertia_left_to_right: "flick left → right",
+  right_drift: "right drift", inertia_right_to_left: "flick right → left", left_drift_final: "final left drift" };
+
+/** The best evaluation's drift and flicks in numbers (metrics.phases of its shown episode, as the report gives). */
+function renderPhases() {
+  const j = state.job;
+  const best = j.best ? state.evals.find((e) => e.id === j.best.id) : undefined;
+  const phases = (best && best.metrics && best.metrics.phases) || [];
+  const body = $("phase-table").tBodies[0];
+  body.replaceChildren();
+  const num = (v, digits) => (v === null || v === undefined ? "–" : Number(v).toFixed(digits));
+  for (const p of phases) {
+    const flick = "flip_s" in p;
+    const cells = [PHASE_NAMES[p.phase] || p.phase, `${num(p.start_s, 2)}–${num(p.end_s, 2)}`,
+      `${num(p.mean_abs_e_m, 2)} / ${num(p.max_abs_e_m, 2)}`, num(p.rms_beta_err_rad, 3),
+      p.countersteer_share === undefined ? "–" : `${Math.round(100 * p.countersteer_share)}%`,
+      flick ? num(p.flip_s, 2) : "", flick ? num(p.settle_s, 2) : "", num(p.speed_loss_mps, 2)];
+    const tr = body.insertRow();
+    for (const text of cells) tr.insertCell().textContent = text;
+  }
+  $("phase-caption").textContent = best
+    ? `evaluation id ${best.id}, its shown episode (seed ${best.trajectory_seed ?? 0}); a flick runs from its ` +
+      "trigger to the sideslip settling on the new side"
+    : "no completed evaluation yet";
 }
 
 function paramNames() {

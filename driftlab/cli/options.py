@@ -150,6 +150,11 @@ def add_job_options(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--deterministic", action="store_true", default=None,
                         help="one evaluation at a time (its seeds still in parallel): the thetas depend on the seed "
                              "and settings only, not on the number of workers or which episode finishes first")
+    parser.add_argument("--time-budget", type=float, metavar="SECONDS",
+                        help="finish the job once it has run this long in all (its runs' wall time), budget or not")
+    parser.add_argument("--stop-after-no-improvement", metavar="N[:BY]",
+                        help="finish the job once its best J has not fallen by more than BY (default 0) in its "
+                             "last N evaluations, e.g. 40:0.01")
     parser.add_argument("--warm-start-from", metavar="IDS",
                         help="start from these stored jobs' evaluations, e.g. 3,4 (job ids): told to the optimizer "
                              "where a job ran the same config, else its best thetas are asked first")

@@ -36,7 +36,22 @@ def tuning_spec(args: argparse.Namespace):
                       seed=args.seed, robust_samples=args.robust_samples, confirm_samples=args.confirm_samples,
                       bounds=bounds, config=config, model_correction=correction,
                       local_phase=None if args.local_phase is None else args.local_phase == "on",
-                      deterministic=bool(args.deterministic))
+                      deterministic=bool(args.deterministic), stop=stop_rules(args))
+
+
+def stop_rules(args: argparse.Namespace):
+    """``--time-budget`` and ``--stop-after-no-improvement N[:BY]`` as the job's stop rules."""
+    from driftlab.core.stopping import StopRules
+
+    n, by = None, 0.0
+    if args.stop_after_no_improvement:
+        count, _, amount = args.stop_after_no_improvement.partition(":")
+        try:
+            n, by = int(count), float(amount or 0.0)
+        except ValueError:
+            raise ConfigError(f"--stop-after-no-improvement must be N or N:BY, e.g. 40:0.01; got "
+                              f"{args.stop_after_no_improvement!r}", field="stop.no_improvement_evaluations") from None
+    return StopRules(time_budget_s=args.time_budget, no_improvement_evaluations=n, no_improvement_by=by)
 
 
 def job_ids(text: str) -> list[int]:
@@ -128,12 +143,12 @@ def cmd_tune(args: argparse.Namespace) -> int:
         finally:
             executor.shutdown()
     with storage.transaction(factory) as session:
-        error = storage.get_job(session, job_id=job_id).error
-        if status == lifecycle.JobStatus.PAUSED and error:
-            sys.stderr.write(f"\ndriftlab: job {name} paused: {error}; run the same command to continue\n")
+        job = storage.get_job(session, job_id=job_id)
+        if status == lifecycle.JobStatus.PAUSED and job.error:
+            sys.stderr.write(f"\ndriftlab: job {name} paused: {job.error}; run the same command to continue\n")
         best = storage.best_evaluation(session, job_id=job_id)
         out = {"job": name, "id": job_id, "status": str(status), "wall_s": round(time.perf_counter() - started, 2),
-               "n_done": storage.count_evaluations(session, job_id=job_id),
+               "n_done": storage.count_evaluations(session, job_id=job_id), "stop_reason": job.stop_reason,
                "best": storage.best_summary(best)}
     storage.close_database(factory)
     sys.stderr.write("\n")

@@ -22,6 +22,7 @@ from driftlab.core.config import (
 from driftlab.core.errors import ConfigError
 from driftlab.core.limits import JOB_LIMITS, MAX_ROBUST_SAMPLES, check_int
 from driftlab.core.robust import tuning_seeds
+from driftlab.core.stopping import StopRules
 from driftlab.core.warm_start import WarmStart
 
 # Around the band where the default controller completes the 8 on the default plant (benchmarks/mismatch_sweep.py:
@@ -107,6 +108,7 @@ class TuningSpec:
         local_phase: with the model corrections, start near the uncorrected model (LOCAL_POINTS, LOCAL_GROWTH);
             off: the seed points fill the whole box (jobs stored before revision 10). None (the default): on for
             DriftLab's own plants, off for any other (see LOCAL_POINTS); stored as what it resolved to.
+        stop: stop rules besides the budget, a time budget and no improvement (driftlab.core.stopping).
         warm_start: what the job takes from other jobs' evaluations before its own (driftlab.core.warm_start):
             evaluations of its own config told first, or other configs' best thetas asked first. None: a cold start.
         deterministic: the next theta is asked only once every evaluation asked before is stored and told, so the
@@ -129,6 +131,7 @@ class TuningSpec:
     local_phase: bool | None = None
     deterministic: bool = False
     warm_start: WarmStart | None = None
+    stop: StopRules = field(default_factory=StopRules)
 
     def __post_init__(self) -> None:
         for name in ("iterations", "seed_points", "active_set", "seed", "robust_samples"):
@@ -142,6 +145,8 @@ class TuningSpec:
             object.__setattr__(self, "local_phase", self.config.plant.plant_type.local_phase)
         if not isinstance(self.local_phase, bool):
             raise ConfigError(f"local_phase must be true or false, got {self.local_phase!r}", field="local_phase")
+        if not isinstance(self.stop, StopRules):
+            raise ConfigError("stop must be the job's stop rules", field="stop")
         if not isinstance(self.deterministic, bool):
             raise ConfigError(f"deterministic must be true or false, got {self.deterministic!r}",
                               field="deterministic")
@@ -166,6 +171,8 @@ class TuningSpec:
                "config": config_to_dict(self.config)}
         if self.warm_start is not None:  # a cold job's document stays what it was
             out["warm_start"] = self.warm_start.to_dict()
+        if self.stop.any:
+            out["stop"] = self.stop.to_dict()
         return out
 
     @property
@@ -208,7 +215,7 @@ class TuningSpec:
     def from_dict(cls, data: dict[str, Any]) -> TuningSpec:
         """From a stored or posted document. ``config`` may be nested sections or flat dotted keys."""
         allowed = {"iterations", "seed_points", "active_set", "seed", "robust_samples", "confirm_samples", "bounds",
-                   "model_correction", "local_phase", "deterministic", "config", "warm_start"}
+                   "model_correction", "local_phase", "deterministic", "config", "warm_start", "stop"}
         unknown = set(data) - allowed
         if unknown:
             raise ConfigError(f"unknown field {sorted(unknown)[0]!r}; allowed: {', '.join(sorted(allowed))}")
@@ -218,4 +225,5 @@ class TuningSpec:
         return cls(**kwargs, bounds=data.get("bounds") or {}, config=config,
                    model_correction=data.get("model_correction", True), local_phase=data.get("local_phase"),
                    deterministic=data.get("deterministic", False),
-                   warm_start=None if data.get("warm_start") is None else WarmStart.from_dict(data["warm_start"]))
+                   warm_start=None if data.get("warm_start") is None else WarmStart.from_dict(data["warm_start"]),
+                   stop=StopRules() if data.get("stop") is None else StopRules.from_dict(data["stop"]))

@@ -52,16 +52,25 @@ class SourceJob:
 
 @dataclass(frozen=True)
 class WarmStart:
-    """What a job starts from: ``told`` evaluations of jobs of its own config, ``initial_points`` (best thetas of
-    jobs of another config) asked first, and per source job how it was used (``"told"`` or ``"initial"``)."""
+    """What a job starts from: ``told`` evaluations of jobs of its own config, ``initial_points`` asked first (best
+    thetas of jobs of another config, then the theta its car profile's weights were found with), per source job how
+    it was used (``"told"`` or ``"initial"``), and the car profile whose theta it asks (``from_profile``)."""
 
     from_jobs: dict[int, str]
     told: tuple[Observation, ...] = ()
     initial_points: tuple[dict[str, float], ...] = ()
+    from_profile: int | None = None
 
     def to_dict(self) -> dict[str, Any]:
-        return {"from_jobs": [{"job_id": k, "used_as": v} for k, v in self.from_jobs.items()],
-                "told": [o.as_list() for o in self.told], "initial_points": [dict(p) for p in self.initial_points]}
+        out = {"from_jobs": [{"job_id": k, "used_as": v} for k, v in self.from_jobs.items()],
+               "told": [o.as_list() for o in self.told], "initial_points": [dict(p) for p in self.initial_points]}
+        return out if self.from_profile is None else {**out, "from_profile": self.from_profile}
+
+    def joined(self, other: WarmStart) -> WarmStart:
+        """Both starts: ``other``'s sources and points after this one's."""
+        points = [*self.initial_points, *(p for p in other.initial_points if p not in self.initial_points)]
+        return WarmStart({**self.from_jobs, **other.from_jobs}, self.told + other.told, tuple(points),
+                         self.from_profile if other.from_profile is None else other.from_profile)
 
     def check(self, bounds: Mapping[str, tuple[float, float]]) -> None:
         """Raise ConfigError unless every theta it holds names each key of ``bounds``, each initial point inside."""
@@ -79,7 +88,8 @@ class WarmStart:
             return cls(from_jobs={int(s["job_id"]): str(s["used_as"]) for s in data.get("from_jobs", [])},
                        told=tuple(Observation(dict(t), None if v is None else float(v), float(j))
                                   for t, v, j in data.get("told", [])),
-                       initial_points=tuple(dict(p) for p in data.get("initial_points", [])))
+                       initial_points=tuple(dict(p) for p in data.get("initial_points", [])),
+                       from_profile=None if data.get("from_profile") is None else int(data["from_profile"]))
         except (KeyError, TypeError, ValueError):
             raise ConfigError("warm_start must be {from_jobs: [{job_id, used_as}], told: [[theta, J or null, J]], "
                               "initial_points: [theta]}", field="warm_start") from None
@@ -103,6 +113,21 @@ def warm_start(sources: Sequence[SourceJob], config: dict[str, Any], bounds: Map
         initial += [_clipped(source.evaluations[i][0], bounds) for _, i in ranked[:points]]
     unique = [p for n, p in enumerate(initial) if p not in initial[:n]]
     return WarmStart(used, tuple(told), tuple(unique))
+
+
+def profile_start(profile_id: int, theta: Mapping[str, float] | str | None,
+                  bounds: Mapping[str, tuple[float, float]]) -> WarmStart | None:
+    """The start a job takes from its car profile (driftlab calibrate): the theta the profile's weights were
+    searched with, asked first, where it is not the untuned theta the job asks anyway. A calibration's later round
+    searches the weights for the theta a job learned with the last round's (a CommonRoad BMW at 0.55 rad: k on
+    its bound, -0.12), and those weights may drive little else; a job that does not meet that theta early may never
+    complete an episode there. ``theta``: as the profile stores it ("untuned", or None before it was stored)."""
+    if not isinstance(theta, Mapping):
+        return None
+    point = _clipped(theta, bounds)
+    if point == _clipped({}, bounds):
+        return None
+    return WarmStart({}, (), (point,), profile_id)
 
 
 def _theta(theta: Mapping[str, float], bounds: Mapping[str, tuple[float, float]]) -> dict[str, float]:

@@ -65,6 +65,7 @@ def claim(session: Session, *, job_id: int, runner: str, from_statuses: tuple[Jo
     session.refresh(job)
     if taken:
         job.started_at = now  # this run's start: the ETA counts only the time since (pauses excluded)
+        job.stop_reason = None
         return job
     if lease_is_live(job, now):
         age = (lease.naive(now) - lease.naive(job.heartbeat_at)).total_seconds()
@@ -91,8 +92,16 @@ def heartbeat(session: Session, *, job_id: int, runner: str) -> bool:
     return held
 
 
-def release(session: Session, *, job_id: int, runner: str, status: JobStatus, error: str | None = None) -> None:
-    """The runner stops: the job takes ``status`` unless someone changed it meanwhile (driftlab.db.lease)."""
+def release(session: Session, *, job_id: int, runner: str, status: JobStatus, error: str | None = None,
+            stop_reason: str | None = None) -> None:
+    """The runner stops: the job takes ``status`` unless someone changed it meanwhile (driftlab.db.lease), adds this
+    run's wall time to the time it has run in all (``run_s``, what a time budget counts), and keeps the stop rule
+    that finished it, if one did."""
+    job = session.get(Job, job_id)
+    if job is not None and job.runner_id == runner and job.started_at is not None:
+        ran_s = (lease.naive(utcnow()) - lease.naive(job.started_at)).total_seconds()
+        job.run_s = (job.run_s or 0.0) + max(ran_s, 0.0)
+        job.stop_reason = stop_reason
     lease.release(session, Job, row_id=job_id, runner=runner, status=status, error=error)
 
 

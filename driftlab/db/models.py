@@ -55,6 +55,8 @@ class Job(Base):
     created_at: Mapped[datetime] = mapped_column(default=utcnow)
     updated_at: Mapped[datetime] = mapped_column(default=utcnow, onupdate=utcnow)
     started_at: Mapped[datetime | None] = mapped_column(default=None)  # when its current (or last) runner claimed it
+    run_s: Mapped[float] = mapped_column(Float, default=0.0)  # its runs' wall time before the current one, in all
+    stop_reason: Mapped[str | None] = mapped_column(String(500), default=None)  # a stop rule that finished it
     # The lease (driftlab.db.lifecycle): the runner that holds the job and its last heartbeat.
     runner_id: Mapped[str | None] = mapped_column(String(100), default=None)
     heartbeat_at: Mapped[datetime | None] = mapped_column(default=None)

@@ -102,6 +102,9 @@ class Job(BaseModel):
     profile_id: int | None = Field(default=None, description="the car profile (driftlab calibrate) whose MPC weights "
                                                              "the job took, if any")
     spec: dict[str, Any] = Field(description="the validated job document (POST /api/jobs), config in full")
+    run_s: float = Field(default=0.0, description="wall time of its finished runs, in all (what a time budget "
+                                                  "counts, with the current run's)")
+    stop_reason: str | None = Field(default=None, description="the stop rule that finished it, if one did")
     notes: str = Field(description="free text kept with the job (PATCH /api/jobs/{id} with notes)")
     created_at: Timestamp
 

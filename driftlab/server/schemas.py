@@ -11,6 +11,7 @@ from pydantic import AfterValidator, BaseModel, ConfigDict, Field, model_validat
 from driftlab.core.config import THETA_KEYS, check_json_types
 from driftlab.core.errors import ConfigError
 from driftlab.core.limits import JOB_LIMITS
+from driftlab.core.stopping import NO_IMPROVEMENT_BY, NO_IMPROVEMENT_EVALUATIONS, TIME_BUDGET_LIMITS_S
 from driftlab.core.tuning import DEFAULT_CONFIRM_SAMPLES, DEFAULT_ROBUST_SAMPLES, DEFAULT_SEED_POINTS
 from driftlab.core.warm_start import MAX_WARM_JOBS
 from driftlab.names import MAX_NAME_LENGTH, name_problem
@@ -69,6 +70,19 @@ def check_document_types(doc: dict[str, Any]) -> None:
                                   field=f"spec.bounds.{name}")
 
 
+class StopCreate(BaseModel):
+    """A job's stop rules besides its budget (driftlab.core.stopping)."""
+
+    model_config = ConfigDict(extra="forbid")
+
+    time_budget_s: StrictNumber | None = Field(default=None, ge=TIME_BUDGET_LIMITS_S[0], le=TIME_BUDGET_LIMITS_S[1],
+                                               description="finish once the job has run this long in all (s)")
+    no_improvement_evaluations: int | None = Field(
+        default=None, ge=NO_IMPROVEMENT_EVALUATIONS[0], le=NO_IMPROVEMENT_EVALUATIONS[1], strict=True,
+        description="finish once the best J has not fallen by more than no_improvement_by in this many evaluations")
+    no_improvement_by: StrictNumber = Field(default=0.0, ge=NO_IMPROVEMENT_BY[0], le=NO_IMPROVEMENT_BY[1])
+
+
 class JobCreate(BaseModel):
     model_config = ConfigDict(extra="forbid")
 
@@ -97,6 +111,8 @@ class JobCreate(BaseModel):
                                             "workers there are or which episode finishes first")
     config: dict[str, Any] | None = Field(default=None, description="dotted keys as `driftlab --set`, "
                                           "e.g. {\"plant.steer_lag_s\": 0.02}, or nested sections")
+    stop: StopCreate | None = Field(default=None, description="stop rules besides the budget: a time budget, no "
+                                                          "improvement")
     warm_start_from: list[Annotated[int, Field(ge=1, le=MAX_ID, strict=True)]] | None = Field(
         default=None, min_length=1, max_length=MAX_WARM_JOBS,
         description="start from these stored jobs' evaluations: told to the optimizer where a job ran the same "

@@ -51,6 +51,7 @@ def job_dict(session, job: Job) -> dict[str, Any]:
             "iterations": iterations, "progress": n_done / iterations, "eta_s": eta, "error": job.error,
             "best": storage.best_summary(best),
             "runner_id": job.runner_id, "study_id": job.study_id, "profile_id": job.profile_id, "spec": job.spec,
+            "run_s": job.run_s or 0.0, "stop_reason": job.stop_reason,
             "notes": job.notes or "",
             "created_at": job.created_at.replace(tzinfo=UTC).isoformat()}
 

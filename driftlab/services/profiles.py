@@ -22,6 +22,7 @@ from sqlalchemy.orm import Session
 from driftlab.core.config import apply_overrides, dotted_config
 from driftlab.core.mpc import MpcConfig
 from driftlab.core.tuning import TuningSpec
+from driftlab.core.warm_start import profile_start
 from driftlab.db import profiles
 
 
@@ -131,8 +132,8 @@ def car_profile_for(session: Session, plant_model: str, vehicle_id: int, sidesli
 
 
 def with_profile(session: Session, spec: TuningSpec, config_document: Any) -> tuple[TuningSpec, int | None]:
-    """``spec`` with the weights of its car's profile for its drift (:func:`car_profile_for`), and that profile's id
-    (None: none applies)."""
+    """``spec`` with the weights of its car's profile for its drift (:func:`car_profile_for`), asking first the theta
+    they were found with (driftlab.core.warm_start.profile_start), and that profile's id (None: none applies)."""
     if gives_weights(config_document):
         return spec, None
     plant, scenario = spec.config.plant, spec.config.scenario
@@ -146,7 +147,11 @@ def with_profile(session: Session, spec: TuningSpec, config_document: Any) -> tu
             config_document or {}):
         config = apply_overrides(config, {"plant.model_drive_coupling": coupling})  # the model refitted
     mpc = replace(config.mpc, **profile.document["weights"])
-    return replace(spec, config=replace(config, mpc=mpc)), profile.id
+    spec = replace(spec, config=replace(config, mpc=mpc))
+    start = profile_start(profile.id, profile.document.get("theta"), spec.bounds)
+    if start is not None:
+        spec = replace(spec, warm_start=start if spec.warm_start is None else spec.warm_start.joined(start))
+    return spec, profile.id
 
 
 def profile_summary(profile: Any) -> dict[str, Any]:

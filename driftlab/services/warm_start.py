@@ -26,4 +26,5 @@ def with_warm_start(session: Session, spec: TuningSpec, job_ids: list[int]) -> T
             raise ConfigError(f"warm_start_from: no job with id {job_id}", field="warm_start_from") from None
         evaluations = [(e.theta, e.J, e.completed) for e in storage.evaluations(session, job_id=job_id)]
         sources.append(SourceJob(job_id, job.spec.get("config", {}), evaluations))
-    return replace(spec, warm_start=warm_start(sources, config_to_dict(spec.config), spec.bounds))
+    start = warm_start(sources, config_to_dict(spec.config), spec.bounds)
+    return replace(spec, warm_start=start if spec.warm_start is None else start.joined(spec.warm_start))

@@ -199,7 +199,9 @@ def _run(factory: sessionmaker[Session], job_id: int, executor: EpisodeExecutor,
         spec = TuningSpec.from_dict(job.spec)
         stored = storage.evaluations(session, job_id=job_id)
         history = [(e.theta, e.J if e.completed else None, e.J) for e in stored]
-        best = best_so_far([e.J for e in stored], [e.completed for e in stored])[-1] if stored else None
+        curve = best_so_far([e.J for e in stored], [e.completed for e in stored])  # what the stop rules read
+        best = curve[-1] if stored else None
+        ran_before_s = job.run_s or 0.0
     optimizer = optimizers.open(spec, history) if optimizers is not None else restore_optimizer(spec, history)
     config_doc = spec.to_dict()["config"]
     seeds, confirm_seeds = spec.episode_seeds, spec.confirm_seeds
@@ -219,15 +221,18 @@ def _run(factory: sessionmaker[Session], job_id: int, executor: EpisodeExecutor,
     started = time.perf_counter()
     n_at_start = n_done
     shutting_down = False
+    stop_reason = None
     try:
         while True:
+            # A stop rule (driftlab.core.stopping) asks nothing more; what was asked completes and is stored.
+            stop_reason = stop_reason or spec.stop.reason(ran_before_s + time.perf_counter() - started, curve)
             if n_done >= lease.iterations and not episodes and not waiting:
                 lease.renew_if_due(force=True)  # a budget raised at the last moment still counts
                 if n_done >= lease.iterations or not lease.held:
                     break
             lease.renew_if_due()
             shutting_down = shutting_down or should_stop()
-            stopping = shutting_down or not lease.held
+            stopping = shutting_down or not lease.held or stop_reason is not None
             # Deterministic: one evaluation at a time (its seeds still run in parallel), so the optimizer's
             # history never depends on which worker finished first.
             free = not evaluations if spec.deterministic else _may_ask(waiting, evaluations, slots.has_room(owner))
@@ -277,6 +282,7 @@ def _run(factory: sessionmaker[Session], job_id: int, executor: EpisodeExecutor,
                 n_done += 1
                 if completed:
                     best = score.J if best is None else min(best, score.J)
+                curve.append(best)
                 if on_progress is not None:
                     rate = (time.perf_counter() - started) / max(n_done - n_at_start, 1)
                     on_progress(Progress(n_done, lease.iterations, best, score, rate))
@@ -292,13 +298,14 @@ def _run(factory: sessionmaker[Session], job_id: int, executor: EpisodeExecutor,
     finally:
         if optimizers is not None:
             optimizer.close()
-    if n_done >= lease.iterations:
+    if n_done >= lease.iterations or (stop_reason is not None and lease.held):
         status = JobStatus.FINISHED
     elif shutting_down:
         status = JobStatus.QUEUED  # the runner stops, not the job: the next runner continues it
     else:
         status = JobStatus.PAUSED
     with storage.transaction(factory) as session:
-        lifecycle.release(session, job_id=job_id, runner=runner, status=status)
+        lifecycle.release(session, job_id=job_id, runner=runner, status=status,
+                          stop_reason=stop_reason if n_done < lease.iterations else None)
         job = session.get(Job, job_id)
         return JobStatus(job.status) if job is not None else status

@@ -141,3 +141,25 @@ def test_a_fresh_database_takes_the_shipped_profile_for_the_jobs_drift_and_keeps
                 "weights": WEIGHTS, "per_point": [{**point, "completed": 1, "episodes": 1, "mean_abs_e_m": 0.9}]}).id
         third = client.post("/api/jobs", json={"iterations": 1, "config": car}).json()
         assert third["profile_id"] == own  # this database's own calibration wins over what ships
+
+
+def test_a_profile_found_for_a_learned_theta_has_its_jobs_ask_that_theta_first(tmp_path):
+    """A later calibration round searches the weights for the theta a job learned (k on its bound at the BMW's
+    0.55 rad): a job that takes them asks that theta first, moved into its box; an untuned one adds nothing."""
+    learned = {"c_lr": 0.023, "c_rl": 0.024, "dV": -0.17, "k": -0.3, "model_mu_scale": 1.04, "model_c_scale": 1.03}
+    with in_process_client(tmp_path / "theta.db") as client:
+        with storage.transaction(client.app.state.factory) as session:
+            untuned = profiles.add_profile(session, plant_model="commonroad_std", vehicle_id=2,
+                                           document={"weights": WEIGHTS, "theta": "untuned"}).id
+        first = client.post("/api/jobs", json={"iterations": 1, "config": CAR}).json()
+        assert first["profile_id"] == untuned and "warm_start" not in first["spec"]
+        with storage.transaction(client.app.state.factory) as session:
+            found = profiles.add_profile(session, plant_model="commonroad_std", vehicle_id=2,
+                                         document={"weights": WEIGHTS, "theta": learned}).id
+        job = client.post("/api/jobs", json={"iterations": 1, "config": CAR}).json()
+        start = job["spec"]["warm_start"]
+        k_low = job["spec"]["bounds"]["k"][0]
+        assert job["profile_id"] == found and start["from_profile"] == found and start["from_jobs"] == []
+        assert start["initial_points"] == [{**learned, "k": k_low}]  # k -0.3 onto the box's face
+        warm = client.post("/api/jobs", json={"iterations": 1, "config": CAR, "warm_start_from": [first["id"]]})
+        assert warm.json()["spec"]["warm_start"]["from_profile"] == found  # both starts kept

@@ -193,11 +193,20 @@ def test_clone_with_changes_starts_from_the_jobs_settings(server, browser):
     sets = form.locator("textarea[name=sets]").input_value().splitlines()
     assert sorted(sets) == ["plant.steer_lag_s=0.05", "scenario.sideslip_rad=0.42"]
     form.locator("input[name=iterations]").fill("3")
+    assert form.locator("input[name=warm_start_from]").input_value() == ""
+    form.locator("input[name=warm_start_from]").fill(f" {original['id']} ")  # and warm-started from the original
+    form.locator("input[name=time_budget_s]").fill("0.1")  # spent after its first evaluation
     page.get_by_role("button", name="Start job").click()
     expect(page.locator("#job-title")).to_contain_text("original-clone", timeout=WAIT_MS)
     clone = _job_by_name(server, "original-clone")
     changed = {k for k in original["spec"] if clone["spec"][k] != original["spec"][k]}
     assert changed == {"iterations"} and clone["iterations"] == 3  # the config in full, bounds, seed: as cloned
+    # the same config: the original's evaluations are told to the clone's optimizer
+    assert clone["spec"]["warm_start"]["from_jobs"] == [{"job_id": original["id"], "used_as": "told"}]
+    assert clone["spec"]["stop"]["time_budget_s"] == 0.1
+    expect(page.locator("#job-status")).to_contain_text("stopped by its rule: time budget", timeout=WAIT_MS)
+    stopped = _job_by_name(server, "original-clone")
+    assert stopped["status"] == "finished" and stopped["n_done"] < 3 and stopped["run_s"] >= 0.1
     assert not errors, errors
     page.close()
 

@@ -133,8 +133,9 @@ function renderJob() {
   $("job-title").textContent = `${j.id} · ${j.name}`;
   const best = j.best ? `best J ${fmt(j.best.J)} (evaluation id ${j.best.id})` : "no completed evaluation yet";
   const eta = j.eta_s !== null && j.eta_s !== undefined ? `, about ${duration(j.eta_s)} left` : "";
+  const stopped = j.stop_reason ? ` · stopped by its rule: ${j.stop_reason}` : "";
   $("job-status").textContent = `status: ${j.status}${j.detail ? ` (${j.detail})` : ""} · ${j.n_done} / ` +
-    `${j.iterations} evaluations${eta} · ${best}`;
+    `${j.iterations} evaluations${eta} · ${best}${stopped}`;
   $("pause").disabled = !["queued", "running"].includes(j.status);
   $("resume").disabled = !["paused", "failed"].includes(j.status);
   if (document.activeElement !== $("extend-to")) $("extend-to").value = j.iterations;

@@ -44,6 +44,12 @@ export function openForm(jobForm, job) {
   f.elements.model_correction.checked = spec.model_correction;
   f.elements.deterministic.checked = spec.deterministic;
   f.elements.sets.value = job ? differingSets(jobForm, job.spec) : "";
+  const stop = spec.stop || {};
+  f.elements.time_budget_s.value = stop.time_budget_s ?? "";
+  f.elements.no_improvement_evaluations.value = stop.no_improvement_evaluations ?? "";
+  f.elements.no_improvement_by.value = stop.no_improvement_by ?? 0;
+  const sources = (job && job.spec.warm_start && job.spec.warm_start.from_jobs) || [];
+  f.elements.warm_start_from.value = sources.map((s) => s.job_id).join(", ");
   f.elements.plant_preset.value = "default";
   boundsRows(jobForm, job ? job.spec.bounds : {}, spec.model_correction);
   f.elements.model_correction.onchange = () => boundsRows(jobForm, {}, f.elements.model_correction.checked);
@@ -73,6 +79,15 @@ export function formBody(jobForm) {
     seed: Number(f.seed.value), model_correction: f.model_correction.checked, deterministic: f.deterministic.checked,
     config: { ...jobForm.plant_presets[f.plant_preset.value], ...parseSets(f.sets.value) }, bounds: {} };
   if (f.name.value.trim()) body.name = f.name.value.trim();
+  const stop = {};
+  if (f.time_budget_s.value !== "") stop.time_budget_s = Number(f.time_budget_s.value);
+  if (f.no_improvement_evaluations.value !== "") {
+    stop.no_improvement_evaluations = Number(f.no_improvement_evaluations.value);
+    stop.no_improvement_by = Number(f.no_improvement_by.value || 0);
+  }
+  if (Object.keys(stop).length) body.stop = stop;
+  const sources = f.warm_start_from.value.split(",").map((t) => t.trim()).filter(Boolean);
+  if (sources.length) body.warm_start_from = sources.map(Number);
   for (const input of $("bounds-table").querySelectorAll("input")) {
     const [, name, side] = input.name.match(/^bound-(.+)-(lo|hi)$/);
     body.bounds[name] = body.bounds[name] || [0, 0];

@@ -1,0 +1,67 @@
+"""A job's stop rules (driftlab.core.stopping) through the job loop with cheap fake episodes on a real SQLite file,
+and at the REST API's edge."""
+
+import pytest
+
+from driftlab.core.errors import ConfigError
+from driftlab.core.stopping import StopRules
+from driftlab.core.tuning import TuningSpec
+from driftlab.db import storage
+from driftlab.worker.job_loop import claim_job, run_job
+from tests.server.conftest import in_process_client
+from tests.worker.test_job_loop import ShuffledExecutor
+
+
+def test_no_improvement_counts_the_best_over_the_last_n_evaluations():
+    rule = StopRules(no_improvement_evaluations=3, no_improvement_by=0.05)
+    assert rule.reason(0.0, [None, None, None, None]) is None  # nothing completed: no best to improve
+    assert rule.reason(0.0, [None, -1.0, -1.0, -1.0]) is None  # a best appeared within the last 3
+    assert rule.reason(0.0, [-1.0, -1.0, -1.04, -1.04]).startswith("no improvement: the best J fell by 0.04")
+    assert rule.reason(0.0, [-1.0, -1.0, -1.1, -1.1]) is None
+    assert StopRules(time_budget_s=60.0).reason(60.0, []) == "time budget: ran 60.0 s of 60 s"
+    assert not StopRules().any and StopRules().reason(1e9, [-1.0] * 9) is None
+    for bad, field in (({"time_budget_s": 0.0}, "stop.time_budget_s"),
+                       ({"no_improvement_evaluations": 0}, "stop.no_improvement_evaluations"),
+                       ({"no_improvement_by": -1.0}, "stop.no_improvement_by"), ({"after": 3}, "stop.after")):
+        with pytest.raises(ConfigError) as exc:
+            StopRules.from_dict(bad)
+        assert exc.value.field == field
+
+
+def _finish(tmp_path, stop, iterations):
+    factory = storage.open_database(f"sqlite:///{tmp_path / 'stop.db'}")
+    spec = TuningSpec(iterations=iterations, seed_points=4, seed=3, robust_samples=1, confirm_samples=0, stop=stop)
+    assert TuningSpec.from_dict(spec.to_dict()) == spec
+    with storage.transaction(factory) as session:
+        job_id = storage.create_job(session, name="stopped", spec=spec.to_dict(), seed=spec.seed).id
+    claim_job(factory, job_id, "runner")
+    assert run_job(factory, job_id, ShuffledExecutor(0), runner="runner", workers=2) == "finished"
+    with storage.snapshot(factory) as session:
+        job = storage.get_job(session, job_id=job_id)
+        return job, storage.evaluations(session, job_id=job_id)
+
+
+def test_a_job_finishes_when_its_best_stops_improving(tmp_path):
+    job, evaluations = _finish(tmp_path, StopRules(no_improvement_evaluations=5, no_improvement_by=100.0), 60)
+    # J < 0 everywhere here: the best never falls by 100, so the rule fires 5 evaluations after the first completed
+    # one (the evaluations asked by then still complete and are stored)
+    assert job.stop_reason.startswith("no improvement") and 6 <= len(evaluations) <= 8
+    assert job.run_s > 0.0
+
+
+def test_a_job_finishes_when_its_time_is_spent(tmp_path):
+    job, evaluations = _finish(tmp_path, StopRules(time_budget_s=0.5), 5000)
+    assert job.stop_reason.startswith("time budget") and 0 < len(evaluations) < 5000 and job.run_s >= 0.5
+
+
+def test_stop_rules_at_the_api_name_their_field(tmp_path):
+    with in_process_client(tmp_path / "api.db") as api:
+        bad = api.post("/api/jobs", json={"iterations": 3, "stop": {"time_budget_s": 0}})
+        assert bad.status_code == 422 and "time_budget_s" in bad.text
+        assert api.post("/api/jobs", json={"iterations": 3, "stop": {"after": 3}}).status_code == 422
+        job = api.post("/api/jobs", json={"iterations": 3, "stop": {"no_improvement_evaluations": 40}}).json()
+        assert job["spec"]["stop"] == {"time_budget_s": None, "no_improvement_evaluations": 40,
+                                       "no_improvement_by": 0.0}
+        assert job["stop_reason"] is None and job["run_s"] == 0.0
+        cold = api.post("/api/jobs", json={"iterations": 3}).json()
+        assert "stop" not in cold["spec"]  # a job without rules stores the document it always did

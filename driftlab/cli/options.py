@@ -155,6 +155,9 @@ def add_job_options(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--stop-after-no-improvement", metavar="N[:BY]",
                         help="finish the job once its best J has not fallen by more than BY (default 0) in its "
                              "last N evaluations, e.g. 40:0.01")
+    parser.add_argument("--enqueue", action="append", metavar="THETA",
+                        help="a hand-picked theta to evaluate next, e.g. k=0.06,dV=0.1 (the keys not given "
+                             "untuned; inside the job's box); repeat it for more, in order")
     parser.add_argument("--warm-start-from", metavar="IDS",
                         help="start from these stored jobs' evaluations, e.g. 3,4 (job ids): told to the optimizer "
                              "where a job ran the same config, else its best thetas are asked first")

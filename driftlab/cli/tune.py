@@ -66,6 +66,23 @@ def job_ids(text: str) -> list[int]:
     return ids
 
 
+def enqueue_thetas(session, job, texts: list[str]) -> None:
+    """``--enqueue k=0.06,dV=0.1`` (repeated): hand-picked thetas the job evaluates next (driftlab.db.enqueued)."""
+    from driftlab.core.tuning import TuningSpec
+    from driftlab.db import enqueued
+
+    spec = TuningSpec.from_dict(job.spec)
+    thetas = []
+    for text in texts:
+        values = key_values(text.split(","), "--enqueue")
+        try:
+            numbers = {k: float(v) for k, v in values.items()}
+        except ValueError:
+            raise ConfigError(f"--enqueue {text!r}: each value must be a number", field="enqueue") from None
+        thetas.append(spec.picked_theta(numbers, "enqueue"))
+    enqueued.enqueue(session, job_id=job.id, thetas=thetas)
+
+
 def open_tuning_job(factory, args: argparse.Namespace, runner: str) -> tuple[int, str]:
     """Create the job, or take up the stored one of that name (its settings win; a given --iterations extends
     it); then claim its lease. A job another live runner holds is refused (LeaseHeld: exit 2)."""
@@ -96,6 +113,9 @@ def open_tuning_job(factory, args: argparse.Namespace, runner: str) -> tuple[int
             done = storage.count_evaluations(session, job_id=job.id)
             message = f"resuming job {job.name} (id {job.id}) at {done} of {job.spec['iterations']}"
         job_id, name, status = job.id, job.name, job.status
+        if args.enqueue:
+            enqueue_thetas(session, job, args.enqueue)
+            message += f"; {len(args.enqueue)} theta(s) enqueued (evaluated next when it runs)"
     if status != JobStatus.FINISHED:
         with storage.transaction(factory) as session:
             lifecycle.claim(session, job_id=job_id, runner=runner,

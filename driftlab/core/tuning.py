@@ -201,6 +201,27 @@ class TuningSpec:
             options["feasible"] = partial(runs, self.config)
         return options
 
+    def picked_theta(self, values: Any, field_name: str = "theta") -> dict[str, float]:
+        """A hand-picked theta for this job (enqueued): any of the keys it learns, each inside its box; the keys not
+        given take the untuned values (which must be inside the box too).
+
+        Raises:
+            ConfigError: naming the key and its box.
+        """
+        if not isinstance(values, dict) or not values:
+            raise ConfigError(f"{field_name} must be an object of theta values, e.g. {{\"k\": 0.05}}", field=field_name)
+        unknown = sorted(set(values) - set(self.bounds))
+        if unknown:
+            raise ConfigError(f"{field_name}.{unknown[0]}: this job learns {', '.join(self.bounds)}",
+                              field=f"{field_name}.{unknown[0]}")
+        theta = {**{k: Theta().as_dict()[k] for k in self.bounds}, **values}
+        for key, value in theta.items():
+            lo, hi = self.bounds[key]
+            if isinstance(value, bool) or not isinstance(value, (int, float)) or not lo <= value <= hi:
+                raise ConfigError(f"{field_name}.{key} must be a number in the job's box [{lo:g}, {hi:g}], got "
+                                  f"{value!r}", field=f"{field_name}.{key}")
+        return {k: float(v) for k, v in theta.items()}
+
     @property
     def episode_seeds(self) -> list[int]:
         """The seeds every evaluation of this job runs (common random numbers)."""

@@ -18,7 +18,7 @@ from sqlalchemy.orm import Session
 from driftlab.core.statuses import StudyKind
 from driftlab.db import lease
 from driftlab.db.lease import HEARTBEAT_S, LEASE_TIMEOUT_S, new_runner_id
-from driftlab.db.models import Evaluation, Job, JobStatus, Rescore, Study, Trajectory, utcnow
+from driftlab.db.models import EnqueuedTheta, Evaluation, Job, JobStatus, Rescore, Study, Trajectory, utcnow
 from driftlab.db.storage import count_evaluations, get_job
 
 __all__ = ["HEARTBEAT_S", "LEASE_TIMEOUT_S", "JobStatus", "LeaseHeld", "TransitionError", "claim", "delete_job",
@@ -149,6 +149,7 @@ def delete_job(session: Session, *, job_id: int, with_its_study: bool = False) -
     ids = select(Evaluation.id).where(Evaluation.job_id == job_id)
     session.execute(delete(Trajectory).where(Trajectory.evaluation_id.in_(ids)))
     session.execute(delete(Rescore).where(Rescore.job_id == job_id))
+    session.execute(delete(EnqueuedTheta).where(EnqueuedTheta.job_id == job_id))
     session.execute(delete(Evaluation).where(Evaluation.job_id == job_id))
     session.execute(delete(Job).where(Job.id == job_id))
 

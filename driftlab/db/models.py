@@ -85,6 +85,7 @@ class Evaluation(Base):
     seeds: Mapped[list[dict[str, Any]] | None] = mapped_column(JSON, default=None)
     trajectory_seed: Mapped[int | None] = mapped_column(Integer, default=None)  # the stored episode's seed
     created_at: Mapped[datetime] = mapped_column(default=utcnow)
+    enqueued: Mapped[bool] = mapped_column(default=False)  # a theta someone picked (EnqueuedTheta), not the optimizer
 
     job: Mapped[Job] = relationship(back_populates="evaluations")
     trajectory: Mapped[Trajectory] = relationship(back_populates="evaluation", cascade="all, delete-orphan")
@@ -92,6 +93,19 @@ class Evaluation(Base):
     @property
     def completed(self) -> bool:
         return self.status == EpisodeStatus.COMPLETED
+
+
+class EnqueuedTheta(Base):
+    """A theta someone picked for a job (a what-if, a colleague's): evaluated before the optimizer's next proposal,
+    and removed in the transaction that stores its evaluation (a runner that dies first leaves it for the next)."""
+
+    __tablename__ = "enqueued_thetas"
+    __table_args__ = {"sqlite_autoincrement": True}
+
+    id: Mapped[int] = mapped_column(primary_key=True)
+    job_id: Mapped[int] = mapped_column(ForeignKey("jobs.id"), index=True)
+    theta: Mapped[dict[str, float]] = mapped_column(JSON)
+    created_at: Mapped[datetime] = mapped_column(default=utcnow)
 
 
 class Trajectory(Base):

@@ -161,7 +161,7 @@ def add_evaluation(session: Session, *, job_id: int, theta: dict[str, float], J:
                    metrics: dict[str, Any], trigger_points: list[dict[str, float]], wall_ms: float,
                    columns: list[str], trajectory: np.ndarray, seeds: list[dict[str, Any]] | None = None,
                    trajectory_seed: int | None = None, max_trajectories: int | None = None,
-                   packed: bytes | None = None) -> Evaluation:
+                   packed: bytes | None = None, enqueued: bool = False) -> Evaluation:
     """Appends the next evaluation of a job (its index is the count so far, so numbering survives resumes).
 
     Its trajectory (up to ~100 kB) is kept while the job holds fewer than ``max_trajectories`` of them, and always
@@ -171,7 +171,7 @@ def add_evaluation(session: Session, *, job_id: int, theta: dict[str, float], J:
     index = count_evaluations(session, job_id=job_id)
     evaluation = Evaluation(job_id=job_id, index=index, theta=theta, J=J, status=status, metrics=metrics,
                             trigger_points=trigger_points, wall_ms=wall_ms, seeds=seeds,
-                            trajectory_seed=trajectory_seed)
+                            trajectory_seed=trajectory_seed, enqueued=enqueued)
     if (max_trajectories is None or count_trajectories(session, job_id=job_id) < max_trajectories
             or _beats_best(session, job_id=job_id, J=J, completed=status == EpisodeStatus.COMPLETED)):
         evaluation.trajectory = Trajectory(columns=list(columns), rows=int(trajectory.shape[0]),

@@ -71,6 +71,8 @@ class Evaluation(BaseModel):
     seeds: list[dict[str, Any]] | None = Field(description="one entry per episode: seed, status, J, ...")
     trajectory_seed: int | None
     created_at: Timestamp
+    enqueued: bool = Field(default=False, description="a theta someone enqueued (POST /api/jobs/{id}/enqueue), "
+                                                      "not the optimizer's proposal")
 
 
 class BestSummary(BaseModel):
@@ -107,6 +109,19 @@ class Job(BaseModel):
     stop_reason: str | None = Field(default=None, description="the stop rule that finished it, if one did")
     notes: str = Field(description="free text kept with the job (PATCH /api/jobs/{id} with notes)")
     created_at: Timestamp
+
+
+class EnqueuedTheta(BaseModel):
+    id: int
+    theta: dict[str, float]
+
+
+class Enqueued(BaseModel):
+    """The thetas a request enqueued (their ids) and all those still waiting for the job, next first."""
+
+    job_id: int
+    enqueued: list[int]
+    waiting: list[EnqueuedTheta]
 
 
 class TrajectoryDocument(BaseModel):

@@ -16,6 +16,7 @@ from driftlab.core.tuning import DEFAULT_CONFIRM_SAMPLES, DEFAULT_ROBUST_SAMPLES
 from driftlab.core.warm_start import MAX_WARM_JOBS
 from driftlab.names import MAX_NAME_LENGTH, name_problem
 
+MAX_ENQUEUED = 100  # thetas one request may enqueue
 MAX_ID = 2**63 - 1  # SQLite's INTEGER; larger ids cannot exist (and used to overflow into a 500)
 MAX_PAGE = 1000
 
@@ -120,6 +121,15 @@ class JobCreate(BaseModel):
 
 
 MAX_NOTES_CHARS = 10_000
+
+
+class EnqueueRequest(BaseModel):
+    """Thetas to evaluate next, in order (each: any of the keys the job learns, inside its box; the rest untuned)."""
+
+    model_config = ConfigDict(extra="forbid")
+
+    thetas: list[dict[str, StrictNumber]] = Field(min_length=1, max_length=MAX_ENQUEUED,
+                                                  description='e.g. [{"k": 0.06, "dV": 0.1}]')
 
 
 class JobPatch(BaseModel):

@@ -16,12 +16,12 @@ from driftlab.db.models import Evaluation, Job, JobStatus
 def evaluation_dict(e: Evaluation) -> dict[str, Any]:
     return {"id": e.id, "job_id": e.job_id, "index": e.index, "theta": e.theta, "J": e.J, "status": e.status,
             "completed": e.completed, "metrics": e.metrics, "trigger_points": e.trigger_points,
-            "wall_ms": e.wall_ms, "seeds": e.seeds, "trajectory_seed": e.trajectory_seed,
+            "wall_ms": e.wall_ms, "seeds": e.seeds, "trajectory_seed": e.trajectory_seed, "enqueued": e.enqueued,
             "created_at": e.created_at.replace(tzinfo=UTC).isoformat()}
 
 
 CSV_FIELDS = ("id", "index", "status", "J", *THETA_KEYS, "n_samples", "n_completed", "seeds", "trajectory_seed",
-              "mean_abs_e_m", "max_abs_e_m", "completed_fraction", "wall_ms", "created_at")
+              "mean_abs_e_m", "max_abs_e_m", "completed_fraction", "wall_ms", "created_at", "enqueued")
 
 
 def evaluations_csv(rows: list[dict[str, Any]]) -> str:

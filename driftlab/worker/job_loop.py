@@ -15,11 +15,12 @@ from dataclasses import dataclass, field
 
 from sqlalchemy.orm import Session, sessionmaker
 
+from driftlab.core.config import Theta
 from driftlab.core.convergence import best_so_far
 from driftlab.core.robust import RobustScore, SampleResult, aggregate
 from driftlab.core.statuses import EpisodeStatus
 from driftlab.core.tuning import TuningSpec
-from driftlab.db import lifecycle, storage
+from driftlab.db import enqueued, lifecycle, storage
 from driftlab.db.lifecycle import JobStatus
 from driftlab.db.models import Job
 from driftlab.settings import MAX_TRAJECTORIES_PER_JOB
@@ -61,6 +62,7 @@ class _PendingEvaluation:
     seeds: list[int]
     outcomes: dict[int, EpisodeOutcome] = field(default_factory=dict)
     confirming: bool = False
+    enqueued_id: int | None = None  # an enqueued theta's row (driftlab.db.enqueued), not the optimizer's proposal
 
     @property
     def done(self) -> bool:
@@ -71,6 +73,19 @@ class _PendingEvaluation:
         samples = [o.sample() for o in ordered]
         score = aggregate(samples)
         return score, samples, ordered[score.representative]
+
+
+def _next_evaluation(factory: sessionmaker[Session], job_id: int, spec: TuningSpec, optimizer,
+                     in_flight: list[_PendingEvaluation], seeds: list[int]) -> _PendingEvaluation:
+    """The oldest theta enqueued for the job and not in flight (POST /api/jobs/{id}/enqueue; told to the optimizer
+    like any other once evaluated), else the optimizer's next proposal."""
+    taken = {e.enqueued_id for e in in_flight if e.enqueued_id is not None}
+    with storage.snapshot(factory) as session:
+        row = next(iter(enqueued.waiting(session, job_id=job_id, taken=taken)), None)
+        if row is not None:
+            theta = {**Theta().as_dict(), **row.theta}
+            return _PendingEvaluation({k: float(theta[k]) for k in spec.bounds}, seeds, enqueued_id=row.id)
+    return _PendingEvaluation(optimizer.ask(), seeds)
 
 
 def _skip_unstarted(evaluation: _PendingEvaluation, waiting: list[tuple[_PendingEvaluation, int]]) -> None:
@@ -110,7 +125,10 @@ def _store(factory: sessionmaker[Session], lease: _Lease, evaluation: _PendingEv
                                wall_ms=sum(o.wall_ms for o in evaluation.outcomes.values()),
                                columns=shown.columns, trajectory=shown.trajectory,
                                seeds=[s.as_dict() for s in samples], trajectory_seed=shown.seed,
-                               max_trajectories=lease.max_trajectories, packed=packed)
+                               max_trajectories=lease.max_trajectories, packed=packed,
+                               enqueued=evaluation.enqueued_id is not None)
+        if evaluation.enqueued_id is not None:  # stored and taken off the queue in one commit
+            enqueued.remove(session, row_id=evaluation.enqueued_id)
     return STORED
 
 
@@ -237,7 +255,7 @@ def _run(factory: sessionmaker[Session], job_id: int, executor: EpisodeExecutor,
             # history never depends on which worker finished first.
             free = not evaluations if spec.deterministic else _may_ask(waiting, evaluations, slots.has_room(owner))
             while (not stopping and free and n_done + len(evaluations) < lease.iterations):
-                evaluation = _PendingEvaluation(optimizer.ask(), seeds)
+                evaluation = _next_evaluation(factory, job_id, spec, optimizer, evaluations, seeds)
                 evaluations.append(evaluation)
                 waiting.extend((evaluation, seed) for seed in seeds)
                 submit_waiting()

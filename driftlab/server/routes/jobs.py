@@ -9,14 +9,15 @@ from sqlalchemy.orm import Session, sessionmaker
 
 from driftlab.core.drivability import check_drivable
 from driftlab.core.tuning import TuningSpec
-from driftlab.db import lifecycle, storage
+from driftlab.db import enqueued, lifecycle, storage
 from driftlab.server import quotas
 from driftlab.server.evaluation_pages import EvaluationPages
-from driftlab.server.responses import Evaluation, Job, errors, media
+from driftlab.server.responses import Enqueued, Evaluation, Job, errors, media
 from driftlab.server.routes.deps import evaluation_pages, factory, require_token, wake_runner
 from driftlab.server.schemas import (
     JOBS_PAGE,
     After,
+    EnqueueRequest,
     JobCreate,
     JobId,
     JobPatch,
@@ -83,6 +84,35 @@ def pause(job_id: JobId, db: Factory) -> dict[str, Any]:
     """409 unless queued or running; a running job stops after the evaluations in flight."""
     with storage.transaction(db) as session:
         return job_dict(session, lifecycle.request_pause(session, job_id=job_id))
+
+
+@router.post("/{job_id}/enqueue", status_code=202, dependencies=Mutating, response_model=Enqueued,
+             responses=errors(404, 409, 422, 503))
+def enqueue(job_id: JobId, body: EnqueueRequest, db: Factory, request: Request) -> dict[str, Any]:
+    """Hand-picked thetas, evaluated next in the order given (before the optimizer's next proposal) and told to its
+    optimizer like any other; their evaluations carry ``enqueued: true``. 409 for a finished job (raise its budget
+    first); a paused or queued job evaluates them when it runs."""
+    with storage.transaction(db) as session:
+        job = storage.get_job(session, job_id=job_id)
+        if job.status == lifecycle.JobStatus.FINISHED:
+            raise lifecycle.TransitionError(f"job {job_id} is finished; raise its budget first (PATCH "
+                                            f"/api/jobs/{job_id} with iterations)")
+        spec = TuningSpec.from_dict(job.spec)
+        thetas = [spec.picked_theta(theta, f"thetas.{n}") for n, theta in enumerate(body.thetas)]
+        added = enqueued.enqueue(session, job_id=job_id, thetas=thetas)
+        out = {"job_id": job_id, "enqueued": [row.id for row in added],
+               "waiting": [{"id": row.id, "theta": row.theta} for row in enqueued.waiting(session, job_id=job_id)]}
+    wake_runner(request)
+    return out
+
+
+@router.get("/{job_id}/enqueue", response_model=Enqueued, responses=errors(404, 422, 503))
+def enqueued_thetas(job_id: JobId, db: Factory) -> dict[str, Any]:
+    """The thetas enqueued for the job and not yet stored as its evaluations, next first."""
+    with storage.snapshot(db) as session:
+        storage.get_job(session, job_id=job_id)
+        return {"job_id": job_id, "enqueued": [],
+                "waiting": [{"id": row.id, "theta": row.theta} for row in enqueued.waiting(session, job_id=job_id)]}
 
 
 @router.post("/{job_id}/resume", dependencies=Mutating, response_model=Job, responses=errors(404, 409, 422, 503))

@@ -1,0 +1,34 @@
+"""Thetas enqueued for a job (driftlab.db.models.EnqueuedTheta): added by the API or the CLI, taken by the job's
+runner before the optimizer's next proposal, removed when their evaluation is stored."""
+
+from __future__ import annotations
+
+from collections.abc import Collection
+
+from sqlalchemy import delete, select
+from sqlalchemy.orm import Session
+
+from driftlab.db.models import EnqueuedTheta
+
+
+def enqueue(session: Session, *, job_id: int, thetas: list[dict[str, float]]) -> list[EnqueuedTheta]:
+    rows = [EnqueuedTheta(job_id=job_id, theta=dict(theta)) for theta in thetas]
+    session.add_all(rows)
+    session.flush()
+    return rows
+
+
+def waiting(session: Session, *, job_id: int, taken: Collection[int] = ()) -> list[EnqueuedTheta]:
+    """The job's enqueued thetas not yet stored as evaluations, oldest first, except the ids ``taken`` (in flight)."""
+    query = select(EnqueuedTheta).where(EnqueuedTheta.job_id == job_id).order_by(EnqueuedTheta.id)
+    if taken:
+        query = query.where(EnqueuedTheta.id.not_in(list(taken)))
+    return list(session.scalars(query))
+
+
+def remove(session: Session, *, row_id: int) -> None:
+    session.execute(delete(EnqueuedTheta).where(EnqueuedTheta.id == row_id))
+
+
+def remove_for_job(session: Session, *, job_id: int) -> None:
+    session.execute(delete(EnqueuedTheta).where(EnqueuedTheta.job_id == job_id))

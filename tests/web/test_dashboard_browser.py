@@ -9,7 +9,7 @@ import pytest
 from playwright.sync_api import expect, sync_playwright
 
 from tests.server_process import free_port, start_server, wait_released
-from tests.web.test_view_browser import CHROMIUM, CHROMIUM_ARGS
+from tests.web.test_view_browser import CHROMIUM, CHROMIUM_ARGS, SCREENSHOT_DIR, ConsoleLog
 
 pytestmark = pytest.mark.e2e  # real processes: servers, browsers, Dask, the CLI
 
@@ -228,5 +228,75 @@ def test_a_car_calibrated_from_the_page_shows_its_progress_and_its_profile(serve
     row = page.locator("#profile-table tbody tr", has_text="commonroad_std 2").first
     expect(row).to_contain_text("0.5@44")
     assert row.locator("a").get_attribute("href") == f"/api/profiles/{profile_id}"
+    assert not errors, errors
+    page.close()
+
+
+def test_a_clicked_point_selects_its_evaluation_plays_it_and_an_enqueued_theta_runs_next(server, browser):
+    job = httpx.post(f"{server}/api/jobs", json={
+        "name": "trials", "iterations": 300, "seed_points": 4, "robust_samples": 1, "confirm_samples": 0,
+        "config": {"plant.steer_lag_s": 0.02}}).json()
+    page, errors = _page(browser, f"{server}/dashboard/?job={job['id']}")
+    expect(page.locator("#job-title")).to_have_text(f"{job['id']} · trials", timeout=WAIT_MS)
+    _wait_count(page, "#convergence", "data-n", 5)
+
+    # A point of the convergence plot -> its row in the table is selected -> "open in 3D view" plays it.
+    point = page.locator("#convergence [data-eval-id]").nth(2)
+    picked = int(point.get_attribute("data-eval-id"))
+    assert f"evaluation id {picked}" in point.locator("title").text_content()  # what hovering shows
+    point.click()
+    expect(page.locator("#trials-table tr.picked")).to_have_attribute("data-eval-id", str(picked))
+    expect(page.locator("#trial-picked")).to_contain_text(f"evaluation id {picked} ")
+    link = page.locator("#trial-3d")
+    assert link.get_attribute("href") == f"/viser/?playbackPath=/api/evaluations/{picked}/recording.viser"
+    view = browser.new_page(viewport={"width": 1200, "height": 800})
+    log = ConsoleLog(view)
+    view.goto(f"{server}{link.get_attribute('href')}")
+    log.wait_for("File loaded!")
+    view.close()
+
+    # Sorted by J: the completed evaluations first, lowest J on top.
+    page.locator("#trials-table th", has_text="J").first.click()
+    expect(page.locator("#trials-table th").nth(3)).to_have_text("J ▲")
+    page.locator("#trials-status").select_option("completed")
+    shown = [float(t) for t in page.locator("#trials-table tbody tr td:nth-child(4)").all_text_contents()]
+    assert shown == sorted(shown) and len(shown) >= 1
+
+    # Brushing the parallel coordinates' k axis (its upper 60%) filters the table to those k.
+    page.locator("#trials-status").select_option("")
+    page.locator("#parallel").scroll_into_view_if_needed()
+    box = page.locator("#parallel .pc-hit[data-axis='k']").bounding_box()
+    page.mouse.move(box["x"] + box["width"] / 2, box["y"] + 2)
+    page.mouse.down()
+    page.mouse.move(box["x"] + box["width"] / 2, box["y"] + 0.6 * box["height"], steps=5)
+    page.mouse.up()
+    expect(page.locator("#trials-filter")).to_contain_text("brushed: k")
+    k_column = [t.text_content() for t in page.locator("#trials-table th").all()].index("k") + 1
+    ks = [float(t) for t in page.locator(f"#trials-table tbody tr td:nth-child({k_column})").all_text_contents()]
+    low = 0.12 * 0.4 - 1e-3  # the job's box for k is [0, 0.12]; fmt rounds to 4 digits
+    assert ks and all(k >= low for k in ks), ks
+    page.locator("#trials-clear").click()
+    expect(page.locator("#trials-filter")).to_have_text("")
+
+    # Enqueued from the page while the job is paused (nothing in flight): the next evaluation it runs, marked.
+    httpx.post(f"{server}/api/jobs/{job['id']}/pause")
+    wait_released(server, job["id"])
+    done_before = httpx.get(f"{server}/api/jobs/{job['id']}").json()["n_done"]
+    page.locator("#enqueue-form input[name=theta]").fill("k=0.061, dV=0.05")
+    page.get_by_role("button", name="Enqueue").click()
+    expect(page.locator("#enqueue-text")).to_contain_text("evaluated next")
+    page.get_by_role("button", name="Resume").click()
+    page.locator("#trials-status").select_option("enqueued")
+    row = page.locator("#trials-table tbody tr")
+    expect(row).to_have_count(1, timeout=WAIT_MS)
+    expect(row.locator("td").nth(2)).to_contain_text("(enqueued)")
+    if SCREENSHOT_DIR:  # the docs' picture of the table (DRIFTLAB_SCREENSHOTS=docs/screenshots)
+        row.click()
+        page.locator("#trials-box").screenshot(path=os.path.join(SCREENSHOT_DIR, "trials_enqueued.png"))
+    marked = [e for e in httpx.get(f"{server}/api/jobs/{job['id']}/evaluations").json() if e["enqueued"]]
+    assert len(marked) == 1 and marked[0]["theta"]["k"] == 0.061 and marked[0]["theta"]["dV"] == 0.05
+    assert marked[0]["index"] == done_before
+    httpx.post(f"{server}/api/jobs/{job['id']}/pause")
+    wait_released(server, job["id"])
     assert not errors, errors
     page.close()

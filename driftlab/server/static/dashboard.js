@@ -6,6 +6,7 @@
 import { calibrationPanel } from "./calibrate.js";
 import { formBody, openForm as fillForm } from "./jobform.js";
 import { renderSpace } from "./searchspace.js";
+import { freshTrials, renderTrials, wireTrials } from "./trials.js";
 import { el, extent, fmt, frame, line, parallel, points, ramp, RAMPS } from "./svgplot.js";
 
 const POLL_MS = 1000;
@@ -18,6 +19,7 @@ const state = {
   space: null, spaceKey: "", spaceBusy: false,
   axesChosen: false, // until a parameter is chosen, the contour shows the two most important
   rescoring: false,
+  trials: freshTrials(), picked: null, // the evaluations table's view, and the evaluation selected everywhere
   refreshCalibration: async () => {},
 };
 
@@ -82,6 +84,9 @@ function select(jobId) {
     state.spaceKey = "";
     state.axesChosen = false;
     $("notes").dataset.loaded = "";
+    state.trials = freshTrials();
+    state.picked = null;
+    $("trials-status").value = "";
     $("contour-x").replaceChildren();
     $("contour-y").replaceChildren();
   }
@@ -115,7 +120,10 @@ async function refreshSelected(id) {
   if (id !== state.selected) return;
   state.evals.push(...fresh.filter((e) => e.index > after));
   renderJob();
-  if (fresh.length) renderHistoryPlots();
+  if (fresh.length) {
+    renderHistoryPlots();
+    renderTrials(state);
+  }
   maybeFetchSpace();
   if (state.rescoring) await pollRescore();
 }
@@ -184,11 +192,20 @@ function renderHistoryPlots() {
   for (const v of J) { if (Number.isFinite(v) && v < b) b = v; best.push(Number.isFinite(b) ? b : NaN); }
   const yr = extent(J);
   const failedTop = ev.map((e) => (e.completed ? NaN : yr[1]));
+  const ids = ev.map((e) => e.id);
+  const titles = ev.map((e) => `evaluation id ${e.id} (index ${e.index})${e.enqueued ? ", enqueued" : ""}: ` +
+    `${e.status}, J ${fmt(e.J)}; ${Object.entries(e.theta).map(([k, v]) => `${k} ${fmt(v)}`).join(", ")}`);
+  const marks = { ids, titles };
   const conv = frame($("convergence"), { width: 460, height: 260, x: [0, Math.max(state.job.iterations - 1, 1)],
     y: yr, xlabel: "evaluation", ylabel: "J", title: "Convergence" });
-  points(conv, idx, J, { color: "#2a6fdb" });
   line(conv, idx, best, { color: "#e8590c" });
-  points(conv, idx, failedTop, { color: "#c92a2a", shape: "x", r: 3.5 });
+  points(conv, idx, J, { color: "#2a6fdb", ...marks });
+  points(conv, idx, failedTop, { color: "#c92a2a", shape: "x", r: 3.5, ...marks });
+  // enqueued evaluations in green; the selected one ringed
+  points(conv, idx, ev.map((e, i) => (e.enqueued ? (e.completed ? J[i] : yr[1]) : NaN)),
+         { color: "#2b8a3e", r: 4, ...marks });
+  points(conv, idx, ev.map((e, i) => (e.id === state.picked ? (e.completed ? J[i] : yr[1]) : NaN)),
+         { color: "#111", shape: "ring", r: 7 });
   $("convergence").dataset.n = ev.length;
 
   const slices = $("slices");
@@ -200,8 +217,8 @@ function renderHistoryPlots() {
     const xs = ev.map((e) => e.theta[name]);
     const s = frame(el("svg", { class: "slice" }, slices), { width: 250, height: 190, x: bounds[name], y: yr,
       xlabel: name, ylabel: "J", title: `J against ${name}` });
-    points(s, xs, J, { color: "#2a6fdb", r: 2.6 });
-    points(s, xs, failedTop, { color: "#c92a2a", shape: "x", r: 3 });
+    points(s, xs, J, { color: "#2a6fdb", r: 2.6, ...marks });
+    points(s, xs, failedTop, { color: "#c92a2a", shape: "x", r: 3, ...marks });
     const t = frame(el("svg", {}, thetaIter), { width: 250, height: 170, x: [0, Math.max(state.job.iterations - 1, 1)],
       y: bounds[name], xlabel: "evaluation", ylabel: name, title: name });
     points(t, idx, ev.map((e) => (e.completed ? e.theta[name] : NaN)), { color: "#2a6fdb", r: 2.4 });
@@ -215,7 +232,13 @@ function renderHistoryPlots() {
   const axes = [...names.map((n) => ({ key: n, label: n, range: bounds[n] })), { key: "J", label: "J", range: yr }];
   rows.sort((a, c) => Number(a.best) - Number(c.best) || Number(a.completed) - Number(c.completed) || c.J - a.J);
   parallel($("parallel"), rows, axes, { width: 860, height: 240, color: (r) => (r.completed
-    ? ramp(1 - (r.J - yr[0]) / (yr[1] - yr[0] || 1), RAMPS.viridis) : "rgba(201,42,42,0.45)") });
+    ? ramp(1 - (r.J - yr[0]) / (yr[1] - yr[0] || 1), RAMPS.viridis) : "rgba(201,42,42,0.45)"),
+  brushes: state.trials.brushes, onBrush: (key, range) => {
+    if (range) state.trials.brushes[key] = range; else delete state.trials.brushes[key];
+    state.trials.page = 0;
+    renderTrials(state);
+    renderHistoryPlots();
+  } });
   $("parallel").dataset.n = ev.length;
 }
 
@@ -359,6 +382,7 @@ async function start() {
   $("job-form").elements.plant_preset.replaceChildren(
     ...Object.keys(state.form.plant_presets).map((n) => new Option(n, n)));
   wireActions();
+  wireTrials(state, { api, act, say, redraw: renderHistoryPlots });
   state.refreshCalibration = calibrationPanel(api, act, Object.keys(state.form.plant_presets));
   $("calibration-box").addEventListener("toggle", () => act(state.refreshCalibration));
   $("new-job").disabled = false; // enabled once the form can be filled

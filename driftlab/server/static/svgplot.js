@@ -64,18 +64,24 @@ export function frame(svg, { width, height, x, y, xlabel = "", ylabel = "", titl
   return { sx, sy, g, m, width, height };
 }
 
-export function points(f, xs, ys, { color = "#2a6fdb", r = 3, shape = "circle", cls = "" } = {}) {
+// ``ids``: an evaluation id per point (data-eval-id: a click selects it) and ``titles``: what hovering shows.
+export function points(f, xs, ys, { color = "#2a6fdb", r = 3, shape = "circle", cls = "", ids, titles } = {}) {
   for (let i = 0; i < xs.length; i++) {
     if (!Number.isFinite(xs[i]) || !Number.isFinite(ys[i])) continue;
     const x = f.sx(xs[i]), y = f.sy(ys[i]);
+    let mark;
     if (shape === "x") {
-      el("path", { d: `M${x - r},${y - r}L${x + r},${y + r}M${x - r},${y + r}L${x + r},${y - r}`, stroke: color,
-                   "stroke-width": 1.6, class: cls }, f.g);
+      mark = el("path", { d: `M${x - r},${y - r}L${x + r},${y + r}M${x - r},${y + r}L${x + r},${y - r}`,
+                          stroke: color, "stroke-width": 1.6, class: cls }, f.g);
     } else if (shape === "star") {
-      el("path", { d: starPath(x, y, r), fill: color, stroke: "#222", "stroke-width": 0.8, class: cls }, f.g);
+      mark = el("path", { d: starPath(x, y, r), fill: color, stroke: "#222", "stroke-width": 0.8, class: cls }, f.g);
+    } else if (shape === "ring") {
+      mark = el("circle", { cx: x, cy: y, r, fill: "none", stroke: color, "stroke-width": 2, class: cls }, f.g);
     } else {
-      el("circle", { cx: x, cy: y, r, fill: color, class: cls }, f.g);
+      mark = el("circle", { cx: x, cy: y, r, fill: color, class: cls }, f.g);
     }
+    if (ids) { mark.setAttribute("data-eval-id", ids[i]); mark.style.cursor = "pointer"; }
+    if (titles) el("title", {}, mark).textContent = titles[i];
   }
 }
 
@@ -143,7 +149,9 @@ export function colorbar(f, lo, hi, { stops = VIRIDIS, reverse = false, label = 
 }
 
 // Parallel coordinates: one axis per key, each row a polyline; `color(row)` picks its colour.
-export function parallel(svg, rows, axes, { width, height, color }) {
+// ``brushes``: axis key -> [lo, hi] drawn on its axis; ``onBrush(key, range or null)``: a drag along an axis
+// brushes that range (a click without a drag clears the axis's brush).
+export function parallel(svg, rows, axes, { width, height, color, brushes = {}, onBrush = null }) {
   svg.replaceChildren();
   svg.setAttribute("viewBox", `0 0 ${width} ${height}`);
   svg.setAttribute("width", width);
@@ -166,5 +174,33 @@ export function parallel(svg, rows, axes, { width, height, color }) {
     el("text", { x: ax(i), y: 12, "text-anchor": "middle", class: "axis-label" }, svg, a.label);
     el("text", { x: ax(i), y: m.t - 4, "text-anchor": "middle", class: "small" }, svg, fmt(a.range[1]));
     el("text", { x: ax(i), y: height - 6, "text-anchor": "middle", class: "small" }, svg, fmt(a.range[0]));
+    const brushed = brushes[a.key];
+    if (brushed) {
+      const [top, bottom] = [ay(a, brushed[1]), ay(a, brushed[0])];
+      el("rect", { x: ax(i) - 7, y: top, width: 14, height: Math.max(bottom - top, 1), class: "pc-brush" }, svg);
+    }
+    if (onBrush) brushable(svg, a, ax(i), m.t, height - m.b, (y) => a.range[0] + ((height - m.b - y)
+      / (height - m.t - m.b)) * (a.range[1] - a.range[0]), onBrush);
+  });
+}
+
+function brushable(svg, axis, x, top, bottom, valueAt, onBrush) {
+  const hit = el("rect", { x: x - 10, y: top, width: 20, height: bottom - top, fill: "transparent",
+                           class: "pc-hit", "data-axis": axis.key }, svg);
+  hit.style.cursor = "ns-resize";
+  const svgY = (ev) => {
+    const box = svg.getBoundingClientRect();
+    const scale = svg.viewBox.baseVal.height / box.height;
+    return Math.min(Math.max((ev.clientY - box.top) * scale, top), bottom);
+  };
+  hit.addEventListener("pointerdown", (down) => {
+    down.preventDefault();
+    const y0 = svgY(down);
+    const up = (ev) => {
+      window.removeEventListener("pointerup", up);
+      const y1 = svgY(ev);
+      onBrush(axis.key, Math.abs(y1 - y0) < 3 ? null : [valueAt(Math.max(y0, y1)), valueAt(Math.min(y0, y1))]);
+    };
+    window.addEventListener("pointerup", up);
   });
 }

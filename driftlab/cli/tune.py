@@ -66,21 +66,17 @@ def job_ids(text: str) -> list[int]:
     return ids
 
 
-def enqueue_thetas(session, job, texts: list[str]) -> None:
-    """``--enqueue k=0.06,dV=0.1`` (repeated): hand-picked thetas the job evaluates next (driftlab.db.enqueued)."""
-    from driftlab.core.tuning import TuningSpec
-    from driftlab.db import enqueued
+def enqueue_texts(session, job_id: int, texts: list[str]) -> None:
+    """``--enqueue k=0.06,dV=0.1`` (repeated): hand-picked thetas the job evaluates next (driftlab.services.enqueue)."""
+    from driftlab.services.enqueue import enqueue_thetas
 
-    spec = TuningSpec.from_dict(job.spec)
     thetas = []
     for text in texts:
-        values = key_values(text.split(","), "--enqueue")
         try:
-            numbers = {k: float(v) for k, v in values.items()}
+            thetas.append({k: float(v) for k, v in key_values(text.split(","), "--enqueue").items()})
         except ValueError:
             raise ConfigError(f"--enqueue {text!r}: each value must be a number", field="enqueue") from None
-        thetas.append(spec.picked_theta(numbers, "enqueue"))
-    enqueued.enqueue(session, job_id=job.id, thetas=thetas)
+    enqueue_thetas(session, job_id=job_id, thetas=thetas, field="enqueue")
 
 
 def open_tuning_job(factory, args: argparse.Namespace, runner: str) -> tuple[int, str]:
@@ -114,7 +110,7 @@ def open_tuning_job(factory, args: argparse.Namespace, runner: str) -> tuple[int
             message = f"resuming job {job.name} (id {job.id}) at {done} of {job.spec['iterations']}"
         job_id, name, status = job.id, job.name, job.status
         if args.enqueue:
-            enqueue_thetas(session, job, args.enqueue)
+            enqueue_texts(session, job.id, args.enqueue)
             message += f"; {len(args.enqueue)} theta(s) enqueued (evaluated next when it runs)"
     if status != JobStatus.FINISHED:
         with storage.transaction(factory) as session:

@@ -26,6 +26,7 @@ from driftlab.web.frames import EpisodeFrames
 from driftlab.web.session import ClientSession
 from driftlab.web.sources import (
     JobHistory,
+    enqueue_theta,
     frames_of_evaluation,
     frames_of_outcome,
     read_compare,
@@ -208,6 +209,10 @@ class Dashboard:
     def request_what_if(self, session: ClientSession, theta: dict[str, float], config_doc: dict[str, Any],
                         plant_overrides: dict[str, float], seed: int) -> None:
         self.what_if.request(session, theta, config_doc, plant_overrides, seed)
+
+    def enqueue(self, job_id: int, theta: dict[str, float]) -> str:
+        """The what-if panel's "add to job": the theta enqueued for the job, or why not."""
+        return enqueue_theta(self.factory, job_id, theta)
 
     # ----- clients -----------------------------------------------------------------------------------------
     def _on_connect(self, client: viser.ClientHandle) -> None:

@@ -50,6 +50,8 @@ class TabData(Protocol):
     def request_what_if(self, session: ClientSession, theta: dict[str, float], config_doc: dict[str, Any],
                         plant_overrides: dict[str, float], seed: int) -> None: ...
 
+    def enqueue(self, job_id: int, theta: dict[str, float]) -> str: ...
+
 
 def job_label(job_id: int, name: str, status: str) -> str:
     return f"{job_id} · {name} · {status}"
@@ -70,7 +72,8 @@ class ClientSession:
         self._build_job_gui(gui)
         self.playback = Playback(client, history=lambda: self.history, frames_of=data.frames, best=self._best,
                                  lock=self.lock)
-        self.what_if = WhatIfPanel(gui, client, lambda *args: data.request_what_if(self, *args), self._best)
+        self.what_if = WhatIfPanel(gui, client, lambda *args: data.request_what_if(self, *args), self._best,
+                                   enqueue=data.enqueue)
         self.what_if.gui_reset.on_click(lambda _: self.what_if.reset_sliders(self._best()))
         self.playback.build_downloads(gui)
         self.compare = ComparePanel(gui, read_studies=data.studies, read_study=data.study,

@@ -159,3 +159,17 @@ def read_config_diff(factory: sessionmaker[Session], job_ids: list[int]) -> dict
     with storage.snapshot(factory) as session:
         jobs = [storage.get_job(session, job_id=i) for i in job_ids]
         return {"jobs": [{"id": j.id, "name": j.name} for j in jobs], "differences": spec_diff([j.spec for j in jobs])}
+
+
+def enqueue_theta(factory: sessionmaker[Session], job_id: int, theta: dict[str, float]) -> str:
+    """Enqueue a what-if theta for the job (driftlab.services.enqueue); what happened, in words."""
+    from driftlab.core.errors import ConfigError
+    from driftlab.db.lifecycle import TransitionError
+    from driftlab.services.enqueue import enqueue_thetas
+
+    try:
+        with storage.transaction(factory) as session:
+            row, = enqueue_thetas(session, job_id=job_id, thetas=[theta], field="theta")
+    except (ConfigError, TransitionError, storage.NotFound) as exc:
+        return f"not added: {exc}"
+    return f"added to job {job_id} (queue entry {row.id}): it is evaluated next"

@@ -35,12 +35,17 @@ SLIDER_BOUNDS = {**DEFAULT_BOUNDS, **MODEL_BOUNDS}
 WhatIfRequest = Callable[[dict[str, float], dict[str, Any], dict[str, float], int], None]
 
 
+# enqueue(job_id, theta): add the theta to the job (evaluated next); returns what to say.
+WhatIfEnqueue = Callable[[int, dict[str, float]], str]
+
+
 class WhatIfPanel:
     def __init__(self, gui: viser.GuiApi, client: viser.ClientHandle, request: WhatIfRequest,
-                 best: Callable[[], EpisodeFrames | None]) -> None:
+                 best: Callable[[], EpisodeFrames | None], enqueue: WhatIfEnqueue | None = None) -> None:
         self.client = client
         self.request = request
         self.best = best
+        self.enqueue = enqueue
         self.ghost: EpisodeFrames | None = None  # the episode the last request is compared with
         self._placed: dict[str, tuple[float, float]] = {}  # slider key -> (value the panel set, the exact value)
         self.history: JobHistory | None = None
@@ -57,6 +62,9 @@ class WhatIfPanel:
                                   for key, label, lo, hi, step in PLANT_SLIDERS}
             self.text = gui.add_markdown("")
             self.gui_reset = gui.add_button("Reset to the best theta and the job's plant")
+            self.gui_add = gui.add_button("Add this theta to the job (evaluated next)")
+            self.add_text = gui.add_markdown("")
+        self.gui_add.on_click(lambda _: self.add_to_job())
         for slider in (*self.theta_sliders.values(), *self.plant_sliders.values()):
             slider.on_update(self._on_slider)
 
@@ -99,7 +107,7 @@ class WhatIfPanel:
     def ask(self) -> None:
         if self.history is None:
             return
-        theta = {k: float(s.value) if self._moved(k, s) else self._placed[k][1] for k, s in self.theta_sliders.items()}
+        theta = self.theta()
         # Only the plant settings a user moved: the job's own config holds the rest exactly.
         overrides = {k: float(s.value) for k, s in self.plant_sliders.items() if self._moved(k, s)}
         self.ghost = self.best()
@@ -107,6 +115,18 @@ class WhatIfPanel:
         self._requested_at = time.perf_counter()
         self.text.content = "running..."
         self.request(theta, self.history.spec.get("config", {}), overrides, seed)
+
+    def theta(self) -> dict[str, float]:
+        """The sliders' theta (a slider left where the panel put it: the stored value itself)."""
+        return {k: float(s.value) if self._moved(k, s) else self._placed[k][1] for k, s in self.theta_sliders.items()}
+
+    def add_to_job(self) -> None:
+        """Enqueue the sliders' theta (the keys the job learns) for the job (driftlab.services.enqueue)."""
+        if self.history is None or self.enqueue is None:
+            return
+        learned = self.history.spec.get("bounds", DEFAULT_BOUNDS)
+        theta = {k: v for k, v in self.theta().items() if k in learned}
+        self.add_text.content = plain(self.enqueue(self.history.job_id, theta))
 
     def show_error(self, error: str) -> None:
         self.text.content = f"**error**: {plain(error)}"

@@ -10,7 +10,7 @@ import httpx
 import pytest
 from matplotlib import image as mpimg
 
-from tests.server_process import free_port, start_server
+from tests.server_process import free_port, start_server, wait_released
 
 pytestmark = pytest.mark.e2e  # real processes: servers, browsers, Dask, the CLI
 
@@ -172,6 +172,27 @@ def test_what_if_with_no_slider_moved_scores_what_the_ghost_scores(server, brows
     worst = [s for s in best["seeds"] if s["seed"] == int(seed)][0]
     assert float(j_ghost) == float(f"{worst['J']:.4g}") and float(j_mean) == float(f"{best['J']:.4g}")
     assert int(n_seeds) == len(best["seeds"])
+    # "add to job": the sliders' theta enqueued for the job, evaluated next (a finished job first says why not)
+    add = page.get_by_role("button", name="Add this theta to the job (evaluated next)")
+    add.click()
+    page.get_by_text(re.compile(r"not added: job \d+ is finished; raise its budget first")).wait_for(timeout=30_000)
+    # a larger budget, paused (nothing in flight), then added and resumed: the next evaluation is the sliders' theta
+    assert httpx.patch(f"{server}/api/jobs/{job['id']}", json={"iterations": 100}).status_code == 200
+    httpx.post(f"{server}/api/jobs/{job['id']}/pause")
+    wait_released(server, job["id"])
+    done = httpx.get(f"{server}/api/jobs/{job['id']}").json()["n_done"]
+    add.click()
+    page.get_by_text(re.compile(r"added to job \d+ \(queue entry \d+\): it is evaluated next")).wait_for(
+        timeout=30_000)
+    assert httpx.post(f"{server}/api/jobs/{job['id']}/resume").status_code == 200
+    deadline = time.time() + 120
+    while not (marked := [e for e in httpx.get(f"{server}/api/jobs/{job['id']}/evaluations").json() if e["enqueued"]]):
+        assert time.time() < deadline, "the enqueued theta was never evaluated"
+        time.sleep(0.5)
+    httpx.post(f"{server}/api/jobs/{job['id']}/pause")
+    wait_released(server, job["id"])
+    # asked first after the resume; stored in order of completion, and the one asked beside it may finish first
+    assert marked[0]["index"] in (done, done + 1) and marked[0]["theta"] == best["theta"]
     page.close()
 
 

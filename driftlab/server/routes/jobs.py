@@ -9,7 +9,7 @@ from sqlalchemy.orm import Session, sessionmaker
 
 from driftlab.core.drivability import check_drivable
 from driftlab.core.tuning import TuningSpec
-from driftlab.db import enqueued, lifecycle, storage
+from driftlab.db import lifecycle, storage
 from driftlab.server import quotas
 from driftlab.server.evaluation_pages import EvaluationPages
 from driftlab.server.responses import Enqueued, Evaluation, Job, errors, media
@@ -27,6 +27,7 @@ from driftlab.server.schemas import (
     check_document_types,
 )
 from driftlab.server.serialize import evaluation_dict, evaluations_csv, job_dict
+from driftlab.services.enqueue import enqueue_thetas, waiting_document
 from driftlab.services.profiles import with_profile
 from driftlab.services.warm_start import with_warm_start
 
@@ -93,15 +94,8 @@ def enqueue(job_id: JobId, body: EnqueueRequest, db: Factory, request: Request) 
     optimizer like any other; their evaluations carry ``enqueued: true``. 409 for a finished job (raise its budget
     first); a paused or queued job evaluates them when it runs."""
     with storage.transaction(db) as session:
-        job = storage.get_job(session, job_id=job_id)
-        if job.status == lifecycle.JobStatus.FINISHED:
-            raise lifecycle.TransitionError(f"job {job_id} is finished; raise its budget first (PATCH "
-                                            f"/api/jobs/{job_id} with iterations)")
-        spec = TuningSpec.from_dict(job.spec)
-        thetas = [spec.picked_theta(theta, f"thetas.{n}") for n, theta in enumerate(body.thetas)]
-        added = enqueued.enqueue(session, job_id=job_id, thetas=thetas)
-        out = {"job_id": job_id, "enqueued": [row.id for row in added],
-               "waiting": [{"id": row.id, "theta": row.theta} for row in enqueued.waiting(session, job_id=job_id)]}
+        added = enqueue_thetas(session, job_id=job_id, thetas=body.thetas)
+        out = waiting_document(session, job_id=job_id, added=added)
     wake_runner(request)
     return out
 
@@ -111,8 +105,7 @@ def enqueued_thetas(job_id: JobId, db: Factory) -> dict[str, Any]:
     """The thetas enqueued for the job and not yet stored as its evaluations, next first."""
     with storage.snapshot(db) as session:
         storage.get_job(session, job_id=job_id)
-        return {"job_id": job_id, "enqueued": [],
-                "waiting": [{"id": row.id, "theta": row.theta} for row in enqueued.waiting(session, job_id=job_id)]}
+        return waiting_document(session, job_id=job_id)
 
 
 @router.post("/{job_id}/resume", dependencies=Mutating, response_model=Job, responses=errors(404, 409, 422, 503))

@@ -8,10 +8,9 @@ import httpx
 import numpy as np
 import pytest
 from matplotlib import image as mpimg
-from playwright.sync_api import sync_playwright
 
 from tests.server_process import free_port, start_server
-from tests.web.test_view_browser import CHROMIUM, CHROMIUM_ARGS, SCREENSHOT_DIR, ConsoleLog, _wait_until_played
+from tests.web.test_view_browser import SCREENSHOT_DIR, ConsoleLog, _wait_until_played
 
 pytestmark = pytest.mark.e2e  # real processes: servers, browsers, Dask, the CLI
 
@@ -42,16 +41,6 @@ def server(tmp_path_factory):
     yield url, _wait_study(url, seeds["id"]), _wait_study(url, grid["id"])
     proc.terminate()
     proc.wait(timeout=30)
-
-
-@pytest.fixture(scope="module")
-def browser():
-    if not os.path.exists(CHROMIUM):
-        pytest.fail(f"no chromium at {CHROMIUM}: install Debian's package or set DRIFTLAB_CHROMIUM")
-    with sync_playwright() as p:
-        b = p.chromium.launch(executable_path=CHROMIUM, args=CHROMIUM_ARGS, headless=True)
-        yield b
-        b.close()
 
 
 def _save(png, name, tmp_path):

@@ -6,10 +6,10 @@ import re
 
 import httpx
 import pytest
-from playwright.sync_api import expect, sync_playwright
+from playwright.sync_api import expect
 
 from tests.server_process import free_port, start_server, wait_released
-from tests.web.test_view_browser import CHROMIUM, CHROMIUM_ARGS, SCREENSHOT_DIR, ConsoleLog
+from tests.web.test_view_browser import SCREENSHOT_DIR, ConsoleLog
 
 pytestmark = pytest.mark.e2e  # real processes: servers, browsers, Dask, the CLI
 
@@ -23,16 +23,6 @@ def server(tmp_path_factory):
     yield url
     proc.terminate()
     proc.wait(timeout=30)
-
-
-@pytest.fixture(scope="module")
-def browser():
-    if not os.path.exists(CHROMIUM):
-        pytest.fail(f"no chromium at {CHROMIUM}: install Debian's package or set DRIFTLAB_CHROMIUM")
-    with sync_playwright() as p:
-        b = p.chromium.launch(executable_path=CHROMIUM, args=CHROMIUM_ARGS, headless=True)
-        yield b
-        b.close()
 
 
 def _page(browser, url):

@@ -221,8 +221,9 @@ function renderHistoryPlots() {
     points(s, xs, failedTop, { color: "#c92a2a", shape: "x", r: 3, ...marks });
     const t = frame(el("svg", {}, thetaIter), { width: 250, height: 170, x: [0, Math.max(state.job.iterations - 1, 1)],
       y: bounds[name], xlabel: "evaluation", ylabel: name, title: name });
-    points(t, idx, ev.map((e) => (e.completed ? e.theta[name] : NaN)), { color: "#2a6fdb", r: 2.4 });
-    points(t, idx, ev.map((e) => (e.completed ? NaN : e.theta[name])), { color: "#c92a2a", shape: "x", r: 3 });
+    points(t, idx, ev.map((e) => (e.completed ? e.theta[name] : NaN)), { color: "#2a6fdb", r: 2.4, ...marks });
+    points(t, idx, ev.map((e) => (e.completed ? NaN : e.theta[name])),
+           { color: "#c92a2a", shape: "x", r: 3, ...marks });
   }
   slices.dataset.n = ev.length;
 

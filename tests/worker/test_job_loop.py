@@ -43,6 +43,15 @@ class ShuffledExecutor:
         pass
 
 
+def run_fake_job(factory, spec: TuningSpec, name: str, workers: int = 2, **run) -> int:
+    """Create the job, claim it and run it to its end on ShuffledExecutor(0); its id."""
+    with storage.transaction(factory) as session:
+        job_id = storage.create_job(session, name=name, spec=spec.to_dict(), seed=spec.seed).id
+    claim_job(factory, job_id, "runner")
+    assert run_job(factory, job_id, ShuffledExecutor(0), runner="runner", workers=workers, **run) == "finished"
+    return job_id
+
+
 def _thetas(tmp_path, name, deterministic, workers, rng_seed, optimizers=None):
     factory = storage.open_database(f"sqlite:///{tmp_path / (name + '.db')}")
     spec = TuningSpec(iterations=14, seed_points=4, seed=3, robust_samples=2, confirm_samples=1,
@@ -123,10 +132,7 @@ def test_nothing_is_stored_past_a_budget_lowered_while_evaluations_run(tmp_path)
 def test_a_long_job_keeps_a_bounded_number_of_trajectories_and_every_best(tmp_path):
     factory = storage.open_database(f"sqlite:///{tmp_path / 'bounded.db'}")
     spec = TuningSpec(iterations=30, seed_points=4, seed=3, robust_samples=1, confirm_samples=0, deterministic=True)
-    with storage.transaction(factory) as session:
-        job_id = storage.create_job(session, name="bounded", spec=spec.to_dict(), seed=spec.seed).id
-    claim_job(factory, job_id, "runner")
-    assert run_job(factory, job_id, ShuffledExecutor(0), runner="runner", max_trajectories=5) == "finished"
+    job_id = run_fake_job(factory, spec, "bounded", workers=1, max_trajectories=5)
     with storage.snapshot(factory) as session:
         stored = storage.evaluations(session, job_id=job_id)
         kept = [e.index for e in stored if e.trajectory is not None]

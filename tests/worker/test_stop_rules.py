@@ -7,9 +7,8 @@ from driftlab.core.errors import ConfigError
 from driftlab.core.stopping import StopRules
 from driftlab.core.tuning import TuningSpec
 from driftlab.db import storage
-from driftlab.worker.job_loop import claim_job, run_job
 from tests.server.conftest import in_process_client
-from tests.worker.test_job_loop import ShuffledExecutor
+from tests.worker.test_job_loop import run_fake_job
 
 
 def test_no_improvement_counts_the_best_over_the_last_n_evaluations():
@@ -32,10 +31,7 @@ def _finish(tmp_path, stop, iterations):
     factory = storage.open_database(f"sqlite:///{tmp_path / 'stop.db'}")
     spec = TuningSpec(iterations=iterations, seed_points=4, seed=3, robust_samples=1, confirm_samples=0, stop=stop)
     assert TuningSpec.from_dict(spec.to_dict()) == spec
-    with storage.transaction(factory) as session:
-        job_id = storage.create_job(session, name="stopped", spec=spec.to_dict(), seed=spec.seed).id
-    claim_job(factory, job_id, "runner")
-    assert run_job(factory, job_id, ShuffledExecutor(0), runner="runner", workers=2) == "finished"
+    job_id = run_fake_job(factory, spec, "stopped")
     with storage.snapshot(factory) as session:
         job = storage.get_job(session, job_id=job_id)
         return job, storage.evaluations(session, job_id=job_id)

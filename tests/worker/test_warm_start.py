@@ -10,17 +10,13 @@ from driftlab.core.tuning import TuningSpec
 from driftlab.core.warm_start import WARM_POINTS
 from driftlab.db import storage
 from driftlab.services.warm_start import with_warm_start
-from driftlab.worker.job_loop import claim_job, run_job
 from driftlab.worker.optimizer_host import restore_optimizer
 from tests.server.conftest import in_process_client
-from tests.worker.test_job_loop import ShuffledExecutor
+from tests.worker.test_job_loop import run_fake_job
 
 
 def _run(factory, spec, name):
-    with storage.transaction(factory) as session:
-        job_id = storage.create_job(session, name=name, spec=spec.to_dict(), seed=spec.seed).id
-    claim_job(factory, job_id, "runner")
-    assert run_job(factory, job_id, ShuffledExecutor(0), runner="runner", workers=2) == "finished"
+    job_id = run_fake_job(factory, spec, name)
     with storage.snapshot(factory) as session:
         return job_id, storage.evaluations(session, job_id=job_id)
 

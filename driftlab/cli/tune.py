@@ -72,8 +72,9 @@ def enqueue_texts(session, job_id: int, texts: list[str]) -> None:
 
     thetas = []
     for text in texts:
+        pairs = key_values(text.split(","), "--enqueue")  # "expects key=value" first
         try:
-            thetas.append({k: float(v) for k, v in key_values(text.split(","), "--enqueue").items()})
+            thetas.append({k: float(v) for k, v in pairs.items()})
         except ValueError:
             raise ConfigError(f"--enqueue {text!r}: each value must be a number", field="enqueue") from None
     enqueue_thetas(session, job_id=job_id, thetas=thetas, field="enqueue")
@@ -163,9 +164,12 @@ def cmd_tune(args: argparse.Namespace) -> int:
         if status == lifecycle.JobStatus.PAUSED and job.error:
             sys.stderr.write(f"\ndriftlab: job {name} paused: {job.error}; run the same command to continue\n")
         best = storage.best_evaluation(session, job_id=job_id)
+        if job.stop_reason:
+            sys.stderr.write(f"\njob {name} finished early: {job.stop_reason}\n")
+        warm = job.spec.get("warm_start")
         out = {"job": name, "id": job_id, "status": str(status), "wall_s": round(time.perf_counter() - started, 2),
                "n_done": storage.count_evaluations(session, job_id=job_id), "stop_reason": job.stop_reason,
-               "best": storage.best_summary(best)}
+               "warm_start_from": None if warm is None else warm["from_jobs"], "best": storage.best_summary(best)}
     storage.close_database(factory)
     sys.stderr.write("\n")
     print(json.dumps(out))

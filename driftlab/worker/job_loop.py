@@ -242,8 +242,11 @@ def _run(factory: sessionmaker[Session], job_id: int, executor: EpisodeExecutor,
     stop_reason = None
     try:
         while True:
-            # A stop rule (driftlab.core.stopping) asks nothing more; what was asked completes and is stored.
-            stop_reason = stop_reason or spec.stop.reason(ran_before_s + time.perf_counter() - started, curve)
+            # A stop rule (driftlab.core.stopping) asks nothing more; what was asked completes and is stored. The
+            # no-improvement window counts this run's evaluations (from the best before it): a job resumed or given
+            # a larger budget runs at least that many more.
+            stop_reason = stop_reason or spec.stop.reason(ran_before_s + time.perf_counter() - started,
+                                                          curve[max(n_at_start - 1, 0):])
             if n_done >= lease.iterations and not episodes and not waiting:
                 lease.renew_if_due(force=True)  # a budget raised at the last moment still counts
                 if n_done >= lease.iterations or not lease.held:

@@ -6,9 +6,10 @@ import pytest
 from driftlab.core.errors import ConfigError
 from driftlab.core.stopping import StopRules
 from driftlab.core.tuning import TuningSpec
-from driftlab.db import storage
+from driftlab.db import lifecycle, storage
+from driftlab.worker.job_loop import claim_job, run_job
 from tests.server.conftest import in_process_client
-from tests.worker.test_job_loop import run_fake_job
+from tests.worker.test_job_loop import ShuffledExecutor, run_fake_job
 
 
 def test_no_improvement_counts_the_best_over_the_last_n_evaluations():
@@ -27,26 +28,39 @@ def test_no_improvement_counts_the_best_over_the_last_n_evaluations():
         assert exc.value.field == field
 
 
-def _finish(tmp_path, stop, iterations):
-    factory = storage.open_database(f"sqlite:///{tmp_path / 'stop.db'}")
+def _finish(factory, stop, iterations):
     spec = TuningSpec(iterations=iterations, seed_points=4, seed=3, robust_samples=1, confirm_samples=0, stop=stop)
     assert TuningSpec.from_dict(spec.to_dict()) == spec
     job_id = run_fake_job(factory, spec, "stopped")
+    return _stored(factory, job_id)
+
+
+def _stored(factory, job_id):
     with storage.snapshot(factory) as session:
         job = storage.get_job(session, job_id=job_id)
         return job, storage.evaluations(session, job_id=job_id)
 
 
-def test_a_job_finishes_when_its_best_stops_improving(tmp_path):
-    job, evaluations = _finish(tmp_path, StopRules(no_improvement_evaluations=5, no_improvement_by=100.0), 60)
+def test_a_job_finishes_when_its_best_stops_improving_and_an_extension_runs_a_new_window(tmp_path):
+    factory = storage.open_database(f"sqlite:///{tmp_path / 'stop.db'}")
+    job, evaluations = _finish(factory, StopRules(no_improvement_evaluations=5, no_improvement_by=100.0), 60)
     # J < 0 everywhere here: the best never falls by 100, so the rule fires 5 evaluations after the first completed
     # one (the evaluations asked by then still complete and are stored)
     assert job.stop_reason.startswith("no improvement") and 6 <= len(evaluations) <= 8
-    assert job.run_s > 0.0
+    assert job.run_s > 0.0 and job.status == "finished"
+    with storage.transaction(factory) as session:
+        lifecycle.extend(session, job_id=job.id, iterations=80)  # queued again
+    claim_job(factory, job.id, "runner")
+    assert run_job(factory, job.id, ShuffledExecutor(1), runner="runner", workers=2) == "finished"
+    again, more = _stored(factory, job.id)
+    # the window counts the new run's evaluations: 5 more at least, then the rule fires again
+    assert again.stop_reason.startswith("no improvement") and len(evaluations) + 5 <= len(more) <= len(evaluations) + 7
+    assert again.run_s > job.run_s
 
 
 def test_a_job_finishes_when_its_time_is_spent(tmp_path):
-    job, evaluations = _finish(tmp_path, StopRules(time_budget_s=0.5), 5000)
+    job, evaluations = _finish(storage.open_database(f"sqlite:///{tmp_path / 'time.db'}"),
+                               StopRules(time_budget_s=0.5), 5000)
     assert job.stop_reason.startswith("time budget") and 0 < len(evaluations) < 5000 and job.run_s >= 0.5
 
 

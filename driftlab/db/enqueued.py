@@ -5,7 +5,7 @@ from __future__ import annotations
 
 from collections.abc import Collection
 
-from sqlalchemy import delete, select
+from sqlalchemy import delete, exists, select
 from sqlalchemy.orm import Session
 
 from driftlab.db.models import EnqueuedTheta
@@ -24,6 +24,10 @@ def waiting(session: Session, *, job_id: int, taken: Collection[int] = ()) -> li
     if taken:
         query = query.where(EnqueuedTheta.id.not_in(list(taken)))
     return list(session.scalars(query))
+
+
+def any_waiting(session: Session, *, job_id: int) -> bool:
+    return bool(session.scalar(select(exists().where(EnqueuedTheta.job_id == job_id))))
 
 
 def remove(session: Session, *, row_id: int) -> None:

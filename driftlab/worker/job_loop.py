@@ -75,16 +75,18 @@ class _PendingEvaluation:
         return score, samples, ordered[score.representative]
 
 
-def _next_evaluation(factory: sessionmaker[Session], job_id: int, spec: TuningSpec, optimizer,
-                     in_flight: list[_PendingEvaluation], seeds: list[int]) -> _PendingEvaluation:
+def _next_evaluation(lease: _Lease, spec: TuningSpec, optimizer, in_flight: list[_PendingEvaluation],
+                     seeds: list[int]) -> _PendingEvaluation:
     """The oldest theta enqueued for the job and not in flight (POST /api/jobs/{id}/enqueue; told to the optimizer
-    like any other once evaluated), else the optimizer's next proposal."""
-    taken = {e.enqueued_id for e in in_flight if e.enqueued_id is not None}
-    with storage.snapshot(factory) as session:
-        row = next(iter(enqueued.waiting(session, job_id=job_id, taken=taken)), None)
-        if row is not None:
-            theta = {**Theta().as_dict(), **row.theta}
-            return _PendingEvaluation({k: float(theta[k]) for k in spec.bounds}, seeds, enqueued_id=row.id)
+    like any other once evaluated), where the lease has seen any, else the optimizer's next proposal."""
+    if lease.enqueued:
+        taken = {e.enqueued_id for e in in_flight if e.enqueued_id is not None}
+        with storage.snapshot(lease.factory) as session:
+            row = next(iter(enqueued.waiting(session, job_id=lease.job_id, taken=taken)), None)
+            if row is not None:
+                theta = {**Theta().as_dict(), **row.theta}
+                return _PendingEvaluation({k: float(theta[k]) for k in spec.bounds}, seeds, enqueued_id=row.id)
+        lease.enqueued = False  # none left to take: the next heartbeat looks again
     return _PendingEvaluation(optimizer.ask(), seeds)
 
 
@@ -140,7 +142,9 @@ def claim_job(factory: sessionmaker[Session], job_id: int, runner: str,
 
 
 class _Lease:
-    """Renews the job's lease every HEARTBEAT_S; tells when it is lost and what the budget is now."""
+    """Renews the job's lease every HEARTBEAT_S; tells when it is lost, what the budget is now, and whether thetas
+    are enqueued for the job (``enqueued``: looked for at the start and at each heartbeat, not at every ask, which
+    would add a read to every evaluation)."""
 
     def __init__(self, factory: sessionmaker[Session], job_id: int, runner: str, iterations: int,
                  max_trajectories: int) -> None:
@@ -148,6 +152,7 @@ class _Lease:
         self.iterations = iterations
         self.max_trajectories = max_trajectories
         self.held = True
+        self.enqueued = True  # until the first ask has looked
         self._last = time.monotonic()
 
     def observe(self, job: Job) -> None:
@@ -164,6 +169,7 @@ class _Lease:
             job = session.get(Job, self.job_id)
             if job is not None:
                 self.observe(job)
+            self.enqueued = enqueued.any_waiting(session, job_id=self.job_id)
         self._last = time.monotonic()
 
 
@@ -245,8 +251,9 @@ def _run(factory: sessionmaker[Session], job_id: int, executor: EpisodeExecutor,
             # A stop rule (driftlab.core.stopping) asks nothing more; what was asked completes and is stored. The
             # no-improvement window counts this run's evaluations (from the best before it): a job resumed or given
             # a larger budget runs at least that many more.
-            stop_reason = stop_reason or spec.stop.reason(ran_before_s + time.perf_counter() - started,
-                                                          curve[max(n_at_start - 1, 0):])
+            if spec.stop.any and stop_reason is None:
+                stop_reason = spec.stop.reason(ran_before_s + time.perf_counter() - started,
+                                               curve[max(n_at_start - 1, 0):])
             if n_done >= lease.iterations and not episodes and not waiting:
                 lease.renew_if_due(force=True)  # a budget raised at the last moment still counts
                 if n_done >= lease.iterations or not lease.held:
@@ -258,7 +265,7 @@ def _run(factory: sessionmaker[Session], job_id: int, executor: EpisodeExecutor,
             # history never depends on which worker finished first.
             free = not evaluations if spec.deterministic else _may_ask(waiting, evaluations, slots.has_room(owner))
             while (not stopping and free and n_done + len(evaluations) < lease.iterations):
-                evaluation = _next_evaluation(factory, job_id, spec, optimizer, evaluations, seeds)
+                evaluation = _next_evaluation(lease, spec, optimizer, evaluations, seeds)
                 evaluations.append(evaluation)
                 waiting.extend((evaluation, seed) for seed in seeds)
                 submit_waiting()

@@ -62,6 +62,13 @@ def test_a_job_finishes_when_its_time_is_spent(tmp_path):
     job, evaluations = _finish(storage.open_database(f"sqlite:///{tmp_path / 'time.db'}"),
                                StopRules(time_budget_s=0.5), 5000)
     assert job.stop_reason.startswith("time budget") and 0 < len(evaluations) < 5000 and job.run_s >= 0.5
+    factory = storage.open_database(f"sqlite:///{tmp_path / 'time.db'}")
+    with storage.transaction(factory) as session:
+        lifecycle.extend(session, job_id=job.id, iterations=5000)  # queued again, its time already spent
+    claim_job(factory, job.id, "runner")
+    assert run_job(factory, job.id, ShuffledExecutor(1), runner="runner", workers=2) == "finished"
+    again, more = _stored(factory, job.id)
+    assert again.stop_reason.startswith("time budget") and len(more) == len(evaluations)  # it asked nothing
 
 
 def test_stop_rules_at_the_api_name_their_field(tmp_path):

@@ -42,13 +42,13 @@ def test_an_evaluation_with_no_step_is_shown_as_such(server, browser):
     page.goto(f"{url}/viser/")
     log.wait_for("Connected!")
     # The newest job is shown, live: its newest evaluation said to have no step, nothing of "other" played.
-    page.get_by_text("stopped before its first step").first.wait_for(timeout=60_000)
-    page.get_by_text("has no drift to hold").first.wait_for(timeout=30_000)  # and why
+    page.get_by_text("stopped before its first step").first.wait_for(timeout=120_000)
+    page.get_by_text("has no drift to hold").first.wait_for(timeout=120_000)  # and why
     assert page.get_by_text("evaluation id 1 ").count() == 0
     page.get_by_role("button", name="Play best").click()
     page.get_by_role("button", name="Play evaluation at index").click()
     page.get_by_role("button", name="Follow live").click()
-    page.get_by_text("stopped before its first step").first.wait_for(timeout=30_000)
+    page.get_by_text("stopped before its first step").first.wait_for(timeout=120_000)
     server_log = Path(proc.log_path).read_text()
     assert "Traceback" not in server_log and "IndexError" not in server_log, server_log[-3000:]
     page.close()

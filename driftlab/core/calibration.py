@@ -113,7 +113,7 @@ def search_point(mpc: MpcConfig, bounds: dict[str, tuple[float, float]] | None =
     return {name: min(max(value, box[name][0]), box[name][1]) for name, value in x.items()}
 
 
-def with_weights(config: EpisodeConfig, weights: dict[str, float]) -> EpisodeConfig:
+def with_weights(config: EpisodeConfig, weights: dict[str, Any]) -> EpisodeConfig:
     return replace(config, mpc=replace(config.mpc, **weights))
 
 
@@ -214,11 +214,11 @@ def calibrate(base: EpisodeConfig, points: Sequence[tuple[CalibrationPoint, Epis
                                   local_points=min(10, seed_points - min(len(starts), seed_points)),
                                   local_radius=0.15, local_growth=max(iterations // 2, 1))
     documents = [config_to_dict(config) for _, config in points]
-    theta = (theta or Theta()).as_dict()
+    theta_values = (theta or Theta()).as_dict()
     for _ in range(iterations):
         x = optimizer.ask()
         weights = weights_of(x)
-        batch = [(theta, {**doc, "mpc": {**doc["mpc"], **weights}}, s)
+        batch = [(theta_values, {**doc, "mpc": {**doc["mpc"], **weights}}, s)
                  for doc in documents for s in calibration.seeds]
         outcomes = run_batch(batch)
         episodes = [EpisodeScore(i // len(calibration.seeds), s, status, j, fraction, error)

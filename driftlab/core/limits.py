@@ -23,6 +23,8 @@ def check_int(name: str, value: object, lo: int | None = None, hi: int | None = 
     default_lo, default_hi = JOB_LIMITS.get(name, (lo, hi))
     lo = default_lo if lo is None else lo
     hi = default_hi if hi is None else hi
+    if lo is None or hi is None:
+        raise ValueError(f"no range for {name!r}: give lo and hi")
     if isinstance(value, bool) or not isinstance(value, int) or not lo <= value <= hi:
         raise ConfigError(f"{name} must be an integer in [{lo}, {hi}], got {value!r}")
     return value

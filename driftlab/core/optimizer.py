@@ -122,8 +122,8 @@ class BayesianOptimizer:
         self.failure_scores: list[float] = []  # per told evaluation: a failure's score, inf otherwise
         self.feasible = feasible
         self.refused: list[np.ndarray] = []  # unit-cube proposals ``feasible`` refused: failures never asked
-        self._hyper_at = -1
-        self._regression_hp: Hyperparameters | None = None
+        self._hyper_at = -1  # no fit yet: the defaults until the first boundary
+        self._regression_hp = Hyperparameters.default(self.dim)
         self._clf_at = -1
         self._label_hp = None
 

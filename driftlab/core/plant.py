@@ -19,6 +19,7 @@ error against a 0.5 ms reference (4e-8 on [V, beta, r] over 5 s for the default 
 from __future__ import annotations
 
 from dataclasses import dataclass, replace
+from typing import Any
 
 import numpy as np
 from numba import njit
@@ -162,24 +163,24 @@ class PlantConfig:
     @classmethod
     def nominal(cls) -> PlantConfig:
         """A plant equal to the controller's model (ideal actuators, same car)."""
+        no_variation: dict[str, Any] = dict.fromkeys(VARIATION_LIMITS, 0.0)
         return cls(friction_scale=1.0, tyre_c_scale=1.0, friction_circle=False, load_transfer=False,
-                   steer_lag_s=0.0, steer_rate_radps=100.0, drive_lag_s=0.0, drive_rate_nps=1e7,
-                   **{name: 0.0 for name in VARIATION_LIMITS})
+                   steer_lag_s=0.0, steer_rate_radps=100.0, drive_lag_s=0.0, drive_rate_nps=1e7, **no_variation)
 
     @classmethod
     def commonroad_std(cls, vehicle_id: int = 2) -> PlantConfig:
         """CommonRoad's STD with vehicle ``vehicle_id`` (its catalog preset: RK4 at 2 ms)."""
-        from driftlab.core.plants import plant_type
+        from driftlab.core.plants import built_in
 
-        return plant_type("commonroad_std").preset(vehicle_id)
+        return built_in("commonroad_std").preset(vehicle_id)
 
     @classmethod
     def commonroad_mb(cls, vehicle_id: int = 2) -> PlantConfig:
         """CommonRoad's multi-body model with vehicle ``vehicle_id`` (its catalog preset: RK4 at 1 ms, its
         suspension and axle compliance being stiffer than STD's wheel-speed mode)."""
-        from driftlab.core.plants import plant_type
+        from driftlab.core.plants import built_in
 
-        return plant_type("commonroad_mb").preset(vehicle_id)
+        return built_in("commonroad_mb").preset(vehicle_id)
 
     @property
     def plant_type(self):

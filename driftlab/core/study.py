@@ -145,7 +145,7 @@ class RobustnessStudySpec:
         theta = data.get("theta")
         if not isinstance(theta, dict):
             raise ConfigError("theta must be an object {c_lr, c_rl, dV, k}")
-        return cls(theta=theta, grid=data.get("grid"), config=config,
+        return cls(theta=theta, grid=data.get("grid") or {}, config=config,
                    robust_samples=data.get("robust_samples", 1), seed=data.get("seed", 0),
                    evaluation_id=data.get("evaluation_id"))
 

@@ -11,6 +11,7 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass
+from typing import Literal, overload
 
 import numpy as np
 from scipy.linalg import cho_solve, cholesky, solve_triangular
@@ -117,6 +118,12 @@ class GaussianProcess:
         k = matern52(self.x, self.x, hp) + (hp.noise_variance + 1e-10) * np.eye(len(self.x))
         self.chol = cholesky(k, lower=True, check_finite=False)
         self.alpha = cho_solve((self.chol, True), self.z, check_finite=False)
+
+    @overload
+    def predict(self, xq: np.ndarray, return_std: Literal[True] = ...) -> tuple[np.ndarray, np.ndarray]: ...
+
+    @overload
+    def predict(self, xq: np.ndarray, return_std: Literal[False]) -> tuple[np.ndarray, None]: ...
 
     def predict(self, xq: np.ndarray, return_std: bool = True) -> tuple[np.ndarray, np.ndarray | None]:
         """Posterior mean and standard deviation (of the latent function) at the rows of ``xq``."""

@@ -13,6 +13,7 @@ turning the noise up does not change which car a seed draws.
 from __future__ import annotations
 
 from dataclasses import dataclass, replace
+from typing import Any
 
 import numpy as np
 
@@ -52,6 +53,9 @@ def _within(name: str, value: float) -> float:
     return min(max(value, lo), hi)
 
 
+SPENT_SPREADS: dict[str, Any] = dict.fromkeys(VARIATION_LIMITS, 0.0)
+
+
 def draw_variation(plant: PlantConfig, seed: int, n_steps: int) -> EpisodeVariation:
     """The episode of ``seed`` (an integer in [0, 2^63 - 1]) for a plant config and ``n_steps`` control steps."""
     params_rng, start_rng, noise_rng = (np.random.default_rng(child)
@@ -69,7 +73,7 @@ def draw_variation(plant: PlantConfig, seed: int, n_steps: int) -> EpisodeVariat
         yaw_inertia_scale=_within("yaw_inertia_scale", plant.yaw_inertia_scale * mass_factor)
         if not plant.plant_type.own_car else plant.yaw_inertia_scale,
         steer_lag_s=_within("steer_lag_s", steer_lag_s),
-        **{name: 0.0 for name in VARIATION_LIMITS},
+        **SPENT_SPREADS,
     )
     start = np.array([_uniform(start_rng, plant.initial_speed_spread_mps),
                       _uniform(start_rng, plant.initial_sideslip_spread_rad),

@@ -3,6 +3,7 @@ lease as a job (driftlab.db.lease), their progress and profiles recorded as they
 
 from __future__ import annotations
 
+from collections.abc import Sequence
 from typing import Any
 
 from sqlalchemy import select
@@ -66,7 +67,7 @@ def claim(session: Session, *, calibration_id: int, runner: str) -> bool:
 
 
 def record(session: Session, *, calibration_id: int, runner: str, progress: dict[str, Any] | None = None,
-           messages: list[str] = (), profile_id: int | None = None) -> bool:
+           messages: Sequence[str] = (), profile_id: int | None = None) -> bool:
     """Store what the run reported and renew the lease; False when ``runner`` no longer holds it (cancelled or
     taken over: stop)."""
     calibration = session.get(Calibration, calibration_id)

@@ -12,9 +12,9 @@ import os
 import socket
 import uuid
 from datetime import datetime, timedelta
-from typing import Any
+from typing import Any, cast
 
-from sqlalchemy import or_, update
+from sqlalchemy import CursorResult, Executable, or_, update
 from sqlalchemy.orm import Session
 
 from driftlab.db.models import JobStatus, utcnow
@@ -49,25 +49,28 @@ def is_live(row: Any, now: datetime | None = None) -> bool:
             and naive(row.heartbeat_at) >= stale_before(now))
 
 
+def rows_updated(session: Session, statement: Executable) -> int:
+    """Rows an UPDATE matched (``Session.execute`` types its result as a plain Result; an UPDATE's is a cursor's)."""
+    return cast(CursorResult[Any], session.execute(statement)).rowcount
+
+
 def take(session: Session, table: Any, *, row_id: int, runner: str, from_statuses: tuple[str, ...], now: datetime,
          also: Any = True) -> bool:
     """Take the lease of ``table`` row ``row_id`` from one of ``from_statuses`` or from a dead runner, where ``also``
     (an SQL condition) holds; False if the row is not claimable (or another runner was quicker)."""
     claimable = or_(table.status.in_([str(s) for s in from_statuses]),
                     (table.status == RUNNING) & is_stale(table, now)) & also
-    result = session.execute(update(table).where(table.id == row_id, claimable)
-                             .values(status=RUNNING, runner_id=runner, heartbeat_at=naive(now), error=None)
-                             .execution_options(synchronize_session=False))
-    return result.rowcount == 1
+    return rows_updated(session, update(table).where(table.id == row_id, claimable)
+                        .values(status=RUNNING, runner_id=runner, heartbeat_at=naive(now), error=None)
+                        .execution_options(synchronize_session=False)) == 1
 
 
 def renew(session: Session, table: Any, *, row_id: int, runner: str, now: datetime | None = None) -> bool:
     """Renew the heartbeat; False when ``runner`` no longer holds the row (paused, deleted or taken over): stop."""
-    result = session.execute(update(table).where(table.id == row_id, table.runner_id == runner,
-                                                 table.status == RUNNING)
-                             .values(heartbeat_at=naive(now or utcnow()))
-                             .execution_options(synchronize_session=False))
-    return result.rowcount == 1
+    return rows_updated(session, update(table).where(table.id == row_id, table.runner_id == runner,
+                                                    table.status == RUNNING)
+                        .values(heartbeat_at=naive(now or utcnow()))
+                        .execution_options(synchronize_session=False)) == 1
 
 
 def release(session: Session, table: Any, *, row_id: int, runner: str, status: str, error: str | None = None) -> None:

@@ -68,7 +68,7 @@ def claim(session: Session, *, job_id: int, runner: str, from_statuses: tuple[Jo
         job.stop_reason = None
         return job
     if lease_is_live(job, now):
-        age = (lease.naive(now) - lease.naive(job.heartbeat_at)).total_seconds()
+        age = (lease.naive(now) - lease.naive(job.heartbeat_at or now)).total_seconds()
         raise LeaseHeld(f"job {job.name!r} is being run by {job.runner_id} (last heartbeat {age:.1f} s ago); "
                         "pause it first, or wait for it to finish")
     if job.study_id is not None:

@@ -13,7 +13,7 @@ from alembic import command
 from alembic.config import Config
 from alembic.runtime.migration import MigrationContext
 from alembic.script import ScriptDirectory
-from sqlalchemy import Engine, inspect, text
+from sqlalchemy import Connection, Engine, inspect, text
 
 MIGRATIONS = Path(__file__).parent / "migrations"
 BASELINE = "0001"
@@ -27,7 +27,10 @@ def _config(connection) -> Config:
 
 
 def head_revision() -> str:
-    return ScriptDirectory.from_config(_config(None)).get_current_head()
+    head = ScriptDirectory.from_config(_config(None)).get_current_head()
+    if head is None:
+        raise RuntimeError(f"no migration head in {MIGRATIONS}: the package's migrations are missing")
+    return head
 
 
 def current_revision(engine: Engine) -> str | None:
@@ -67,7 +70,7 @@ def upgrade(engine: Engine) -> None:
         # fail. The pragma only takes effect outside a transaction, hence on the driver's connection first.
         sqlite = engine.dialect.name == "sqlite"
         if sqlite:
-            connection.connection.driver_connection.execute("PRAGMA foreign_keys=OFF")
+            _driver_execute(connection, "PRAGMA foreign_keys=OFF")
         with connection.begin():
             config = _config(connection)
             tables = set(inspect(connection).get_table_names())
@@ -75,4 +78,12 @@ def upgrade(engine: Engine) -> None:
                 command.stamp(config, _revision_of_meta(connection))
             command.upgrade(config, "head")
         if sqlite:
-            connection.connection.driver_connection.execute("PRAGMA foreign_keys=ON")
+            _driver_execute(connection, "PRAGMA foreign_keys=ON")
+
+
+def _driver_execute(connection: Connection, statement: str) -> None:
+    """Run ``statement`` on the driver's own connection, outside SQLAlchemy's transaction."""
+    driver = connection.connection.driver_connection
+    if driver is None:
+        raise RuntimeError("the database connection is closed")
+    driver.execute(statement)

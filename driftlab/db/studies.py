@@ -77,7 +77,7 @@ def cells(session: Session, *, study_id: int) -> list[StudyCell]:
 
 def store_cell(session: Session, *, cell_id: int, status: str, J: float | None, n_completed: int,
                seeds: list[dict[str, Any]], wall_ms: float) -> StudyCell:
-    cell = session.get(StudyCell, cell_id)
+    cell = session.get_one(StudyCell, cell_id)
     cell.status, cell.J, cell.n_completed, cell.seeds, cell.wall_ms = status, J, n_completed, seeds, wall_ms
     cell.completed_at = utcnow()
     return cell
@@ -130,10 +130,10 @@ def hold_seeds_study(session: Session, *, study_id: int, runner: str) -> None:
     """
     now = utcnow()
     free = or_(Study.runner_id.is_(None), Study.runner_id == runner, lease.is_stale(Study, now))
-    result = session.execute(update(Study).where(Study.id == study_id, Study.kind == StudyKind.SEEDS, free)
-                             .values(runner_id=runner, heartbeat_at=now.replace(tzinfo=None))
-                             .execution_options(synchronize_session=False))
-    if result.rowcount != 1:
+    taken = lease.rows_updated(session, update(Study).where(Study.id == study_id, Study.kind == StudyKind.SEEDS, free)
+                               .values(runner_id=runner, heartbeat_at=now.replace(tzinfo=None))
+                               .execution_options(synchronize_session=False))
+    if taken != 1:
         study = get_study(session, study_id=study_id)
         raise lifecycle.LeaseHeld(f"study {study.name!r} (id {study_id}) is being run by {study.runner_id}; "
                                   "pause it first, or wait for it to finish")

@@ -17,7 +17,8 @@ from driftlab.core.plants.commonroad import COMMONROAD_BUILT_INS, DRIFTLAB_ONLY,
 from driftlab.core.plants.driftlab_plant import DriftLabPlantType
 
 __all__ = ["DRIFTLAB_ONLY", "CommonRoadPlantType", "CommonRoadVariant", "ExternalPlantType", "PlantType",
-           "built_in_names", "installed_names", "model_reason", "plant_type", "preset_types", "register_plant"]
+           "built_in", "built_in_names", "installed_names", "model_reason", "plant_type", "preset_types",
+           "register_plant"]
 
 _BUILT_IN: dict[str, PlantType] = {entry.name: entry for entry in (DriftLabPlantType(), *COMMONROAD_BUILT_INS)}
 _REGISTERED: dict[str, PlantType] = {}
@@ -25,6 +26,11 @@ _REGISTERED: dict[str, PlantType] = {}
 
 def built_in_names() -> tuple[str, ...]:
     return tuple(_BUILT_IN)
+
+
+def built_in(name: str) -> PlantType:
+    """A built-in plant type by name (KeyError for any other name)."""
+    return _BUILT_IN[name]
 
 
 def register_plant(name: str, plant: PlantType | Callable) -> None:

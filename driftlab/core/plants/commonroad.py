@@ -17,8 +17,8 @@ from driftlab.core.vehicle import VehicleParams
 
 # Settings that shape DriftLab's own car and tyres; a CommonRoad plant has its own (PAC2002 tyres, load transfer,
 # combined slip) and keeps these at 1 / off.
-DRIFTLAB_ONLY = {"yaw_inertia_scale": 1.0, "tyre_b_scale": 1.0, "tyre_c_scale": 1.0, "friction_circle": False,
-                 "load_transfer": False}
+DRIFTLAB_ONLY: dict[str, Any] = {"yaw_inertia_scale": 1.0, "tyre_b_scale": 1.0, "tyre_c_scale": 1.0,
+                                 "friction_circle": False, "load_transfer": False}
 
 
 class CommonRoadPlantType(PlantType):

@@ -34,3 +34,21 @@ def test_settings_are_built_only_at_entry_points():
     built = sorted({name for name, tree in _modules() for node in ast.walk(tree)
                     if isinstance(node, ast.Call) and isinstance(node.func, ast.Name) and node.func.id == "Settings"})
     assert built and set(built) <= SETTINGS_ENTRY_POINTS, built
+
+
+# What the view may not import: storage, and the modules that simulate, control or solve the car's physics. It reads
+# through driftlab.services.view_reads and draws; it may use the config's schema, the track's geometry and the
+# statuses' names.
+VIEW_MAY_NOT = ("driftlab.db", "driftlab.worker", "driftlab.core.vehicle", "driftlab.core.plant",
+                "driftlab.core.plants", "driftlab.core.commonroad", "driftlab.core.equilibrium",
+                "driftlab.core.drivability", "driftlab.core.episode", "driftlab.core.closed_loop", "driftlab.core.mpc",
+                "driftlab.core.controller", "driftlab.core.compiled", "driftlab.core.variation",
+                "driftlab.core.calibration", "driftlab.core.robust", "sqlalchemy")
+
+
+def test_the_view_imports_neither_storage_nor_the_physics():
+    wrong = [(name, module) for name, tree in _modules() if name.startswith("web/")
+             for module in _imported(tree) if any(module == m or module.startswith(f"{m}.") for m in VIEW_MAY_NOT)]
+    assert wrong == []
+    assert any(module == "driftlab.services" or module.startswith("driftlab.services.")
+               for name, tree in _modules() if name.startswith("web/") for module in _imported(tree))

@@ -75,54 +75,49 @@ def _open_study(factory, args: argparse.Namespace, tuning_spec, runner: str) -> 
 
 
 def _run_seeds_jobs(factory, study_id: int, executor, workers: int, runner: str) -> None:
-    """Runs the study's unfinished jobs at once, as the server's runner does: one thread and one optimizer per job,
-    the workers shared fairly (driftlab.worker.slots; at most as many jobs at once as workers, the next one
-    starting when one finishes). Ctrl-C: what is asked completes, then the jobs are paused."""
+    """Runs the study's unfinished jobs at once on the server runner's scheduler (driftlab.worker.job_pool): one
+    thread and one optimizer per job, the workers shared fairly, at most as many jobs at once as workers, the next
+    one starting when one finishes. Ctrl-C: what is asked completes, then the jobs are paused."""
     import threading
 
     from driftlab.db import lifecycle, storage, studies
     from driftlab.db.lifecycle import JobStatus
-    from driftlab.worker.job_loop import claim_job, run_job
+    from driftlab.worker.job_loop import claim_job
+    from driftlab.worker.job_pool import JobPool
     from driftlab.worker.slots import EpisodeSlots
 
     with storage.transaction(factory) as session:
         todo = [(j.id, j.name) for j in studies.study_jobs(session, study_id=study_id)
                 if j.status != JobStatus.FINISHED]
-    slots, stop, done = EpisodeSlots(workers), threading.Event(), threading.Semaphore(0)
-    statuses: dict[int, str] = {}
+    names, started = dict(todo), {}
+    stop, done = threading.Event(), threading.Semaphore(0)
 
-    def run(job_id: int, name: str) -> None:
-        started = time.perf_counter()
-        try:
-            statuses[job_id] = run_job(factory, job_id, executor, runner=runner, slots=slots, owner=job_id,
-                                       should_stop=stop.is_set, max_trajectories=settings().max_trajectories_per_job)
-            sys.stderr.write(f"job {name}: {statuses[job_id]} in {time.perf_counter() - started:.1f} s\n")
-        finally:
-            done.release()
+    def finished(job_id: int, status: str | None) -> None:
+        if status is not None:
+            sys.stderr.write(f"job {names[job_id]}: {status} in {time.perf_counter() - started[job_id]:.1f} s\n")
+        done.release()  # its share goes to the next one
+
+    pool = JobPool(factory, executor, EpisodeSlots(workers), runner=runner, should_stop=stop.is_set,
+                   max_trajectories=settings().max_trajectories_per_job, on_done=finished)
 
     def start(batch: list[tuple[int, str]]) -> None:
-        for job_id, _ in batch:  # every job of the batch has its share before any of them asks
+        for job_id, _ in batch:
             claim_job(factory, job_id, runner, from_statuses=(JobStatus.QUEUED, JobStatus.PAUSED, JobStatus.FAILED))
-            slots.join(job_id)
-        for job_id, name in batch:
-            threads.append(threading.Thread(target=run, args=(job_id, name), name=f"driftlab-job-{job_id}"))
-            threads[-1].start()
+            started[job_id] = time.perf_counter()
+        pool.start([job_id for job_id, _ in batch])
 
-    threads: list[threading.Thread] = []
     try:
-        start(todo[:slots.capacity])
-        for job in todo[slots.capacity:]:
-            done.acquire()  # a job finished: its share goes to the next one
+        start(todo[:pool.free])
+        for job in todo[len(started):]:
+            done.acquire()
             start([job])
-        while any(t.is_alive() for t in threads):
-            for thread in threads:
-                thread.join(timeout=0.2)
+        while pool.running:
+            pool.join(timeout_s=0.2)
     except KeyboardInterrupt:
         stop.set()
-        for thread in threads:
-            thread.join()
+        pool.join()
         with storage.transaction(factory) as session:
-            for job_id, status in statuses.items():
+            for job_id, status in pool.statuses.items():
                 if status == JobStatus.QUEUED:  # stopped by us, not finished: paused, as `tune` leaves a job
                     lifecycle.request_pause(session, job_id=job_id)
         raise

@@ -246,7 +246,7 @@ def learn_theta(config: EpisodeConfig, run_batch: RunBatch, *, iterations: int, 
     best: tuple[float, dict[str, float]] | None = None
     for n in range(iterations):
         x = optimizer.ask()
-        theta = {**Theta().as_dict(), **x}
+        theta = Theta.filled(x)
         outcomes = run_batch([(theta, document, s) for s in seed_list])
         episodes = [EpisodeScore(0, s, *outcome) for s, outcome in zip(seed_list, outcomes, strict=True)]
         score = mean_penalized_J(episodes)

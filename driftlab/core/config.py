@@ -7,6 +7,7 @@ and :func:`config_to_dict` / :func:`config_from_dict` round-trip it through plai
 
 from __future__ import annotations
 
+from collections.abc import Mapping
 from dataclasses import dataclass, field, fields, is_dataclass, replace
 from typing import Any
 
@@ -74,6 +75,12 @@ class Theta:
 
     def as_dict(self) -> dict[str, float]:
         return {k: float(getattr(self, k)) for k in THETA_KEYS}
+
+    @staticmethod
+    def filled(values: Mapping[str, float]) -> dict[str, float]:
+        """A theta as a mapping with every key: the ones it lacks at their defaults (a theta stored before the
+        model corrections existed has none of their scales: 1, the model as fitted). Not validated."""
+        return {**Theta().as_dict(), **values}
 
     def model_vehicle(self, vehicle: VehicleParams) -> VehicleParams:
         """The car the controller's model assumes: ``vehicle`` with the model corrections applied (the plant

@@ -116,7 +116,7 @@ def refusal_reason(theta: Theta, config: EpisodeConfig) -> str | None:
 def runs(config: EpisodeConfig, theta: dict[str, float]) -> bool:
     """Whether an episode of ``theta`` (any subset of its keys; the others untuned) would run: the optimizer's
     known constraint (driftlab.core.optimizer.BayesianOptimizer's ``feasible``)."""
-    return refusal_reason(Theta.from_mapping({**Theta().as_dict(), **theta}), config) is None
+    return refusal_reason(Theta.from_mapping(Theta.filled(theta)), config) is None
 
 
 @with_one_blas_thread

@@ -1,5 +1,6 @@
-"""The names a result is stored under: how an episode ended, what kind a study is. Strings (StrEnum) as the
-database, the API and the CLI show them; imported by every layer, so nothing here imports anything of DriftLab."""
+"""The names a result is stored under: how an episode ended, where a job is, what kind a study is. Strings
+(StrEnum) as the database, the API and the CLI show them; imported by every layer, so nothing here imports anything
+of DriftLab."""
 
 from __future__ import annotations
 
@@ -26,3 +27,13 @@ class StudyKind(StrEnum):
 
     SEEDS = "seeds"
     ROBUSTNESS = "robustness"
+
+
+class JobStatus(StrEnum):
+    """A job's (and a robustness study's) status; the transitions are driftlab.db.lifecycle's."""
+
+    QUEUED = "queued"
+    RUNNING = "running"
+    PAUSED = "paused"
+    FINISHED = "finished"
+    FAILED = "failed"

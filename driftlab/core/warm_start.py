@@ -140,5 +140,5 @@ def _inside(theta: Mapping[str, float], bounds: Mapping[str, tuple[float, float]
 
 def _clipped(theta: Mapping[str, float], bounds: Mapping[str, tuple[float, float]]) -> dict[str, float]:
     """Theta in the box; a key the source did not learn is what it ran with, the untuned value."""
-    full = {**Theta().as_dict(), **theta}
+    full = Theta.filled(theta)
     return {k: min(max(float(full[k]), lo), hi) for k, (lo, hi) in bounds.items()}

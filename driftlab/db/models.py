@@ -11,21 +11,11 @@ from typing import Any
 from sqlalchemy import JSON, Float, ForeignKey, Integer, LargeBinary, String, Text, UniqueConstraint
 from sqlalchemy.orm import DeclarativeBase, Mapped, mapped_column, relationship
 
-from driftlab.core.statuses import EpisodeStatus
+from driftlab.core.statuses import EpisodeStatus, JobStatus
 
 
 def utcnow() -> datetime:
     return datetime.now(UTC)
-
-
-class JobStatus(StrEnum):
-    """A job's (and a robustness study's) status; the transitions are driftlab.db.lifecycle's."""
-
-    QUEUED = "queued"
-    RUNNING = "running"
-    PAUSED = "paused"
-    FINISHED = "finished"
-    FAILED = "failed"
 
 
 class RescoreStatus(StrEnum):
@@ -93,6 +83,21 @@ class Evaluation(Base):
     @property
     def completed(self) -> bool:
         return self.status == EpisodeStatus.COMPLETED
+
+    @property
+    def shown_seed(self) -> int:
+        """The seed of the episode kept as its trajectory (an evaluation stored before ``trajectory_seed`` existed
+        kept its first seed's)."""
+        if self.trajectory_seed is not None:
+            return self.trajectory_seed
+        return int(self.seeds[0]["seed"]) if self.seeds else 0
+
+    @property
+    def shown_episode(self) -> dict[str, Any]:
+        """That episode's entry of ``seeds`` ({seed, status, J, ...}); the evaluation's own for one seed."""
+        seed = self.shown_seed
+        return next((s for s in self.seeds or () if s["seed"] == seed), {"seed": seed, "J": self.J,
+                                                                          "status": self.status})
 
 
 class EnqueuedTheta(Base):

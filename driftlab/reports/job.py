@@ -38,7 +38,7 @@ def write_report(*, db_url: str, name: str, out_dir: str, baseline_samples: int 
     config = spec.config
     track = FigureEight(config.scenario.left_radius_m, config.scenario.right_radius_m,
                         config.scenario.laps)
-    shown_seed = best.trajectory_seed or 0
+    shown_seed = best.shown_seed
     best_result = run_episode(Theta.from_mapping(best.theta), config, seed=shown_seed)
     plot_episode(best_result, track, str(out / "best_episode.png"),
                  title=f"{name}: best, evaluation id {best.id} (index {best.index}), {best.status}\n"
@@ -84,7 +84,7 @@ def write_report(*, db_url: str, name: str, out_dir: str, baseline_samples: int 
     summaries = [summarize(results) for results in rescored]
     for (label, theta, status, value), summary in zip(table, summaries, strict=True):
         tuning = (status or "-", "-" if value is None else f"{value:.3f}")
-        theta = {**Theta().as_dict(), **theta}  # stored before the model corrections: scales 1
+        theta = Theta.filled(theta)
         lines.append(f"| {label} | {theta['c_lr']!r} | {theta['c_rl']!r} | {theta['dV']!r} | {theta['k']!r} | "
                      f"{theta['model_mu_scale']!r} | {theta['model_c_scale']!r} | {tuning[0]} | {tuning[1]} | "
                      f"{summary['completed']}/{summary['samples']} | "

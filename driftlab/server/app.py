@@ -28,7 +28,7 @@ from driftlab.server.trajectory_documents import TrajectoryDocuments
 from driftlab.server.view import RecordingCache, add_view_routes
 from driftlab.services.search_space import SearchSpaceCache
 from driftlab.settings import Settings
-from driftlab.web.dashboard import Dashboard
+from driftlab.web.view_app import ViewApp
 from driftlab.worker.executors import LocalProcessExecutor
 from driftlab.worker.job_runner import JobRunner
 
@@ -38,12 +38,12 @@ def _start_view(app: FastAPI, factory, settings: Settings) -> None:
     executor = LocalProcessExecutor(1)
     executor.warm_up()
     app.state.what_if_executor = executor
-    app.state.dashboard = Dashboard(factory, run_episode=executor.submit,
+    app.state.view_app = ViewApp(factory, run_episode=executor.submit,
                                     what_if_per_minute=settings.what_if_per_minute)
 
 
 def _stop_view(app: FastAPI) -> None:
-    app.state.dashboard.stop()
+    app.state.view_app.stop()
     app.state.recordings.recorder.stop()
     app.state.what_if_executor.shutdown()
 
@@ -117,9 +117,9 @@ def create_app(db_url: str, *, workers: int | None = 2, start_worker: bool = Tru
     app.include_router(evaluations.router)
     app.include_router(studies.router)
     app.include_router(calibrations.router)
-    add_view_routes(app, lambda: app.state.dashboard.port if hasattr(app.state, "dashboard") else None,
+    add_view_routes(app, lambda: app.state.view_app.port if hasattr(app.state, "view_app") else None,
                     app.state.recordings,
-                    lambda: len(app.state.dashboard.sessions) if hasattr(app.state, "dashboard") else 0,
+                    lambda: len(app.state.view_app.sessions) if hasattr(app.state, "view_app") else 0,
                     max_tabs=settings.max_view_tabs)
     document_edge(app, token_set=bool(settings.token), public_reads=settings.public_reads)
 

@@ -31,10 +31,9 @@ def evaluations_csv(rows: list[dict[str, Any]]) -> str:
     writer.writerow(CSV_FIELDS)
     for row in rows:
         metrics, seeds = row["metrics"], row["seeds"] or []
-        # a theta stored before the model corrections ran the model as configured: scales 1
         summary = {k: metrics.get(k) for k in ("n_samples", "n_completed", "mean_abs_e_m", "max_abs_e_m",
                                                 "completed_fraction")}
-        flat = {**row, **Theta().as_dict(), **row["theta"], **summary,
+        flat = {**row, **Theta.filled(row["theta"]), **summary,
                 "seeds": " ".join(str(s["seed"]) for s in seeds)}
         writer.writerow([flat.get(name) for name in CSV_FIELDS])
     return buffer.getvalue()
@@ -70,10 +69,8 @@ def trajectory_metadata(e: Evaluation, job: Job) -> dict[str, Any]:
     """What a downloaded trajectory is: the evaluation, its job, theta, the drawn episode's seed and J (the worst
     of the evaluation's seeds), the evaluation's J over all its seeds, that episode's phases in numbers
     (driftlab.core.metrics.phase_segments), and the config to re-run it with."""
-    seeds = list(e.seeds or ())
-    seed = e.trajectory_seed if e.trajectory_seed is not None else (seeds[0]["seed"] if seeds else 0)
-    episode = next((s for s in seeds if s["seed"] == seed), {"J": e.J, "status": e.status})
+    episode = e.shown_episode
     return {"evaluation_id": e.id, "job_id": job.id, "job_name": job.name, "index": e.index,
-            "theta": {**Theta().as_dict(), **e.theta}, "seed": seed, "J_episode": episode["J"],
-            "episode_status": episode["status"], "J": e.J, "status": e.status, "n_seeds": max(len(seeds), 1),
+            "theta": Theta.filled(e.theta), "seed": e.shown_seed, "J_episode": episode["J"],
+            "episode_status": episode["status"], "J": e.J, "status": e.status, "n_seeds": max(len(e.seeds or ()), 1),
             "phases": (e.metrics or {}).get("phases", []), "config": job.spec.get("config", {})}

@@ -2,7 +2,7 @@
 median and the 25-75 % band of a seeds study shaded; their best episodes played together as ghost cars; and a
 robustness study's heatmap (completed or failed, and J, over its grid).
 
-It draws what storage holds (read through callbacks), and is refreshed by the dashboard's poller while a
+It draws what storage holds (read through callbacks), and is refreshed by the view app's poller while a
 comparison is shown.
 """
 

@@ -16,8 +16,8 @@ import numpy as np
 import viser
 import viser.uplot
 
-from driftlab.db.storage import NotFound
 from driftlab.markup import plain
+from driftlab.services.view_reads import NotFound
 from driftlab.web.frames import EpisodeFrames
 from driftlab.web.player import EpisodePlayer
 from driftlab.web.plots import padded_range, series

@@ -1,8 +1,8 @@
 """One browser tab: its own job selection and convergence plot, and its parts on its own scene and GUI:
 playback (driftlab.web.playback), what-if (driftlab.web.what_if) and compare (driftlab.web.compare).
 
-The tab reads through the dashboard (a :class:`TabData`) and never the other way round, except for the
-results the dashboard hands back: new evaluations (:meth:`ClientSession.on_history`), a what-if episode
+The tab reads through the view app (a :class:`TabData`) and never the other way round, except for the
+results the view app hands back: new evaluations (:meth:`ClientSession.on_history`), a what-if episode
 (:meth:`ClientSession.on_what_if_result`) and the study list (:meth:`ClientSession.set_study_options`).
 """
 
@@ -16,15 +16,14 @@ import numpy as np
 import viser
 import viser.uplot
 
-from driftlab.core.compiled import episode_kernels_cached
-from driftlab.db.models import JobStatus
 from driftlab.markup import plain
+from driftlab.services.view_reads import compiling, drift_window_text
 from driftlab.web.compare import ComparePanel
 from driftlab.web.frames import EpisodeFrames
 from driftlab.web.playback import Playback
 from driftlab.web.plots import padded_range, series
 from driftlab.web.scene import set_overview_camera
-from driftlab.web.sources import JobHistory, car_geometry_of_spec, drift_window_text, track_of_spec
+from driftlab.web.sources import JobHistory, car_geometry_of_spec, track_of_spec
 from driftlab.web.what_if import WhatIfPanel
 
 FRAME_RATE_HZ = 30.0
@@ -33,7 +32,7 @@ NO_JOB = "(no jobs yet: start one with POST /api/jobs)"
 
 
 class TabData(Protocol):
-    """What a tab reads and asks of the dashboard."""
+    """What a tab reads and asks of the view app."""
 
     def history(self, job_id: int) -> JobHistory: ...
 
@@ -139,7 +138,7 @@ class ClientSession:
                 self.window_text.content = text
 
     def on_history(self, history: JobHistory) -> None:
-        """New evaluations or a new status of a job (from the dashboard's poller)."""
+        """New evaluations or a new status of a job (from the view app's poller)."""
         if self.history is None or history.job_id != self.history.job_id:
             return
         index, j_done, best, failed = history.convergence()
@@ -155,9 +154,8 @@ class ClientSession:
         best_text = "none completed yet" if best_pos is None else (
             f"**{history.values[best_pos]:.4g}** (lower is better), evaluation id {history.ids[best_pos]} "
             f"(index {best_pos})")
-        compiling = " (**compiling the simulation**: numba, once after an install)" if (
-            history.status == JobStatus.RUNNING and episode_kernels_cached() is False) else ""
-        self.job_text.content = (f"**{plain(history.name)}**: {history.status}{compiling}, {history.n_done} / "
+        waits = " (**compiling the simulation**: numba, once after an install)" if compiling(history.status) else ""
+        self.job_text.content = (f"**{plain(history.name)}**: {history.status}{waits}, {history.n_done} / "
                                  f"{history.iterations} evaluations, {sum(history.completed)} completed; "
                                  f"best J {best_text}")
 

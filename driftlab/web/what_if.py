@@ -1,5 +1,5 @@
 """A tab's what-if panel: sliders for theta (within the job's bounds) and the main plant mismatch settings;
-moving one asks for that episode (the dashboard's what-if runner runs it in a worker) and reports its result.
+moving one asks for that episode (the view app's what-if runner runs it in a worker) and reports its result.
 
 The episode runs on the seed of the ghost it is compared with (the best evaluation's drawn episode, its worst
 seed), so the two J beside each other are one episode each on the same car and noise: with no slider moved the
@@ -16,9 +16,10 @@ from typing import Any
 import numpy as np
 import viser
 
-from driftlab.core.config import Theta, config_from_dict, config_to_dict
+from driftlab.core.config import Theta
 from driftlab.core.tuning import DEFAULT_BOUNDS, MODEL_BOUNDS
 from driftlab.markup import plain
+from driftlab.services.view_reads import plant_settings
 from driftlab.web.frames import EpisodeFrames
 from driftlab.web.sources import JobHistory
 
@@ -79,8 +80,8 @@ class WhatIfPanel:
             return
         learned = self.history.spec.get("bounds", DEFAULT_BOUNDS)
         middle = {k: 0.5 * (lo + hi) for k, (lo, hi) in learned.items()}
-        theta = {**Theta().as_dict(), **(best.theta if best is not None else middle)}
-        plant = config_to_dict(config_from_dict(self.history.spec.get("config", {})))["plant"]  # defaults filled
+        theta = Theta.filled(best.theta if best is not None else middle)
+        plant = plant_settings(self.history.spec)
         placed: dict[str, tuple[float, float]] = {}
         with self.client.atomic():
             for key, slider in self.theta_sliders.items():

@@ -54,6 +54,15 @@ def is_executor_lost(exc: BaseException) -> bool:
         "CommClosedError", "FutureCancelledError", "SchedulerUnreachable")
 
 
+def interrupted_status(exc: BaseException) -> tuple[JobStatus, str]:
+    """What a run that raised ends as, and its error text: a lost cluster pauses it (resumed when the cluster is
+    back), anything else fails it. Either way what is stored stays."""
+    text = f"{type(exc).__name__}: {exc}"
+    if is_executor_lost(exc):
+        return JobStatus.PAUSED, f"{EXECUTOR_LOST}: {text}"[:2000]
+    return JobStatus.FAILED, text[:2000]
+
+
 @dataclass
 class _PendingEvaluation:
     """One asked theta whose episodes (one per seed) are running."""
@@ -84,7 +93,7 @@ def _next_evaluation(lease: _Lease, spec: TuningSpec, optimizer, in_flight: list
         with storage.snapshot(lease.factory) as session:
             row = next(iter(enqueued.waiting(session, job_id=lease.job_id, taken=taken)), None)
             if row is not None:
-                theta = {**Theta().as_dict(), **row.theta}
+                theta = Theta.filled(row.theta)
                 return _PendingEvaluation({k: float(theta[k]) for k in spec.bounds}, seeds, enqueued_id=row.id)
         lease.enqueued = False  # none left to take: the next heartbeat looks again
     return _PendingEvaluation(optimizer.ask(), seeds)
@@ -315,13 +324,9 @@ def _run(factory: sessionmaker[Session], job_id: int, executor: EpisodeExecutor,
                     rate = (time.perf_counter() - started) / max(n_done - n_at_start, 1)
                     on_progress(Progress(n_done, lease.iterations, best, score, rate))
     except Exception as exc:
-        # The executor lost its cluster: the job waits for it (paused, resumed when it is back). Anything else
-        # crashed an evaluation: the job fails. Either way what is stored stays.
-        lost = is_executor_lost(exc)
-        status = JobStatus.PAUSED if lost else JobStatus.FAILED
-        error = f"{EXECUTOR_LOST}: {type(exc).__name__}: {exc}" if lost else f"{type(exc).__name__}: {exc}"
+        status, error = interrupted_status(exc)
         with storage.transaction(factory) as session:
-            lifecycle.release(session, job_id=job_id, runner=runner, status=status, error=error[:2000])
+            lifecycle.release(session, job_id=job_id, runner=runner, status=status, error=error)
         return status
     finally:
         if optimizers is not None:

@@ -22,7 +22,8 @@ from driftlab.db.models import Job, Study
 from driftlab.settings import MAX_TRAJECTORIES_PER_JOB
 from driftlab.worker.calibrating import run_stored_calibration
 from driftlab.worker.executors import EpisodeExecutor, open_executor
-from driftlab.worker.job_loop import EXECUTOR_LOST, claim_job, run_job
+from driftlab.worker.job_loop import EXECUTOR_LOST, claim_job
+from driftlab.worker.job_pool import JobPool
 from driftlab.worker.optimizer_host import OptimizerHost
 from driftlab.worker.rescoring import run_rescore
 from driftlab.worker.slots import EpisodeSlots
@@ -44,8 +45,7 @@ class JobRunner:
         self._thread: threading.Thread | None = None
         self._executor: EpisodeExecutor | None = None
         self._slots: EpisodeSlots | None = None
-        self._jobs: dict[int, threading.Thread] = {}  # the jobs running now, each on its thread
-        self._jobs_lock = threading.Lock()
+        self._jobs: JobPool | None = None  # the jobs running now, each on its thread
         # The rescore and the calibration running now, if any: (kind, id) -> its thread.
         self._side_tasks: dict[str, threading.Thread] = {}
         # With optimizer_process, the jobs' asks and tells off the server's interpreter (below the requests in
@@ -56,8 +56,7 @@ class JobRunner:
     @property
     def running_job_ids(self) -> list[int]:
         """The jobs this runner runs now (several at once, up to the executor's capacity)."""
-        with self._jobs_lock:
-            return sorted(self._jobs)
+        return [] if self._jobs is None else self._jobs.running
 
     def start(self, executor: EpisodeExecutor | None = None) -> None:
         """Opens the executor (or takes ``executor``, whose capacity is ``workers``) and starts the runner."""
@@ -67,6 +66,9 @@ class JobRunner:
         else:
             self._executor, self.workers = executor, self.workers or 1
         self._slots = EpisodeSlots(self.workers)
+        self._jobs = JobPool(self.factory, self._executor, self._slots, runner=self.runner_id,
+                             should_stop=self._stop.is_set, max_trajectories=self.max_trajectories_per_job,
+                             optimizers=self._optimizers, on_done=lambda job_id, status: self._wake.set())
         if self._optimizers is not None:
             self._optimizers.start()
         self._thread = threading.Thread(target=self._loop, name="driftlab-job-runner", daemon=True)
@@ -129,32 +131,16 @@ class JobRunner:
             self.current_study_id = None
         return True
 
-    def _run_job(self, job_id: int) -> None:
-        try:
-            run_job(self.factory, job_id, self._executor, runner=self.runner_id, slots=self._slots, owner=job_id,
-                    should_stop=self._stop.is_set, optimizers=self._optimizers,
-                    max_trajectories=self.max_trajectories_per_job)
-        finally:
-            with self._jobs_lock:
-                self._jobs.pop(job_id, None)
-            self._wake.set()  # its share is free: the next job may start
-
     def _start_claimable_jobs(self) -> bool:
-        """Claims what it can (a job takes at least one of the executor's slots: no more jobs at once than it has
-        workers) and starts them together: every job claimed now has its share before any of them asks."""
-        claimed = []
-        while len(self.running_job_ids) + len(claimed) < self._slots.capacity:
+        """Claims what it can (no more jobs at once than the executor has workers) and starts them together; a job
+        that stops wakes the loop: its share is free for the next."""
+        claimed: list[int] = []
+        while self._jobs.free > len(claimed):
             job_id = self._claim_next()
             if job_id is None:
                 break
             claimed.append(job_id)
-            self._slots.join(job_id)
-        for job_id in claimed:
-            thread = threading.Thread(target=self._run_job, args=(job_id,), name=f"driftlab-job-{job_id}",
-                                      daemon=True)
-            with self._jobs_lock:
-                self._jobs[job_id] = thread
-            thread.start()
+        self._jobs.start(claimed)
         return bool(claimed)
 
     def _start_side_tasks(self) -> None:
@@ -202,9 +188,7 @@ class JobRunner:
                     continue
                 self._wake.wait(self.poll_s)
                 self._wake.clear()
-        finally:
-            with self._jobs_lock:
-                threads = list(self._jobs.values())
-            threads += list(self._side_tasks.values())
-            for thread in threads:  # each stops after its episodes in flight (should_stop)
+        finally:  # each stops after its episodes in flight (should_stop)
+            self._jobs.join(timeout_s=30)
+            for thread in list(self._side_tasks.values()):
                 thread.join(timeout=30)

@@ -24,7 +24,7 @@ from driftlab.db import lifecycle, storage, studies
 from driftlab.db.lifecycle import JobStatus
 from driftlab.db.models import Study
 from driftlab.worker.executors import EpisodeExecutor, EpisodeOutcome
-from driftlab.worker.job_loop import EXECUTOR_LOST, is_executor_lost
+from driftlab.worker.job_loop import interrupted_status
 
 
 @dataclass
@@ -101,11 +101,9 @@ def run_study(factory: sessionmaker[Session], study_id: int, executor: EpisodeEx
                 if cell.done and held:
                     held = _store_cell(factory, study_id, runner, cell)
     except Exception as exc:
-        lost = is_executor_lost(exc)
-        status = JobStatus.PAUSED if lost else JobStatus.FAILED
-        error = f"{EXECUTOR_LOST}: {type(exc).__name__}: {exc}" if lost else f"{type(exc).__name__}: {exc}"
+        status, error = interrupted_status(exc)
         with storage.transaction(factory) as session:
-            studies.release_study(session, study_id=study_id, runner=runner, status=status, error=error[:2000])
+            studies.release_study(session, study_id=study_id, runner=runner, status=status, error=error)
         return status
     status = JobStatus.FINISHED if not queue and held else JobStatus.QUEUED if shutting_down else JobStatus.PAUSED
     with storage.transaction(factory) as session:

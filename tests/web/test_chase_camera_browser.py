@@ -12,8 +12,8 @@ from playwright.sync_api import sync_playwright
 from driftlab.core.config import Theta
 from driftlab.core.tuning import TuningSpec
 from driftlab.db import storage
-from driftlab.web.dashboard import Dashboard
 from driftlab.web.scene import set_chase_camera
+from driftlab.web.view_app import ViewApp
 from driftlab.web.viser_server import RELAY_HEADER, RELAY_SECRET
 from driftlab.worker.executors import evaluate_episode
 from tests.web.test_view_browser import CHROMIUM, CHROMIUM_ARGS
@@ -54,7 +54,7 @@ def dashboard(tmp_path_factory):
                                wall_ms=outcome.wall_ms, columns=outcome.columns, trajectory=outcome.trajectory,
                                seeds=[{"seed": 0, "status": outcome.status, "J": outcome.J,
                                        "completed_fraction": 1.0}], trajectory_seed=0)
-    view = Dashboard(factory, host="127.0.0.1", port=0)
+    view = ViewApp(factory, host="127.0.0.1", port=0)
     yield view, outcome.trigger_points[0]["t_s"]
     view.stop()
 

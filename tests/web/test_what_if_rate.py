@@ -5,7 +5,7 @@ import time
 from concurrent.futures import Future
 
 from driftlab.core.config import EpisodeConfig, config_to_dict
-from driftlab.web.dashboard import EpisodeBudget, WhatIfRunner
+from driftlab.web.view_app import EpisodeBudget, WhatIfRunner
 
 
 class _Tab:

@@ -1,8 +1,8 @@
-"""The viser app behind ``/viser/``: one :class:`ClientSession` per browser tab, a poller that reads new
-evaluations (and studies, and what a tab compares) from storage, and the what-if runner that sends single
-episodes to a worker process.
+"""The viser app behind ``/viser/`` (the 3D view; the dashboard is the page at ``/dashboard/``): one
+:class:`ClientSession` per browser tab, a poller that reads new evaluations (and studies, and what a tab compares)
+through driftlab.services.view_reads, and the what-if runner that sends single episodes to a worker process.
 
-The dashboard draws what it is given: stored trajectories, or episodes a worker ran. It runs no physics.
+The view draws what it is given: stored trajectories, or episodes a worker ran. It runs no physics.
 """
 
 from __future__ import annotations
@@ -15,25 +15,13 @@ from concurrent.futures import Future
 from typing import Any
 
 import viser
-from sqlalchemy.orm import Session, sessionmaker
 
-from driftlab.core.config import apply_overrides, config_from_dict, config_to_dict
-from driftlab.core.drivability import check_drivable
 from driftlab.core.errors import ConfigError
-from driftlab.db import storage
+from driftlab.services import view_reads
 from driftlab.settings import WHAT_IF_PER_MINUTE
 from driftlab.web.frames import EpisodeFrames
 from driftlab.web.session import ClientSession
-from driftlab.web.sources import (
-    JobHistory,
-    enqueue_theta,
-    frames_of_evaluation,
-    frames_of_outcome,
-    read_compare,
-    read_config_diff,
-    read_studies,
-    read_study,
-)
+from driftlab.web.sources import JobHistory, frames_of_evaluation, frames_of_outcome
 from driftlab.web.viser_server import quiet_viser_server
 
 # run_episode(theta, config_doc, seed) -> Future of an EpisodeOutcome (see driftlab.worker.executors).
@@ -113,9 +101,7 @@ class WhatIfRunner:
     def _submit(self, session: ClientSession, theta: dict, config_doc: dict, overrides: dict, seed: int) -> None:
         self.started += 1
         try:
-            config = apply_overrides(config_from_dict(config_doc), overrides)
-            check_drivable(config)
-            future = self.run_episode(theta, config_to_dict(config), seed)
+            future = self.run_episode(theta, view_reads.what_if_config(config_doc, overrides), seed)
         except (ConfigError, ValueError) as exc:
             session.on_what_if_result(None, str(exc), 0.0)
             self._next(session)
@@ -141,8 +127,8 @@ class WhatIfRunner:
         self._start_or_wait(session, waiting)
 
 
-class Dashboard:
-    def __init__(self, factory: sessionmaker[Session], *, run_episode: EpisodeRunner | None = None,
+class ViewApp:
+    def __init__(self, factory: view_reads.Factory, *, run_episode: EpisodeRunner | None = None,
                  host: str = "127.0.0.1", port: int = 0, poll_s: float = 0.5,
                  what_if_per_minute: float = WHAT_IF_PER_MINUTE) -> None:
         self.factory = factory
@@ -195,16 +181,16 @@ class Dashboard:
         return frames
 
     def studies(self) -> list[tuple[int, str, str, str]]:
-        return read_studies(self.factory)
+        return view_reads.study_list(self.factory)
 
     def study(self, study_id: int) -> dict[str, Any]:
-        return read_study(self.factory, study_id)
+        return view_reads.study(self.factory, study_id)
 
     def compare(self, job_ids: list[int]) -> list[dict[str, Any]]:
-        return read_compare(self.factory, job_ids)
+        return view_reads.compare(self.factory, job_ids)
 
     def config_diff(self, job_ids: list[int]) -> dict[str, Any]:
-        return read_config_diff(self.factory, job_ids)
+        return view_reads.config_diff(self.factory, job_ids)
 
     def request_what_if(self, session: ClientSession, theta: dict[str, float], config_doc: dict[str, Any],
                         plant_overrides: dict[str, float], seed: int) -> None:
@@ -212,7 +198,7 @@ class Dashboard:
 
     def enqueue(self, job_id: int, theta: dict[str, float]) -> str:
         """The what-if panel's "add to job": the theta enqueued for the job, or why not."""
-        return enqueue_theta(self.factory, job_id, theta)
+        return view_reads.enqueue_theta(self.factory, job_id, theta)
 
     # ----- clients -----------------------------------------------------------------------------------------
     def _on_connect(self, client: viser.ClientHandle) -> None:
@@ -231,8 +217,7 @@ class Dashboard:
 
     # ----- polling storage -----------------------------------------------------------------------------------
     def _read_jobs(self) -> list[tuple[int, str, str]]:
-        with storage.snapshot(self.factory) as session:
-            return [(j.id, j.name, j.status) for j in storage.list_jobs(session)]
+        return view_reads.job_list(self.factory)
 
     def _poll_loop(self) -> None:
         while not self._stop.wait(self.poll_s):

@@ -109,7 +109,7 @@ def test_tune_resumes_by_name_and_report_writes_the_tables(tmp_path):
     assert rep.returncode == 0, rep.stderr
     text = (tmp_path / "rep" / "report.md").read_text()
     assert "paper Table I" in text and "best of 2 random" in text and "untuned" in text
-    # the phase table gives the numbers stored with the best evaluation (its drawn seed, re-run)
+    # the phase table gives the numbers stored with the best evaluation (its kept episode, not re-run)
     from driftlab.db import storage
     from driftlab.reports.job import phase_table
 

@@ -37,7 +37,7 @@ def test_settings_are_built_only_at_entry_points():
 
 
 # What the view may not import: storage, and the modules that simulate, control or solve the car's physics. It reads
-# through driftlab.services.view_reads and draws; it may use the config's schema, the track's geometry and the
+# through driftlab.services.read_model and draws; it may use the config's schema, the track's geometry and the
 # statuses' names.
 VIEW_MAY_NOT = ("driftlab.db", "driftlab.worker", "driftlab.core.vehicle", "driftlab.core.plant",
                 "driftlab.core.plants", "driftlab.core.commonroad", "driftlab.core.equilibrium",

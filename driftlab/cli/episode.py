@@ -69,5 +69,5 @@ def cmd_episode(args: argparse.Namespace) -> int:
         plot_episode(result, FigureEight(scenario.left_radius_m, scenario.right_radius_m, scenario.laps), args.plot,
                      title=f"{args.plant} plant, {args.controller} controller, seed {args.seed}\n"
                            f"theta {', '.join(f'{k} {v:.4g}' for k, v in theta.as_dict().items())}\n"
-                           f"{result.status}, J = {result.J:.3f}")
+                           f"{result.status}, J = {result.J:.3f}", lap_errors_m=result.metrics.lap_mean_abs_e_m)
     return 0

@@ -71,6 +71,10 @@ class EpisodeResult:
     def completed(self) -> bool:
         return self.status == EpisodeStatus.COMPLETED
 
+    @property
+    def column_index(self) -> dict[str, int]:
+        return COL
+
     def column(self, name: str) -> np.ndarray:
         return self.trajectory[:, COL[name]]
 

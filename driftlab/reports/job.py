@@ -7,7 +7,6 @@ from pathlib import Path
 import numpy as np
 
 from driftlab.core.config import PAPER_THETA, Theta
-from driftlab.core.episode import run_episode
 from driftlab.core.equilibrium import drift_equilibrium
 from driftlab.core.robust import aggregate, rescore_seeds, summarize
 from driftlab.core.track import FigureEight
@@ -16,6 +15,7 @@ from driftlab.core.vehicle import pack_params
 from driftlab.db import storage
 from driftlab.markup import plain
 from driftlab.reports.plotting import plot_convergence, plot_episode
+from driftlab.services import read_model
 from driftlab.worker.executors import open_executor
 from driftlab.worker.scoring import score_thetas
 
@@ -38,11 +38,12 @@ def write_report(*, db_url: str, name: str, out_dir: str, baseline_samples: int 
     config = spec.config
     track = FigureEight(config.scenario.left_radius_m, config.scenario.right_radius_m,
                         config.scenario.laps)
-    shown_seed = best.shown_seed
-    best_result = run_episode(Theta.from_mapping(best.theta), config, seed=shown_seed)
-    plot_episode(best_result, track, str(out / "best_episode.png"),
+    # A job keeps its best's trajectory (driftlab.db.storage.add_evaluation); the plot is that stored episode.
+    shown = read_model.stored_episode(factory, best.id)
+    plot_episode(shown, track, str(out / "best_episode.png"),
                  title=f"{name}: best, evaluation id {best.id} (index {best.index}), {best.status}\n"
-                       f"J = {best.J:.3f} over its seeds; shown: seed {shown_seed}, J = {best_result.J:.3f}")
+                       f"J = {best.J:.3f} over its seeds; shown: seed {shown.seed}, J = {shown.episode_J:.3f}",
+                 lap_errors_m=shown.metrics.get("lap_mean_abs_e_m", ()))
     values = np.array([e.J for e in evals])
     failed = np.array([not e.completed for e in evals])
     plot_convergence(values, failed, str(out / "convergence.png"), title=f"{name}: J per iteration")
@@ -90,8 +91,8 @@ def write_report(*, db_url: str, name: str, out_dir: str, baseline_samples: int 
                      f"{summary['completed']}/{summary['samples']} | "
                      f"{summary['J_mean']:.3f} | {summary['J_worst']:.3f} |")
     lines += _verdict(summaries[0], summaries[1], len(evals), spec.seed_points)
-    lines += ["", f"## The drift and the flicks, phase by phase (best evaluation, seed {shown_seed})", "",
-              *phase_table(best_result.metrics.phases)]
+    lines += ["", f"## The drift and the flicks, phase by phase (best evaluation, seed {shown.seed})", "",
+              *phase_table(shown.metrics.get("phases", []))]
     lines += ["", "![best episode](best_episode.png)", "", "![convergence](convergence.png)", ""]
     path = out / "report.md"
     path.write_text("\n".join(lines))

@@ -3,7 +3,9 @@
 from __future__ import annotations
 
 import math
+from collections.abc import Sequence
 from pathlib import Path
+from typing import Any, Protocol
 
 import matplotlib
 
@@ -13,7 +15,6 @@ import numpy as np  # noqa: E402
 from matplotlib.colors import ListedColormap  # noqa: E402
 
 from driftlab.core.convergence import best_so_far
-from driftlab.core.episode import COL, EpisodeResult  # noqa: E402
 from driftlab.core.metrics import laps_of_rows  # noqa: E402
 from driftlab.core.track import FigureEight  # noqa: E402
 
@@ -26,8 +27,24 @@ def _draw_track(ax, track: FigureEight) -> None:
     ax.plot([0.0], [0.0], "ko", ms=4, label="P0")
 
 
-def plot_episode(result: EpisodeResult, track: FigureEight, path: str | Path, title: str = "") -> None:
-    """x-y path with both circles and trigger points, and V, beta, r, delta against references."""
+class PlottedEpisode(Protocol):
+    """An episode as run (driftlab.core.episode.EpisodeResult) or as stored (driftlab.services.read_model)."""
+
+    status: str
+    J: float
+    trajectory: np.ndarray
+    trigger_points: Any
+
+    @property
+    def column_index(self) -> dict[str, int]: ...
+
+    def column(self, name: str) -> np.ndarray: ...
+
+
+def plot_episode(result: PlottedEpisode, track: FigureEight, path: str | Path, title: str = "",
+                 lap_errors_m: Sequence[float] = ()) -> None:
+    """x-y path with both circles and trigger points (each lap's mean |e| from ``lap_errors_m``), and V, beta, r,
+    delta against references."""
     fig = plt.figure(figsize=(13, 8))
     grid = fig.add_gridspec(4, 2, width_ratios=[1.1, 1.4])
     ax_xy = fig.add_subplot(grid[:, 0])
@@ -36,8 +53,8 @@ def plot_episode(result: EpisodeResult, track: FigureEight, path: str | Path, ti
     if track.laps == 1:
         ax_xy.plot(x, y, color="tab:red", lw=1.5, label="path")
     else:  # one colour a lap: whether the drift stays where it was or wanders off
-        lap = laps_of_rows(result.trajectory, COL, track) - 1
-        errors = result.metrics.lap_mean_abs_e_m
+        lap = laps_of_rows(result.trajectory, result.column_index, track) - 1
+        errors = lap_errors_m
         for i, colour in zip(range(track.laps), plt.cm.autumn(np.linspace(0.0, 0.7, track.laps)), strict=True):
             on_lap = lap == i
             if on_lap.any():

@@ -17,7 +17,7 @@ import viser
 import viser.uplot
 
 from driftlab.markup import plain
-from driftlab.services.view_reads import NotFound
+from driftlab.services.read_model import NotFound
 from driftlab.web.frames import EpisodeFrames
 from driftlab.web.player import EpisodePlayer
 from driftlab.web.plots import padded_range, series

@@ -17,7 +17,7 @@ import viser
 import viser.uplot
 
 from driftlab.markup import plain
-from driftlab.services.view_reads import compiling, drift_window_text
+from driftlab.services.read_model import compiling, drift_window_text
 from driftlab.web.compare import ComparePanel
 from driftlab.web.frames import EpisodeFrames
 from driftlab.web.playback import Playback

@@ -1,4 +1,4 @@
-"""Where the view's data comes from: stored evaluations (by job, through driftlab.services.view_reads) and episodes
+"""Where the view's data comes from: stored evaluations (by job, through driftlab.services.read_model) and episodes
 the worker just ran."""
 
 from __future__ import annotations
@@ -11,13 +11,13 @@ import numpy as np
 
 from driftlab.core.convergence import best_position, best_so_far
 from driftlab.core.track import FigureEight
-from driftlab.services import view_reads
+from driftlab.services import read_model
 from driftlab.web.frames import EpisodeFrames
 
 
-def frames_of_evaluation(factory: view_reads.Factory, evaluation_id: int) -> EpisodeFrames:
-    """A stored evaluation with its trajectory (raises view_reads.NotFound)."""
-    e = view_reads.stored_episode(factory, evaluation_id)
+def frames_of_evaluation(factory: read_model.Factory, evaluation_id: int) -> EpisodeFrames:
+    """A stored evaluation with its trajectory (raises read_model.NotFound)."""
+    e = read_model.stored_episode(factory, evaluation_id)
     return EpisodeFrames(e.columns, e.rows, e.trigger_points, evaluation_id=e.evaluation_id, index=e.index,
                          theta=e.theta, status=e.status, J=e.J, seed=e.seed, episode_J=e.episode_J,
                          n_seeds=e.n_seeds, failure_reason=e.failure_reason)
@@ -58,10 +58,10 @@ class JobHistory:
     # The poller grows the lists while tabs read them: readers must never see them at different lengths.
     _lock: threading.Lock = field(default_factory=threading.Lock, repr=False, compare=False)
 
-    def refresh(self, factory: view_reads.Factory) -> bool:
+    def refresh(self, factory: read_model.Factory) -> bool:
         """Read job status and evaluations newer than the last one held; True if anything changed."""
         with self._lock:
-            job = view_reads.job_rows(factory, self.job_id, after=len(self.ids) - 1)
+            job = read_model.job_rows(factory, self.job_id, after=len(self.ids) - 1)
             changed = bool(job.evaluations) or job.status != self.status
             self.name, self.status, self.iterations, self.spec = job.name, job.status, job.iterations, job.spec
             for evaluation_id, value, completed, theta in job.evaluations:

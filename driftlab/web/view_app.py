@@ -1,6 +1,6 @@
 """The viser app behind ``/viser/`` (the 3D view; the dashboard is the page at ``/dashboard/``): one
 :class:`ClientSession` per browser tab, a poller that reads new evaluations (and studies, and what a tab compares)
-through driftlab.services.view_reads, and the what-if runner that sends single episodes to a worker process.
+through driftlab.services.read_model, and the what-if runner that sends single episodes to a worker process.
 
 The view draws what it is given: stored trajectories, or episodes a worker ran. It runs no physics.
 """
@@ -17,7 +17,7 @@ from typing import Any
 import viser
 
 from driftlab.core.errors import ConfigError
-from driftlab.services import view_reads
+from driftlab.services import read_model
 from driftlab.settings import WHAT_IF_PER_MINUTE
 from driftlab.web.frames import EpisodeFrames
 from driftlab.web.session import ClientSession
@@ -101,7 +101,7 @@ class WhatIfRunner:
     def _submit(self, session: ClientSession, theta: dict, config_doc: dict, overrides: dict, seed: int) -> None:
         self.started += 1
         try:
-            future = self.run_episode(theta, view_reads.what_if_config(config_doc, overrides), seed)
+            future = self.run_episode(theta, read_model.what_if_config(config_doc, overrides), seed)
         except (ConfigError, ValueError) as exc:
             session.on_what_if_result(None, str(exc), 0.0)
             self._next(session)
@@ -128,7 +128,7 @@ class WhatIfRunner:
 
 
 class ViewApp:
-    def __init__(self, factory: view_reads.Factory, *, run_episode: EpisodeRunner | None = None,
+    def __init__(self, factory: read_model.Factory, *, run_episode: EpisodeRunner | None = None,
                  host: str = "127.0.0.1", port: int = 0, poll_s: float = 0.5,
                  what_if_per_minute: float = WHAT_IF_PER_MINUTE) -> None:
         self.factory = factory
@@ -181,16 +181,16 @@ class ViewApp:
         return frames
 
     def studies(self) -> list[tuple[int, str, str, str]]:
-        return view_reads.study_list(self.factory)
+        return read_model.study_list(self.factory)
 
     def study(self, study_id: int) -> dict[str, Any]:
-        return view_reads.study(self.factory, study_id)
+        return read_model.study(self.factory, study_id)
 
     def compare(self, job_ids: list[int]) -> list[dict[str, Any]]:
-        return view_reads.compare(self.factory, job_ids)
+        return read_model.compare(self.factory, job_ids)
 
     def config_diff(self, job_ids: list[int]) -> dict[str, Any]:
-        return view_reads.config_diff(self.factory, job_ids)
+        return read_model.config_diff(self.factory, job_ids)
 
     def request_what_if(self, session: ClientSession, theta: dict[str, float], config_doc: dict[str, Any],
                         plant_overrides: dict[str, float], seed: int) -> None:
@@ -198,7 +198,7 @@ class ViewApp:
 
     def enqueue(self, job_id: int, theta: dict[str, float]) -> str:
         """The what-if panel's "add to job": the theta enqueued for the job, or why not."""
-        return view_reads.enqueue_theta(self.factory, job_id, theta)
+        return read_model.enqueue_theta(self.factory, job_id, theta)
 
     # ----- clients -----------------------------------------------------------------------------------------
     def _on_connect(self, client: viser.ClientHandle) -> None:
@@ -217,7 +217,7 @@ class ViewApp:
 
     # ----- polling storage -----------------------------------------------------------------------------------
     def _read_jobs(self) -> list[tuple[int, str, str]]:
-        return view_reads.job_list(self.factory)
+        return read_model.job_list(self.factory)
 
     def _poll_loop(self) -> None:
         while not self._stop.wait(self.poll_s):

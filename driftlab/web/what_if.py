@@ -19,7 +19,7 @@ import viser
 from driftlab.core.config import Theta
 from driftlab.core.tuning import DEFAULT_BOUNDS, MODEL_BOUNDS
 from driftlab.markup import plain
-from driftlab.services.view_reads import plant_settings
+from driftlab.services.read_model import plant_settings
 from driftlab.web.frames import EpisodeFrames
 from driftlab.web.sources import JobHistory
 

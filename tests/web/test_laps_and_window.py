@@ -8,7 +8,7 @@ from driftlab.core.config import EpisodeConfig, Theta, apply_overrides
 from driftlab.core.episode import COLUMNS, run_episode
 from driftlab.core.track import FigureEight
 from driftlab.reports.export import with_lap_column
-from driftlab.services.view_reads import drift_window_text
+from driftlab.services.read_model import drift_window_text
 from driftlab.web.frames import EpisodeFrames
 from driftlab.web.player import EpisodePlayer
 from driftlab.web.viser_server import quiet_viser_server

@@ -1,7 +1,7 @@
-"""What the 3D view (driftlab.web) reads and writes, in the shapes it draws: a stored evaluation with its
-trajectory, a job's evaluations as they arrive, studies, comparisons, the drift window of a job's plant, the config
-a what-if episode runs with, a theta enqueued from the view. The view draws what this module gives it; it imports
-neither the database nor the physics (tests/test_layers.py)."""
+"""The read model: what is stored, in the shapes the view (driftlab.web) and the reports draw: a stored evaluation
+with the episode kept as its trajectory, a job's evaluations as they arrive, studies, comparisons, the drift window
+of a job's plant; and what the view writes: the config a what-if episode runs with, a theta enqueued from it. The
+view draws what this module gives it and imports neither the database nor the physics (tests/test_layers.py)."""
 
 from __future__ import annotations
 
@@ -31,7 +31,8 @@ Factory = sessionmaker[Session]  # what the view holds to read through this modu
 
 @dataclass(frozen=True)
 class StoredEpisode:
-    """A stored evaluation and the episode kept as its trajectory (one row per control step, ``columns`` named)."""
+    """A stored evaluation and the episode kept as its trajectory (one row per control step, ``columns`` named),
+    with that episode's metrics (driftlab.core.metrics.EpisodeMetrics as stored: its laps, its phases)."""
 
     columns: tuple[str, ...]
     rows: np.ndarray
@@ -45,6 +46,18 @@ class StoredEpisode:
     episode_J: float
     n_seeds: int
     failure_reason: str
+    metrics: dict[str, Any]
+
+    @property
+    def column_index(self) -> dict[str, int]:
+        return {name: i for i, name in enumerate(self.columns)}
+
+    @property
+    def trajectory(self) -> np.ndarray:
+        return self.rows
+
+    def column(self, name: str) -> np.ndarray:
+        return self.rows[:, self.columns.index(name)]
 
 
 def stored_episode(factory: Factory, evaluation_id: int) -> StoredEpisode:
@@ -55,7 +68,8 @@ def stored_episode(factory: Factory, evaluation_id: int) -> StoredEpisode:
         return StoredEpisode(tuple(columns), rows, tuple(e.trigger_points or ()), evaluation_id=e.id, index=e.index,
                              theta=dict(e.theta), status=e.status, J=float(e.J), seed=e.shown_seed,
                              episode_J=float(e.shown_episode["J"]), n_seeds=max(len(e.seeds or ()), 1),
-                             failure_reason=str((e.metrics or {}).get("failure_reason") or ""))
+                             failure_reason=str((e.metrics or {}).get("failure_reason") or ""),
+                             metrics=dict(e.metrics or {}))
 
 
 @dataclass(frozen=True)

@@ -1,7 +1,8 @@
 """Throughput of an 8-job seeds study against the number of workers: its jobs one after another (as a study ran
 before: claim a job, run it to the end, then the next) against the server's job runner running them at once on the
-shared executor (driftlab.worker.job_runner, driftlab.worker.slots). Real SQLite file, the real job loop and
-optimizer (the job default: six dimensions, 4 + 4 robust seeds), every evaluation committed as it completes.
+shared executor (driftlab.worker.job_runner, driftlab.worker.slots). Real SQLite file (or --db: PostgreSQL), the
+real job loop and optimizer (the job default: six dimensions, 4 + 4 robust seeds), every evaluation committed as it
+completes.
 
 (a) A simulated cluster: a fake executor whose episodes sleep 16 ms on a pool of N threads ("workers"), N = 1 ... 32;
     each episode returns a real episode's trajectory (so a commit stores what a real one does).
@@ -120,8 +121,11 @@ class Meter:
         OptimizerHost.open = self._real_open
 
 
+DATABASE_URL: str | None = None  # --db: every measurement's study in this database (else an SQLite file each)
+
+
 def _study(db_dir: str, spec: dict, name: str):
-    factory = storage.open_database(f"sqlite:///{os.path.join(db_dir, name + '.db')}")
+    factory = storage.open_database(DATABASE_URL or f"sqlite:///{os.path.join(db_dir, name + '.db')}")
     with storage.transaction(factory) as session:
         study = start_study(session, doc={"kind": "seeds", "seeds": SEEDS, "spec": spec})
         jobs = [j.id for j in studies.study_jobs(session, study_id=study.id)]
@@ -252,7 +256,12 @@ def main() -> None:
     parser.add_argument("--real-repeats", type=int, default=3)
     parser.add_argument("--skip-real", action="store_true")
     parser.add_argument("--skip-simulated", action="store_true")
+    parser.add_argument("--db", help="an SQLAlchemy URL every study is stored in, e.g. a PostgreSQL database "
+                                     "(postgresql+psycopg://...); default: a new SQLite file per measurement")
     args = parser.parse_args()
+    global DATABASE_URL
+    DATABASE_URL = args.db
+    print(f"storage: {storage.open_database(args.db).kw['bind'].dialect.name if args.db else 'sqlite'}")
     with tempfile.TemporaryDirectory() as db_dir:
         if not args.skip_simulated:
             simulated(args.workers, args.evaluations, db_dir)

@@ -15,6 +15,8 @@ from alembic.runtime.migration import MigrationContext
 from alembic.script import ScriptDirectory
 from sqlalchemy import Connection, Engine, inspect, text
 
+from driftlab.db.models import Base
+
 MIGRATIONS = Path(__file__).parent / "migrations"
 BASELINE = "0001"
 
@@ -74,7 +76,12 @@ def upgrade(engine: Engine) -> None:
         with connection.begin():
             config = _config(connection)
             tables = set(inspect(connection).get_table_names())
-            if "alembic_version" not in tables and "jobs" in tables:
+            if not sqlite and not tables:
+                # A new database of another kind: the schema as the models declare it. The revisions before it
+                # upgrade SQLite files of earlier releases (with SQLite's SQL); later ones run on both kinds.
+                Base.metadata.create_all(connection)
+                command.stamp(config, "head")
+            elif "alembic_version" not in tables and "jobs" in tables:
                 command.stamp(config, _revision_of_meta(connection))
             command.upgrade(config, "head")
         if sqlite:

@@ -1,17 +1,22 @@
 """Storage functions (keyword-only, no HTTP): jobs, evaluations, trajectories.
 
 SQLite by default (where: :func:`driftlab.settings.database_url`), opened in WAL mode with a busy timeout so
-readers never see "database is locked" while a worker commits.
+readers never see "database is locked" while a worker commits; PostgreSQL (``postgresql+psycopg://...``) for
+several app servers on one database.
 
-Transactions: :func:`transaction` takes SQLite's write lock when it begins (``BEGIN IMMEDIATE``), so a check and
-the write it guards see the same database (a budget lowered by the API while a runner stores an evaluation: one
-of the two waits for the other, neither acts on a count the other has already changed). :func:`snapshot` is for
-reads only: a consistent view that never blocks a writer. pysqlite's own transaction handling (BEGIN only before
-the first write, reads outside any transaction) is switched off for this, as SQLAlchemy's SQLite docs describe.
+Transactions: :func:`transaction` takes the database's write lock when it begins (SQLite's ``BEGIN IMMEDIATE``;
+on PostgreSQL a transaction-scoped advisory lock, the same one for every writer, in READ COMMITTED: each statement
+after it sees what every earlier writer committed), so a check and the write it guards see the same database (a
+budget lowered by the API while a runner stores an evaluation: one of the two waits for the other, neither acts on
+a count the other has already changed). :func:`snapshot` is for reads only: a consistent view (PostgreSQL:
+REPEATABLE READ) that never blocks a writer. pysqlite's own transaction handling (BEGIN only before the first
+write, reads outside any transaction) is switched off for this, as SQLAlchemy's SQLite docs describe.
 """
 
 from __future__ import annotations
 
+import json
+import math
 import zlib
 from collections.abc import Iterator
 from contextlib import contextmanager
@@ -28,6 +33,7 @@ from driftlab.db.models import Evaluation, Job, JobStatus, Trajectory
 
 _BUSY_TIMEOUT_MS = 30_000
 _BEGIN_OPTION = "driftlab_sqlite_begin"
+_WRITE_LOCK_KEY = 0x6472696674  # PostgreSQL's advisory lock every DriftLab write transaction takes ("drift")
 _POOLED_CONNECTIONS = 20
 
 
@@ -41,13 +47,35 @@ def open_database(url: str) -> sessionmaker[Session]:
     # A connection per request thread kept open (FastAPI's thread pool runs up to 40 at once): with SQLAlchemy's
     # default pool of 5, every request past the fifth opened a connection and ran its pragmas, then closed it.
     pool = ({"pool_size": _POOLED_CONNECTIONS, "max_overflow": 2 * _POOLED_CONNECTIONS, "pool_use_lifo": True}
-            if _is_sqlite_file(url) else {})
-    engine = create_engine(url, connect_args={"timeout": _BUSY_TIMEOUT_MS / 1000} if sqlite else {}, **pool)
+            if _is_sqlite_file(url) or not sqlite else {})
+    engine = create_engine(url, connect_args={"timeout": _BUSY_TIMEOUT_MS / 1000} if sqlite else {},
+                           json_serializer=finite_json, **pool)
     if sqlite:
         event.listen(engine, "connect", _sqlite_pragmas)
         event.listen(engine, "begin", _sqlite_begin)
+    elif engine.dialect.name == "postgresql":
+        event.listen(engine, "begin", _postgresql_begin)
     schema.upgrade(engine)
     return sessionmaker(engine, expire_on_commit=False)
+
+
+def finite_json(value: Any) -> str:
+    """A JSON column's text, as the standard has it: a NaN or an infinity (a metric of an episode that never took
+    a step) is stored as null. PostgreSQL refuses them, and the API could not send them."""
+    try:
+        return json.dumps(value, allow_nan=False)
+    except ValueError:
+        return json.dumps(_finite(value), allow_nan=False)
+
+
+def _finite(value: Any) -> Any:
+    if isinstance(value, float):
+        return value if math.isfinite(value) else None
+    if isinstance(value, dict):
+        return {key: _finite(item) for key, item in value.items()}
+    if isinstance(value, (list, tuple)):
+        return [_finite(item) for item in value]
+    return value
 
 
 def _is_sqlite_file(url: str) -> bool:
@@ -79,6 +107,11 @@ def _sqlite_begin(connection) -> None:
     connection.exec_driver_sql(f"BEGIN {mode}")
 
 
+def _postgresql_begin(connection) -> None:
+    if connection.get_execution_options().get(_BEGIN_OPTION) == "IMMEDIATE":
+        connection.exec_driver_sql(f"SELECT pg_advisory_xact_lock({_WRITE_LOCK_KEY})")
+
+
 def engine_of(factory: sessionmaker[Session]) -> Engine:
     return factory.kw["bind"]
 
@@ -95,6 +128,8 @@ def transaction(factory: sessionmaker[Session]) -> Iterator[Session]:
 def snapshot(factory: sessionmaker[Session]) -> Iterator[Session]:
     """A read-only transaction: one consistent view, no lock that would make a writer wait."""
     with factory() as session, session.begin():
+        if session.get_bind().dialect.name == "postgresql":
+            session.connection(execution_options={"isolation_level": "REPEATABLE READ"})
         yield session
 
 

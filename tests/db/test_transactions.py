@@ -1,4 +1,5 @@
-"""A check and the write it guards see the same database: two writers on a real SQLite file take turns."""
+"""A check and the write it guards see the same database: two writers take turns, on a real SQLite file and on a
+real PostgreSQL server."""
 
 import threading
 import time
@@ -10,9 +11,11 @@ from driftlab.db import lifecycle, storage
 from driftlab.db.models import Job
 
 
-@pytest.fixture
-def factory(tmp_path):
-    factory = storage.open_database(f"sqlite:///{tmp_path / 'driftlab.db'}")
+@pytest.fixture(params=["sqlite", pytest.param("postgresql", marks=pytest.mark.e2e)])
+def factory(request, tmp_path):
+    url = (f"sqlite:///{tmp_path / 'driftlab.db'}" if request.param == "sqlite"
+           else request.getfixturevalue("postgres").new_database())
+    factory = storage.open_database(url)
     with storage.transaction(factory) as session:
         storage.create_job(session, name="j", spec={"iterations": 5}, seed=0)
     return factory

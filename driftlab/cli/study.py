@@ -98,7 +98,7 @@ def _run_seeds_jobs(factory, study_id: int, executor, workers: int, runner: str)
         done.release()  # its share goes to the next one
 
     pool = JobPool(factory, executor, EpisodeSlots(workers), runner=runner, should_stop=stop.is_set,
-                   max_trajectories=settings().max_trajectories_per_job, on_done=finished)
+                   max_trajectories=settings().max_trajectories_per_job, on_done=finished, daemon=False)
 
     def start(batch: list[tuple[int, str]]) -> None:
         for job_id, _ in batch:

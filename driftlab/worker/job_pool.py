@@ -22,15 +22,18 @@ class JobPool:
         should_stop: asked by every job between evaluations (the runner shuts down: each job goes back to the
             queue after what is in flight).
         on_done: called on the job's thread with (job id, the status it left the job in) once its share is free.
+        daemon: the jobs' threads end with the process (the server's runner stops them itself); a command's keep
+            it alive until they are done.
     """
 
     def __init__(self, factory: sessionmaker[Session], executor: EpisodeExecutor, slots: EpisodeSlots, *,
                  runner: str, should_stop: Callable[[], bool], max_trajectories: int,
                  optimizers: OptimizerHost | None = None,
-                 on_done: Callable[[int, str | None], None] = lambda job_id, status: None) -> None:
+                 on_done: Callable[[int, str | None], None] = lambda job_id, status: None,
+                 daemon: bool = True) -> None:
         self.factory, self.executor, self.slots, self.runner = factory, executor, slots, runner
         self.should_stop, self.max_trajectories, self.optimizers = should_stop, max_trajectories, optimizers
-        self.on_done = on_done
+        self.on_done, self.daemon = on_done, daemon
         self.statuses: dict[int, str] = {}  # the status each finished run left its job in
         self._threads: dict[int, threading.Thread] = {}
         self._lock = threading.Lock()
@@ -51,7 +54,8 @@ class JobPool:
         for job_id in job_ids:
             self.slots.join(job_id)
         for job_id in job_ids:
-            thread = threading.Thread(target=self._run, args=(job_id,), name=f"driftlab-job-{job_id}", daemon=True)
+            thread = threading.Thread(target=self._run, args=(job_id,), name=f"driftlab-job-{job_id}",
+                                      daemon=self.daemon)
             with self._lock:
                 self._threads[job_id] = thread
             thread.start()

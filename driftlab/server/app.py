@@ -39,7 +39,7 @@ def _start_view(app: FastAPI, factory, settings: Settings) -> None:
     executor.warm_up()
     app.state.what_if_executor = executor
     app.state.view_app = ViewApp(factory, run_episode=executor.submit,
-                                    what_if_per_minute=settings.what_if_per_minute)
+                                 what_if_per_minute=settings.what_if_per_minute)
 
 
 def _stop_view(app: FastAPI) -> None:

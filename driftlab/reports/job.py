@@ -9,6 +9,7 @@ import numpy as np
 from driftlab.core.config import PAPER_THETA, Theta
 from driftlab.core.equilibrium import drift_equilibrium
 from driftlab.core.robust import aggregate, rescore_seeds, summarize
+from driftlab.core.statuses import EpisodeStatus
 from driftlab.core.track import FigureEight
 from driftlab.core.tuning import TuningSpec
 from driftlab.core.vehicle import pack_params
@@ -57,7 +58,8 @@ def write_report(*, db_url: str, name: str, out_dir: str, baseline_samples: int 
         # The random baseline is scored as tuning scored (the job's seeds, same aggregate); then every theta
         # of the table is rescored under fresh seeds.
         random_scores = [aggregate(r) for r in score_thetas(executor, samples, config_doc, spec.episode_seeds)]
-        ranked = sorted(range(n_random), key=lambda i: (random_scores[i].status != "completed", random_scores[i].J))
+        ranked = sorted(range(n_random),
+                        key=lambda i: (random_scores[i].status != EpisodeStatus.COMPLETED, random_scores[i].J))
         random_best = samples[ranked[0]]
         table = [("learned (best)", dict(best.theta), best.status, best.J),
                  ("untuned", Theta().as_dict(), None, None), ("paper's", PAPER_THETA.as_dict(), None, None),

@@ -16,6 +16,7 @@ from matplotlib.colors import ListedColormap  # noqa: E402
 
 from driftlab.core.convergence import best_so_far
 from driftlab.core.metrics import laps_of_rows  # noqa: E402
+from driftlab.core.statuses import EpisodeStatus
 from driftlab.core.track import FigureEight  # noqa: E402
 
 
@@ -127,7 +128,7 @@ def plot_heatmap(table, path: str | Path, title: str = "") -> None:
     """A robustness study's J over its grid (a :class:`driftlab.core.study.GridTable`): completed cells coloured
     by J, failed cells light red and labelled with how they failed, pending cells blank."""
     values = np.array(table.J, dtype=float)
-    failed = np.array([[s not in ("completed", "pending") for s in row] for row in table.status])
+    failed = np.array([[s not in (EpisodeStatus.COMPLETED, "pending") for s in row] for row in table.status])
     fig, ax = plt.subplots(figsize=(max(5.0, 1.1 * values.shape[1] + 3), max(3.5, 0.6 * values.shape[0] + 2)))
     shown = np.where(failed, np.nan, values)
     finite = shown[np.isfinite(shown)]

@@ -6,6 +6,7 @@ from __future__ import annotations
 import statistics
 from pathlib import Path
 
+from driftlab.core.statuses import EpisodeStatus, StudyKind
 from driftlab.core.study import grid_table
 from driftlab.db import storage, studies
 from driftlab.markup import plain
@@ -40,7 +41,7 @@ def _robustness_lines(summary: dict, out: Path) -> list[str]:
     table = grid_table(summary["grid"], summary["cells"])
     plot_heatmap(table, out / "heatmap.png", title=f"{summary['name']}: theta {summary['theta']}")
     done = [c for c in summary["cells"] if c["status"] != studies.PENDING]
-    completed = [c for c in done if c["status"] == "completed"]
+    completed = [c for c in done if c["status"] == EpisodeStatus.COMPLETED]
     lines = [f"Theta {summary['theta']} on {summary['n_cells']} cells ({len(done)} run, {len(completed)} "
              "completed on every seed).", "", "| settings | status | J | seeds completed |", "|---|---|---|---|"]
     for c in summary["cells"]:
@@ -58,7 +59,7 @@ def write_study_report(*, db_url: str, name: str, out_dir: str) -> Path:
         summary = study_views.study_summary(session, studies.get_study_by_name(session, name=name))
         header = [f"# DriftLab study report: {plain(name)}", "", f"A {summary['kind']} study, {summary['status']}. "
                   "Lower J is better.", ""]
-        if summary["kind"] == "seeds":
+        if summary["kind"] == StudyKind.SEEDS:
             lines = _seeds_lines(summary, session, out)
         else:
             lines = _robustness_lines(summary, out)

@@ -9,6 +9,7 @@ import math
 
 import numpy as np
 
+from driftlab.core.statuses import EpisodeStatus
 from driftlab.core.study import GridTable
 
 # viridis at 0, 0.25, 0.5, 0.75, 1 (matplotlib's), reversed below so that a low J is bright.
@@ -29,7 +30,7 @@ def j_color(value: float, lo: float, hi: float) -> str:
 def _cell(status: str, value: float, lo: float, hi: float) -> str:
     if status == "pending":
         return f'<td style="background:{PENDING_COLOR};color:#888">…</td>'
-    if status != "completed":
+    if status != EpisodeStatus.COMPLETED:
         title = "" if math.isnan(value) else f' title="J {value:.4g}"'
         return f'<td style="background:{FAILED_COLOR};color:#a61e1e"{title}>{html.escape(status)}</td>'
     text_color = "#000" if value <= 0.5 * (lo + hi) else "#fff"
@@ -38,7 +39,7 @@ def _cell(status: str, value: float, lo: float, hi: float) -> str:
 
 def heatmap_html(table: GridTable, title: str = "") -> str:
     completed = [v for row, srow in zip(table.J, table.status, strict=True)
-                 for v, s in zip(row, srow, strict=True) if s == "completed"]
+                 for v, s in zip(row, srow, strict=True) if s == EpisodeStatus.COMPLETED]
     lo, hi = (min(completed), max(completed)) if completed else (0.0, 1.0)
     style = "border-collapse:collapse;font-size:11px;text-align:center"
     cell_style = "td,th{border:1px solid #fff;padding:4px 6px}"
@@ -47,7 +48,7 @@ def heatmap_html(table: GridTable, title: str = "") -> str:
     for value, j_row, s_row in zip(table.row_values, table.J, table.status, strict=True):
         cells = "".join(_cell(s, v, lo, hi) for v, s in zip(j_row, s_row, strict=True))
         rows.append(f"<tr><th>{html.escape(str(value))}</th>{cells}</tr>")
-    n_failed = sum(s not in ("completed", "pending") for row in table.status for s in row)
+    n_failed = sum(s not in (EpisodeStatus.COMPLETED, "pending") for row in table.status for s in row)
     legend = (f"J of completed cells from {lo:.4g} (yellow, best) to {hi:.4g} (purple); {n_failed} failed (red)"
               if completed else f"no completed cell yet; {n_failed} failed (red)")
     columns = (f'<tr><th></th><th colspan="{len(table.column_labels)}">{html.escape(table.column_key)} →</th></tr>'

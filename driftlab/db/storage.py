@@ -46,8 +46,11 @@ def open_database(url: str) -> sessionmaker[Session]:
     sqlite = url.startswith("sqlite")
     # A connection per request thread kept open (FastAPI's thread pool runs up to 40 at once): with SQLAlchemy's
     # default pool of 5, every request past the fifth opened a connection and ran its pragmas, then closed it.
+    # A PostgreSQL server shares its connections (100 by default) among every app server: fewer each, and a request
+    # past them waits for one (pool_timeout) instead of being refused.
     pool = ({"pool_size": _POOLED_CONNECTIONS, "max_overflow": 2 * _POOLED_CONNECTIONS, "pool_use_lifo": True}
-            if _is_sqlite_file(url) or not sqlite else {})
+            if _is_sqlite_file(url) else {} if sqlite else
+            {"pool_size": _POOLED_CONNECTIONS // 2, "max_overflow": _POOLED_CONNECTIONS // 2, "pool_use_lifo": True})
     engine = create_engine(url, connect_args={"timeout": _BUSY_TIMEOUT_MS / 1000} if sqlite else {},
                            json_serializer=finite_json, **pool)
     if sqlite:

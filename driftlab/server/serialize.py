@@ -7,10 +7,10 @@ import io
 from datetime import UTC
 from typing import Any
 
-from driftlab.core.compiled import episode_kernels_cached
 from driftlab.core.config import THETA_KEYS, Theta
 from driftlab.db import storage
 from driftlab.db.models import Evaluation, Job, JobStatus
+from driftlab.services.read_model import compiling
 
 
 def evaluation_dict(e: Evaluation) -> dict[str, Any]:
@@ -60,7 +60,7 @@ COMPILING = "compiling the simulation (numba, once after an install; no evaluati
 
 def job_detail(status: str, seconds_per_evaluation: float | None) -> str | None:
     """What a running job does when its status alone does not say: compiling before its run's first evaluation."""
-    if status == JobStatus.RUNNING and seconds_per_evaluation is None and episode_kernels_cached() is False:
+    if seconds_per_evaluation is None and compiling(status):
         return COMPILING
     return None
 

@@ -43,6 +43,6 @@ def test_a_run_with_no_evaluation_yet_has_no_eta_and_says_when_it_compiles(tmp_p
         lifecycle.claim(session, job_id=1, runner="r")
     with storage.snapshot(factory) as session:
         assert storage.seconds_per_evaluation(session, job_id=1, since=session.get(Job, 1).started_at) is None
-    monkeypatch.setattr("driftlab.server.serialize.episode_kernels_cached", lambda: False)
+    monkeypatch.setattr("driftlab.services.read_model.episode_kernels_cached", lambda: False)
     assert job_detail("running", None) == COMPILING
     assert job_detail("running", 0.5) is None and job_detail("queued", None) is None

@@ -128,8 +128,9 @@ class EnqueueRequest(BaseModel):
 
     model_config = ConfigDict(extra="forbid")
 
-    thetas: list[dict[str, StrictNumber]] = Field(min_length=1, max_length=MAX_ENQUEUED,
-                                                  description='e.g. [{"k": 0.06, "dV": 0.1}]')
+    # Each theta names at least one value (an empty one would be the untuned theta, which the job asks anyway).
+    thetas: list[Annotated[dict[str, StrictNumber], Field(min_length=1)]] = Field(
+        min_length=1, max_length=MAX_ENQUEUED, description='e.g. [{"k": 0.06, "dV": 0.1}]')
 
 
 class JobPatch(BaseModel):

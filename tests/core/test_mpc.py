@@ -37,12 +37,16 @@ def _independent_solution(qp: ReferenceQp, z_now, z_ref):
             total += err @ weights @ err + du[k] @ r_w @ du[k]
         return total
 
-    # The cost is quadratic: its gradient and Hessian by central differences are exact up to rounding.
+    # The cost is quadratic: its gradient and Hessian by finite differences are exact up to rounding.
     n = 2 * n_h
     eye = np.eye(n)
-    grad0 = np.array([(cost(eye[i]) - cost(-eye[i])) / 2.0 for i in range(n)])
-    hess = np.array([[(cost(eye[i] + eye[j]) - cost(eye[i] - eye[j]) - cost(-eye[i] + eye[j])
-                       + cost(-eye[i] - eye[j])) / 4.0 for j in range(n)] for i in range(n)])
+    at_zero = cost(np.zeros(n))
+    plus = np.array([cost(eye[i]) for i in range(n)])
+    grad0 = (plus - np.array([cost(-eye[i]) for i in range(n)])) / 2.0
+    hess = np.empty((n, n))
+    for i in range(n):
+        for j in range(i, n):
+            hess[i, j] = hess[j, i] = cost(eye[i] + eye[j]) - plus[i] - plus[j] + at_zero
     u_prev = np.tile(z_now[n_x:], n_h)
     constraints = [LinearConstraint(qp.cumsum, qp.input_lo - u_prev, qp.input_hi - u_prev)]
     res = minimize(lambda d: 0.5 * d @ hess @ d + grad0 @ d, np.zeros(n), jac=lambda d: hess @ d + grad0,

@@ -121,57 +121,6 @@ def test_kill_9_leaves_no_orphan_workers_and_the_next_server_takes_the_job_over(
     assert not [p for p in _children(os.getpid()) if _alive(p) and p in workers]
 
 
-HUGE = ["99999999999999999999999", "9223372036854775808", str(2**70)]
-
-
-@pytest.mark.parametrize("path", [
-    "/api/jobs/{n}", "/api/evaluations/{n}", "/api/evaluations/{n}/trajectory", "/api/jobs/1/evaluations?after={n}",
-    "/api/evaluations/{n}/recording.viser", "/api/jobs/{n}/best",
-])
-def test_out_of_range_ids_are_404_or_422_never_500(server, path):
-    _, url, _ = server
-    for n in HUGE + ["0", "-5"]:
-        r = httpx.get(url + path.format(n=n))
-        assert r.status_code in (404, 422), (path, n, r.status_code, r.text)
-    r = httpx.post(f"{url}/api/jobs/{HUGE[1]}/pause")
-    assert r.status_code in (404, 422)
-
-
-@pytest.mark.parametrize(("body", "field"), [
-    ({"iterations": True}, "iterations"),
-    ({"iterations": "40"}, "iterations"),
-    ({"iterations": 40.0}, "iterations"),
-    ({"iterations": 5, "seed": False}, "seed"),
-    ({"iterations": 5, "seed_points": "3"}, "seed_points"),
-    ({"iterations": 5, "config": {"plant.steer_lag_s": "0.03"}}, "plant.steer_lag_s"),
-    ({"iterations": 5, "config": {"plant": {"friction_circle": 1}}}, "plant.friction_circle"),
-    ({"iterations": 5, "config": {"mpc.horizon": 20.5}}, "mpc.horizon"),
-    ({"iterations": 5, "bounds": {"k": ["0", "0.1"]}}, "bounds"),
-    ({"iterations": 5, "config": {"mpc.no_such": 1}}, "mpc.no_such"),
-])
-def test_numbers_are_strict(server, body, field):
-    """Inside config and bounds too: a JSON document states its types (the CLI's --set parses text)."""
-    _, url, _ = server
-    before = httpx.get(f"{url}/api/jobs").json()
-    r = httpx.post(f"{url}/api/jobs", json=body)
-    assert r.status_code == 422 and field in r.json()["detail"]
-    assert any(field in e["field"] for e in r.json().get("errors", [])), r.json()
-    assert httpx.get(f"{url}/api/jobs").json() == before  # nothing stored
-
-
-def test_study_config_values_are_strict_too(server):
-    _, url, _ = server
-    bad = [({"kind": "seeds", "seeds": [0], "spec": {"iterations": 2, "config": {"plant.mass_scale": "1.1"}}},
-            "plant.mass_scale"),
-           ({"kind": "seeds", "seeds": [0], "spec": {"iterations": 2, "bounds": {"k": ["0", 0.1]}}}, "spec.bounds.k"),
-           ({"kind": "robustness", "theta": {"k": "0.05"}, "grid": {"plant.mass_scale": [1.0]}}, "theta"),
-           ({"kind": "robustness", "theta": {"k": 0.05}, "grid": {"plant.mass_scale": [1.0, "1.1"]}},
-            "plant.mass_scale")]
-    for body, field in bad:
-        r = httpx.post(f"{url}/api/studies", json=body)
-        assert r.status_code == 422 and field in r.json()["detail"], (body, r.text)
-
-
 def test_a_budget_changed_on_a_running_job_is_honoured(server):
     _, url, _ = server
     raised = httpx.post(f"{url}/api/jobs", json={"iterations": 8, "seed_points": 8, "robust_samples": 1}).json()
@@ -199,21 +148,6 @@ def test_a_pause_stops_after_the_evaluations_in_flight(server):
     after = wait_released(url, job["id"])
     assert after["status"] == "paused"
     assert at_pause <= after["n_done"] <= at_pause + 2  # 2 workers: two in flight at most
-
-
-def test_config_errors_have_the_same_shape_as_schema_errors(server):
-    _, url, _ = server
-    r = httpx.post(f"{url}/api/jobs", json={"iterations": 5, "bounds": {"k": [0.0, 5.0]}})
-    assert r.status_code == 422 and r.json()["errors"][0]["field"] == "bounds.k"
-
-
-def test_invalid_json_is_a_422_naming_the_body(server):
-    _, url, _ = server
-    r = httpx.post(f"{url}/api/jobs", content=b'{"iterations": 3,', headers={"content-type": "application/json"})
-    assert r.status_code == 422 and r.json()["detail"].startswith("body:")
-    not_utf8 = httpx.post(f"{url}/api/jobs", content=b'{"iterations": 5, "name": "\xff\xfe"}',
-                          headers={"content-type": "application/json"})
-    assert not_utf8.status_code == 422 and not_utf8.json()["errors"][0]["field"] == "body"
 
 
 def test_delete_extend_and_paging(server):

@@ -5,19 +5,11 @@ import os
 import pytest
 from threadpoolctl import threadpool_limits
 
-# The suite runs its files side by side (pytest-xdist, README): one BLAS thread in each test process and in every
-# process it starts, as in the service's worker processes, so that parallel tests do not oversubscribe the cores.
+# One BLAS thread in each test process and in every process it starts, as in the service's worker processes: the
+# fast tier runs on both cores at once (pytest-xdist, README), and two processes' BLAS threads each on 2 cores
+# made it slower than one process (2 min 40 s either way, against 1 min 39 s with one thread each).
 os.environ["OMP_NUM_THREADS"] = "1"
 threadpool_limits(limits=1)
-
-
-def pytest_collection_modifyitems(items):
-    """With ``--dist loadgroup`` (README) a file's tests stay together, so its module-scoped server or browser
-    starts once; the browser files share one worker, as two software-rendered browsers at once starve each other
-    and the servers beside them of the two cores."""
-    for item in items:
-        path = item.nodeid.split("::")[0]
-        item.add_marker(pytest.mark.xdist_group("browser" if path.endswith("_browser.py") else path))
 
 
 @pytest.fixture(scope="session")

@@ -128,7 +128,7 @@ class EnqueueRequest(BaseModel):
 
     model_config = ConfigDict(extra="forbid")
 
-    # Each theta names at least one value (an empty one would be the untuned theta, which the job asks anyway).
+    # Each theta names at least one of theta's keys; which keys this job learns and its box, the job checks (422).
     thetas: list[Annotated[dict[str, StrictNumber], Field(
         min_length=1, json_schema_extra={"propertyNames": {"enum": list(THETA_KEYS)}})]] = Field(
         min_length=1, max_length=MAX_ENQUEUED, description='e.g. [{"k": 0.06, "dV": 0.1}]')

@@ -252,7 +252,13 @@ def test_a_clicked_point_selects_its_evaluation_plays_it_and_an_enqueued_theta_r
     shown = [float(t) for t in page.locator("#trials-table tbody tr td:nth-child(4)").all_text_contents()]
     assert shown == sorted(shown) and len(shown) >= 1
 
-    # Brushing the parallel coordinates' k axis (its upper 60%) filters the table to those k.
+    # Brushing the parallel coordinates' k axis (its upper 60%) filters the table to those k. The job is paused
+    # first and the page has drawn its last evaluation: a redraw between measuring the axis and the drag moves it.
+    httpx.post(f"{server}/api/jobs/{job['id']}/pause")
+    wait_released(server, job["id"])
+    stored = len(httpx.get(f"{server}/api/jobs/{job['id']}/evaluations").json())
+    page.wait_for_function("n => Number(document.querySelector('#parallel')?.dataset.n) === n", arg=stored,
+                           timeout=WAIT_MS)
     page.locator("#trials-status").select_option("")
     page.locator("#parallel").scroll_into_view_if_needed()
     box = page.locator("#parallel .pc-hit[data-axis='k']").bounding_box()
@@ -269,8 +275,6 @@ def test_a_clicked_point_selects_its_evaluation_plays_it_and_an_enqueued_theta_r
     expect(page.locator("#trials-filter")).to_have_text("")
 
     # Enqueued from the page while the job is paused (nothing in flight): the next evaluation it runs, marked.
-    httpx.post(f"{server}/api/jobs/{job['id']}/pause")
-    wait_released(server, job["id"])
     done_before = httpx.get(f"{server}/api/jobs/{job['id']}").json()["n_done"]
     page.locator("#enqueue-form input[name=theta]").fill("k=0.061, dV=0.05")
     page.get_by_role("button", name="Enqueue").click()

@@ -21,3 +21,11 @@ def postgres():
     server = PostgresServer()
     yield server
     server.stop()
+
+
+def pytest_collection_modifyitems(items):
+    """Under ``-n N --dist loadgroup`` (the README's test command) the browser tests run one after another on one
+    worker: two software-rendered browsers at once on 2 cores starve each other's WebGL."""
+    for item in items:
+        if "browser" in getattr(item, "fixturenames", ()):
+            item.add_marker(pytest.mark.xdist_group("browser"))

@@ -1,11 +1,13 @@
-"""The browser the view's tests drive: Debian's chromium, headless, through Playwright (no browser download)."""
+"""One browser per test module (tests/web/chromium.py); Playwright's assertions wait as long as its pages do."""
 
 import os
 
 import pytest
-from playwright.sync_api import sync_playwright
+from playwright.sync_api import expect, sync_playwright
 
-from tests.web.test_view_browser import CHROMIUM, CHROMIUM_ARGS
+from tests.web.chromium import CHROMIUM, CHROMIUM_ARGS, WAIT_MS, Chromium
+
+expect.set_options(timeout=WAIT_MS)
 
 
 @pytest.fixture(scope="module")
@@ -15,5 +17,5 @@ def browser():
                     "or set DRIFTLAB_CHROMIUM")
     with sync_playwright() as p:
         b = p.chromium.launch(executable_path=CHROMIUM, args=CHROMIUM_ARGS, headless=True)
-        yield b
+        yield Chromium(b)
         b.close()

@@ -3,11 +3,9 @@ file holding one real episode): it follows the car when paused and when the time
 the episode plays."""
 
 import math
-import os
 import time
 
 import pytest
-from playwright.sync_api import sync_playwright
 
 from driftlab.core.config import Theta
 from driftlab.core.tuning import TuningSpec
@@ -16,7 +14,7 @@ from driftlab.web.scene import set_chase_camera
 from driftlab.web.view_app import ViewApp
 from driftlab.web.viser_server import RELAY_HEADER, RELAY_SECRET
 from driftlab.worker.executors import evaluate_episode
-from tests.web.test_view_browser import CHROMIUM, CHROMIUM_ARGS
+from tests.web.chromium import WAIT_S
 
 pytestmark = pytest.mark.e2e  # a browser
 
@@ -34,7 +32,7 @@ def _expected_camera(frames, t_s):
     return camera.position
 
 
-def _wait(condition, what, timeout_s=60.0):
+def _wait(condition, what, timeout_s=WAIT_S):
     deadline = time.time() + timeout_s
     while not condition():
         assert time.time() < deadline, what
@@ -79,36 +77,32 @@ def dashboard(tmp_path_factory):
     view.stop()
 
 
-def test_the_chase_camera_follows_the_car_when_paused_and_scrubbed(dashboard):
+def test_the_chase_camera_follows_the_car_when_paused_and_scrubbed(dashboard, browser):
     view, first_trigger_s = dashboard
-    if not os.path.exists(CHROMIUM):
-        pytest.fail(f"no chromium at {CHROMIUM}: install Debian's package or set DRIFTLAB_CHROMIUM")
-    with sync_playwright() as p:
-        browser = p.chromium.launch(executable_path=CHROMIUM, args=CHROMIUM_ARGS, headless=True)
-        # Straight to viser's port, as the API's relay connects (it answers nothing else: driftlab.web.viser_server).
-        page = browser.new_page(viewport={"width": 900, "height": 600},
-                                extra_http_headers={RELAY_HEADER: RELAY_SECRET})
-        page.goto(f"http://127.0.0.1:{view.port}/")
-        page.get_by_role("button", name="Play best").click()
-        page.get_by_role("button", name="Pause").click()
-        page.get_by_role("button", name="Play", exact=True).wait_for(timeout=30_000)
-        _wait(lambda: len(view.sessions) == 1, "the tab's session")
-        session = next(iter(view.sessions.values()))
-        frames = session.playback.player.frames
+    # Straight to viser's port, as the API's relay connects (it answers nothing else: driftlab.web.viser_server).
+    page = browser.new_page(viewport={"width": 900, "height": 600},
+                            extra_http_headers={RELAY_HEADER: RELAY_SECRET})
+    page.goto(f"http://127.0.0.1:{view.port}/")
+    page.get_by_role("button", name="Play best").click()
+    page.get_by_role("button", name="Pause").click()
+    page.get_by_role("button", name="Play", exact=True).wait_for()
+    _wait(lambda: len(view.sessions) == 1, "the tab's session")
+    session = next(iter(view.sessions.values()))
+    frames = session.playback.player.frames
 
-        page.get_by_text("Chase camera").click()  # switched on while paused: the camera goes to the car at once
-        paused_at = session.playback.player.t_s
-        expected = _expected_camera(frames, paused_at)
-        _wait(lambda: math.dist(session.client.camera.position, expected) < 0.5,
-              f"camera at {session.client.camera.position}, the car's chase position {expected}")
+    page.get_by_text("Chase camera").click()  # switched on while paused: the camera goes to the car at once
+    paused_at = session.playback.player.t_s
+    expected = _expected_camera(frames, paused_at)
+    _wait(lambda: math.dist(session.client.camera.position, expected) < 0.5,
+          f"camera at {session.client.camera.position}, the car's chase position {expected}")
 
-        target_s = round(first_trigger_s + 0.4, 1)  # mid-flick
-        slider = page.get_by_role("slider").nth(1)  # playback speed, then time
-        _scrub(page, slider, target_s)
-        _wait(lambda: abs(session.playback.player.t_s - target_s) < 1e-6, f"scrubbed to {target_s} s")
-        assert not session.playback.playing
-        expected = _expected_camera(frames, target_s)
-        _wait(lambda: math.dist(session.client.camera.position, expected) < 0.5,
-              f"camera at {session.client.camera.position}, the car's chase position {expected} at {target_s} s")
-        assert math.dist(expected, _expected_camera(frames, paused_at)) > 5.0  # the car moved, and the camera with it
-        browser.close()
+    target_s = round(first_trigger_s + 0.4, 1)  # mid-flick
+    slider = page.get_by_role("slider").nth(1)  # playback speed, then time
+    _scrub(page, slider, target_s)
+    _wait(lambda: abs(session.playback.player.t_s - target_s) < 1e-6, f"scrubbed to {target_s} s")
+    assert not session.playback.playing
+    expected = _expected_camera(frames, target_s)
+    _wait(lambda: math.dist(session.client.camera.position, expected) < 0.5,
+          f"camera at {session.client.camera.position}, the car's chase position {expected} at {target_s} s")
+    assert math.dist(expected, _expected_camera(frames, paused_at)) > 5.0  # the car moved, and the camera with it
+    page.close()

@@ -67,28 +67,28 @@ def test_compare_mode_overlays_a_seeds_study_and_plays_its_best_episodes_togethe
     url, seeds, _ = server
     page = _open_compare(browser, url, f"{seeds['id']} · three · seeds · finished")
     summary = page.get_by_text("three (seeds, finished); final best J from")
-    summary.wait_for(timeout=30_000)
+    summary.wait_for()
     final = seeds["final_best_J"]
     assert f"from {min(final):.4g} to {max(final):.4g}, median {np.median(final):.4g}" in summary.inner_text()
     for job_id in seeds["job_ids"]:  # one row per job, its best J as the API has it
         job = httpx.get(f"{url}/api/jobs/{job_id}").json()
-        page.get_by_text(f"{job['name']} (id {job_id})").first.wait_for(timeout=10_000)
+        page.get_by_text(f"{job['name']} (id {job_id})").first.wait_for()
     # Each job's best episode through its flicks, as stored (metrics.phases).
     first = httpx.get(f"{url}/api/compare", params={"jobs": str(seeds["job_ids"][0])}).json()[0]
     flick = next(p for p in first["best_phases"] if "flip_s" in p)
     page.get_by_text(f"{flick['flip_s']:.2f} / {flick['settle_s']:.2f} s, -{flick['speed_loss_mps']:.2f} m/s",
-                     exact=False).first.wait_for(timeout=10_000)
+                     exact=False).first.wait_for()
     plot = page.locator(".uplot", has=page.get_by_text("Compare: best J so far (completed)"))
-    plot.wait_for(timeout=10_000)
+    plot.wait_for()
     # The config diff: a seeds study's jobs differ in their seed only.
     diff = page.locator("table", has=page.get_by_text("setting", exact=True))
-    diff.wait_for(timeout=10_000)
+    diff.wait_for()
     assert [td.inner_text() for td in diff.locator("tbody tr").first.locator("td").all()] == ["seed", "0", "1", "2"]
     assert diff.locator("tbody tr").count() == 1
     page.get_by_role("button", name="Play best episodes together").click()
-    page.get_by_text("Compare (best episodes together)").wait_for(timeout=30_000)
+    page.get_by_text("Compare (best episodes together)").wait_for()
     for n, name in enumerate(("red car", "blue ghost", "green ghost")):
-        page.get_by_text(f"{name}: three-seed{n}").wait_for(timeout=10_000)
+        page.get_by_text(f"{name}: three-seed{n}").wait_for()
     _wait_until_played(page, 2.0)  # the cars drive for a moment
     pixels = _save(page.screenshot(), "compare.png", tmp_path)
     scene = pixels[:, : int(pixels.shape[1] * 0.6)]
@@ -104,9 +104,9 @@ def test_compare_mode_overlays_a_seeds_study_and_plays_its_best_episodes_togethe
 def test_the_heatmap_shows_each_cell_as_stored(server, browser, tmp_path):
     url, _, grid = server
     page = _open_compare(browser, url, f"{grid['id']} · grip · robustness · finished")
-    page.get_by_text("grip (robustness, finished): 12 of 12 cells run").wait_for(timeout=30_000)
+    page.get_by_text("grip (robustness, finished): 12 of 12 cells run").wait_for()
     table = page.locator("table", has=page.get_by_text("plant.friction_scale"))
-    table.wait_for(timeout=10_000)
+    table.wait_for()
     rows = table.locator("tr").all()[2:]  # below the column key's row and the column values' row
     shown = [[td.inner_text() for td in row.locator("td").all()] for row in rows]
     expected = [c["J"] if c["status"] == "completed" else c["status"] for c in grid["cells"]]

@@ -42,13 +42,13 @@ def test_an_evaluation_with_no_step_is_shown_as_such(server, browser):
     page.goto(f"{url}/viser/")
     log.wait_for("Connected!")
     # The newest job is shown, live: its newest evaluation said to have no step, nothing of "other" played.
-    page.get_by_text("stopped before its first step").first.wait_for(timeout=120_000)
-    page.get_by_text("has no drift to hold").first.wait_for(timeout=120_000)  # and why
+    page.get_by_text("stopped before its first step").first.wait_for()
+    page.get_by_text("has no drift to hold").first.wait_for()  # and why
     assert page.get_by_text("evaluation id 1 ").count() == 0
     page.get_by_role("button", name="Play best").click()
     page.get_by_role("button", name="Play evaluation at index").click()
     page.get_by_role("button", name="Follow live").click()
-    page.get_by_text("stopped before its first step").first.wait_for(timeout=120_000)
+    page.get_by_text("stopped before its first step").first.wait_for()
     server_log = Path(proc.log_path).read_text()
     assert "Traceback" not in server_log and "IndexError" not in server_log, server_log[-3000:]
     page.close()
@@ -62,10 +62,10 @@ def test_deleting_the_selected_job_leaves_no_error_banner(server, browser):
     wait_released(url, job["id"])
     page = browser.new_page(viewport={"width": 1400, "height": 1400})
     page.goto(f"{url}/dashboard/?job={job['id']}")
-    expect(page.locator("#job-title")).to_have_text(f"{job['id']} · to-go", timeout=60_000)
+    expect(page.locator("#job-title")).to_have_text(f"{job['id']} · to-go")
     page.get_by_role("button", name="Delete").click()
     page.locator("#confirm-ok").click()
-    expect(page.locator("#message")).to_contain_text(f"job {job['id']} (to-go) deleted", timeout=30_000)
+    expect(page.locator("#message")).to_contain_text(f"job {job['id']} (to-go) deleted")
     expect(page.locator(f"tr[data-job-id='{job['id']}']")).to_have_count(0)  # a poll since has dropped it
     # Absence over time: two more poll periods (one a second), and still no 404 of the deleted job.
     page.wait_for_timeout(2000)

@@ -67,15 +67,15 @@ def test_the_view_shows_names_as_typed_and_runs_none_of_them(server, browser):
     log.wait_for("Connected!")
     page.get_by_role("combobox", name="Job").click()  # the dropdown lists every job by name
     for job_id, name in zip(ids, NAMES, strict=True):
-        page.get_by_role("option", name=f"{job_id} · {name} · finished").wait_for(timeout=30_000)
+        page.get_by_role("option", name=f"{job_id} · {name} · finished").wait_for()
     page.get_by_role("option", name=f"{ids[0]} · {NAMES[0]} · finished").click()
-    page.get_by_text(NAMES[0], exact=True).wait_for(timeout=30_000)  # the job line: **name**, read as typed
+    page.get_by_text(NAMES[0], exact=True).wait_for()  # the job line: **name**, read as typed
     page.get_by_text("Compare", exact=True).click()
     # "Job ids" (viser's text input has no label of its own)
     page.locator("input.mantine-TextInput-input").last.fill(",".join(str(i) for i in ids))
     page.get_by_role("button", name="Show comparison").click()
     for job_id, name in zip(ids, NAMES, strict=True):
-        page.get_by_text(f"{name} (id {job_id})", exact=True).first.wait_for(timeout=30_000)  # table and diff
+        page.get_by_text(f"{name} (id {job_id})", exact=True).first.wait_for()  # table and diff
     assert page.locator("iframe, svg[onload], img[onerror]").count() == 0
     page.wait_for_timeout(1000)  # a resource a name asked for would have been requested by now
     _nothing_ran(seen)
@@ -90,12 +90,12 @@ def test_the_study_dropdown_and_the_dashboard_show_names_as_text(server, browser
     page.get_by_role("combobox", name="Study").click()
     page.get_by_role("option", name=f"1 · {STUDY_NAME} · seeds", exact=False).first.click()
     page.get_by_role("button", name="Show comparison").click()
-    page.get_by_text(STUDY_NAME, exact=True).first.wait_for(timeout=30_000)
+    page.get_by_text(STUDY_NAME, exact=True).first.wait_for()
     _nothing_ran(seen)
     page.close()
     page, _, seen = _watched(browser, f"{url}/dashboard/?job={ids[0]}")
     for name in NAMES:
-        page.get_by_text(name, exact=False).first.wait_for(timeout=30_000)
+        page.get_by_text(name, exact=False).first.wait_for()
     assert page.locator("iframe, svg[onload], img[onerror]").count() == 0
     _nothing_ran(seen)
     page.close()

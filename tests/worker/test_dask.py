@@ -161,7 +161,9 @@ def test_the_server_resumes_a_job_by_itself_when_its_scheduler_returns(tmp_path)
         n_paused = paused["n_done"]
         processes[1].kill()
         processes = [_scheduler(port), _worker(address)]
-        deadline = time.time() + 120
+        # A new scheduler and worker start, the server reconnects and the job runs on: at load ~19 (two copies of
+        # the suite at once) 120 s was not always enough.
+        deadline = time.time() + 300
         while httpx.get(f"{url}/api/jobs/{job['id']}").json()["n_done"] <= n_paused + 2 and time.time() < deadline:
             time.sleep(0.5)
         now = httpx.get(f"{url}/api/jobs/{job['id']}").json()

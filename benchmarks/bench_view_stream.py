@@ -23,7 +23,7 @@ from playwright.sync_api import sync_playwright
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 from tests.server_process import serve_finished_job  # noqa: E402
-from tests.web.test_view_browser import CHROMIUM, CHROMIUM_ARGS  # noqa: E402
+from tests.web.chromium import CHROMIUM, CHROMIUM_ARGS  # noqa: E402
 
 RUNS = 5
 WINDOW_S = 10.0

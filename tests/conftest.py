@@ -25,11 +25,7 @@ def postgres():
 
 def pytest_collection_modifyitems(items):
     """Under ``-n N --dist loadgroup`` (the README's test command) the browser tests run one after another on one
-    worker: two software-rendered browsers at once on 2 cores starve each other's WebGL. They go first: the group is
-    the longest piece of work, and handed out last it ran alone while the other worker had finished."""
-    first = set()
+    worker: two software-rendered browsers at once on 2 cores starve each other's WebGL."""
     for item in items:
         if "browser" in getattr(item, "fixturenames", ()):
             item.add_marker(pytest.mark.xdist_group("browser"))
-            first.add(item.module.__name__)
-    items.sort(key=lambda item: item.module.__name__ not in first)  # stable: a module's tests stay together

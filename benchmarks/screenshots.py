@@ -14,7 +14,6 @@ from __future__ import annotations
 
 import argparse
 import os
-import shutil
 import sys
 import tempfile
 import time
@@ -24,10 +23,9 @@ import httpx
 from playwright.sync_api import sync_playwright
 from served import served
 
-CHROMIUM = os.environ.get("DRIFTLAB_CHROMIUM") or shutil.which("chromium") or "/usr/bin/chromium"
-CHROMIUM_ARGS = ["--headless=new", "--no-sandbox", "--disable-gpu", "--use-angle=swiftshader",
-                 "--enable-unsafe-swiftshader", "--disable-background-networking", "--disable-component-update",
-                 "--disable-sync", "--no-first-run", "--disable-dev-shm-usage"]
+sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
+from tests.web.chromium import CHROMIUM, CHROMIUM_ARGS  # noqa: E402
+
 # The sideslip changes sign ~0.45 s after a trigger and is near its new value after ~1.1 s (docs/results.md): at
 # 0.9 s the car is deep in the flick, at an angle to its path.
 FLICK_AFTER_TRIGGER_S = 0.9

@@ -14,7 +14,6 @@ from tests.web.test_view_browser import SCREENSHOT_DIR, ConsoleLog
 pytestmark = pytest.mark.e2e  # real processes: servers, browsers, Dask, the CLI
 
 
-
 @pytest.fixture(scope="module")
 def server(tmp_path_factory):
     db = tmp_path_factory.mktemp("dashboard") / "driftlab.db"

@@ -178,7 +178,7 @@ def test_what_if_with_no_slider_moved_scores_what_the_ghost_scores(server, brows
     add.click()
     page.get_by_text(re.compile(r"added to job \d+ \(queue entry \d+\): it is evaluated next")).wait_for()
     assert httpx.post(f"{server}/api/jobs/{job['id']}/resume").status_code == 200
-    deadline = time.time() + 120
+    deadline = time.time() + WAIT_S
     while not (marked := [e for e in httpx.get(f"{server}/api/jobs/{job['id']}/evaluations").json() if e["enqueued"]]):
         assert time.time() < deadline, "the enqueued theta was never evaluated"
         time.sleep(0.5)

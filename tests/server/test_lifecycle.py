@@ -233,8 +233,10 @@ def test_schemathesis_all_checks_pass(tmp_path):
 
 
 def test_a_job_says_compiling_until_its_first_evaluation_after_an_install(tmp_path):
-    # An empty numba cache is what a fresh install has: the first episode compiles the loop (~25 s on 2 cores).
-    proc, url = start_server(tmp_path / "fresh.db", free_port(), env_extra={"NUMBA_CACHE_DIR": str(tmp_path / "nb")})
+    # An empty numba cache is what a fresh install has: the first episode compiles the loop (~40 s of a core). One
+    # worker process: two would each compile it, a core each, for the same answer.
+    proc, url = start_server(tmp_path / "fresh.db", free_port(), env_extra={"NUMBA_CACHE_DIR": str(tmp_path / "nb")},
+                             extra_args=("--workers", "1"))
     try:
         job = httpx.post(f"{url}/api/jobs", json={"iterations": 2, "seed_points": 2}).json()
         seen = []

@@ -10,6 +10,7 @@ import pytest
 from matplotlib import image as mpimg
 
 from tests.server_process import free_port, start_server
+from tests.web.chromium import choose_option
 from tests.web.test_view_browser import SCREENSHOT_DIR, ConsoleLog, _wait_until_played
 
 pytestmark = pytest.mark.e2e  # real processes: servers, browsers, Dask, the CLI
@@ -57,8 +58,7 @@ def _open_compare(browser, url, study_label):
     page.goto(f"{url}/viser/")
     log.wait_for("Connected!")
     page.get_by_text("Compare", exact=True).click()
-    page.get_by_role("combobox", name="Study").click()  # viser's dropdown: a select box, then its options
-    page.get_by_role("option", name=study_label).click()
+    choose_option(page, "Study", study_label)
     page.get_by_role("button", name="Show comparison").click()
     return page
 

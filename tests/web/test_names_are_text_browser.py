@@ -9,6 +9,7 @@ import httpx
 import pytest
 
 from tests.server_process import free_port, start_server, wait_status
+from tests.web.chromium import choose_option
 from tests.web.test_view_browser import ConsoleLog
 
 pytestmark = pytest.mark.e2e  # real processes: servers, browsers, Dask, the CLI
@@ -87,8 +88,7 @@ def test_the_study_dropdown_and_the_dashboard_show_names_as_text(server, browser
     page, log, seen = _watched(browser, f"{url}/viser/")
     log.wait_for("Connected!")
     page.get_by_text("Compare", exact=True).click()
-    page.get_by_role("combobox", name="Study").click()
-    page.get_by_role("option", name=f"1 · {STUDY_NAME} · seeds", exact=False).first.click()
+    choose_option(page, "Study", f"1 · {STUDY_NAME} · seeds", exact=False)
     page.get_by_role("button", name="Show comparison").click()
     page.get_by_text(STUDY_NAME, exact=True).first.wait_for()
     _nothing_ran(seen)

@@ -33,6 +33,20 @@ def test_equilibrium_without_drift_reports_error_with_exit_2():
     assert "beta" in out.stderr and len(out.stderr.strip().splitlines()) == 1
 
 
+def test_the_window_of_a_car_that_cannot_drift_at_the_presets_sideslip_is_printed(capsys):
+    # The VW Vanagon countersteers only from ~0.57 rad on a 44 m circle: its model cannot be fitted at the preset's
+    # 0.5 rad, which a job is refused for, naming the window; the window itself is still printed.
+    from driftlab.cli import main
+
+    assert main(["equilibrium", "--plant", "commonroad_std", "--set", "plant.commonroad_vehicle=3", "--window"]) == 0
+    (window,) = json.loads(capsys.readouterr().out)["window"]
+    (low, high), = window["sideslip_ranges_rad"]
+    assert window["radius_m"] == 44.0 and 0.5 < low <= 0.6 < 0.62 < high
+    assert main(["episode", "--plant", "commonroad_std", "--set", "plant.commonroad_vehicle=3"]) == 2
+    refused = capsys.readouterr().err
+    assert "sideslip 0.5 rad" in refused and "needs a scenario.sideslip_rad in 0.5" in refused
+
+
 def test_a_plant_without_a_drift_is_refused_before_any_episode(tmp_path):
     episode = _run("episode", "--set", "plant.friction_scale=1.2")
     db = tmp_path / "jobs.db"

@@ -12,17 +12,14 @@ from driftlab.cli.options import PLOT_SUFFIXES, check_output_file, episode_confi
 from driftlab.core.config import Theta, config_to_dict
 from driftlab.core.drivability import check_drivable, drift_window
 from driftlab.core.equilibrium import drift_equilibrium
-from driftlab.core.errors import ConfigError, NoEquilibriumError
+from driftlab.core.errors import ConfigError, NoEquilibriumError, OutsideDriftWindowError
 from driftlab.core.vehicle import pack_params
 
 
 def cmd_equilibrium(args: argparse.Namespace) -> int:
-    config = episode_config(args)
     if args.window:
-        scenario = config.scenario
-        radii = sorted({args.radius, scenario.left_radius_m, scenario.right_radius_m})
-        print(json.dumps({"window": [drift_window(config, radius).as_dict() for radius in radii]}))
-        return 0
+        return _print_window(args)
+    config = episode_config(args)
     try:
         eq = drift_equilibrium(args.radius, args.beta, pack_params(config.vehicle))
     except NoEquilibriumError as exc:
@@ -38,6 +35,23 @@ def cmd_equilibrium(args: argparse.Namespace) -> int:
         out["plant"] = plant if plant is not None else {"error": f"plant.model {config.plant.model!r}: its own "
                                                                   "drift is not known to DriftLab"}
     print(json.dumps(out))
+    return 0
+
+
+def _print_window(args: argparse.Namespace) -> int:
+    """The drift window at --radius and the scenario's radii. The window does not depend on the scenario's sideslip,
+    but a car's controller's model is fitted at it (driftlab.core.commonroad.model_fit): where the preset's sideslip
+    is outside the car's window (the VW Vanagon's 0.5 rad), the model is fitted inside it instead."""
+    try:
+        config = episode_config(args)
+    except OutsideDriftWindowError as exc:
+        if exc.window is None:
+            raise
+        inside = f"scenario.sideslip_rad={round((exc.window[0] + exc.window[1]) / 2, 2)}"
+        config = episode_config(argparse.Namespace(**{**vars(args), "set": [*(args.set or []), inside]}))
+    scenario = config.scenario
+    radii = sorted({args.radius, scenario.left_radius_m, scenario.right_radius_m})
+    print(json.dumps({"window": [drift_window(config, radius).as_dict() for radius in radii]}))
     return 0
 
 

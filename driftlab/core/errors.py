@@ -10,5 +10,15 @@ class ConfigError(ValueError):
         self.field = field
 
 
+class OutsideDriftWindowError(ConfigError):
+    """The scenario's sideslip is outside the sideslips at which a job of this car can drift a circle (``window``:
+    [low, high] rad, None where it drifts at none)."""
+
+    def __init__(self, message: str, *, field: str | None = None,
+                 window: tuple[float, float] | None = None) -> None:
+        super().__init__(message, field=field)
+        self.window = window
+
+
 class NoEquilibriumError(ValueError):
     """No drift equilibrium of the requested kind exists for the given radius and sideslip."""

@@ -21,7 +21,7 @@ from scipy.optimize import brentq
 from driftlab.core.commonroad.family import countersteer_window, describe_family, drift_family, sideslip_window
 from driftlab.core.commonroad.parameters import commonroad_model_vehicle
 from driftlab.core.equilibrium import drift_equilibrium
-from driftlab.core.errors import ConfigError, NoEquilibriumError
+from driftlab.core.errors import ConfigError, NoEquilibriumError, OutsideDriftWindowError
 from driftlab.core.vehicle import VehicleParams, pack_params
 
 
@@ -57,17 +57,23 @@ def _fitted(vehicle_id: int, radius_m: float, sideslip_rad: float, model: Any, d
     try:
         return _fit(vehicle_id, radius_m, sideslip_rad, model, drive_coupling)
     except ConfigError as exc:
-        raise ConfigError(f"{exc}. {windows_text(vehicle_id, radius_m, model)}", field=exc.field) from None
+        car, own = _windows(vehicle_id, radius_m, model)
+        raise OutsideDriftWindowError(f"{exc}. {windows_text(vehicle_id, radius_m, car, own)}", field=exc.field,
+                                      window=_overlap(car, own)) from None
 
 
-def windows_text(vehicle_id: int, radius_m: float, model: Any) -> str:
-    """Where a job of this car on a circle of ``radius_m`` can drift: the sideslips at which the car's own main
-    drift countersteers (driftlab.core.commonroad.family) and those at which the controller's model of it (the
-    paper's tyre with the car's mass, geometry and tyre shape, its front grip raised where needed) has a
-    countersteer drift; a job needs both."""
+def _windows(vehicle_id: int, radius_m: float, model: Any) -> tuple[tuple[float, float] | None, ...]:
+    """The sideslips at which the car's own main drift countersteers both ways (driftlab.core.commonroad.family),
+    and those at which the controller's model of it (the paper's tyre with the car's mass, geometry and tyre shape,
+    its front grip raised where needed) has a countersteer drift."""
     car = _overlap(countersteer_window(model, vehicle_id, radius_m),
                    countersteer_window(model, vehicle_id, radius_m, right=True))
-    own = model_window(widest_front_grip(commonroad_model_vehicle(model.car(vehicle_id))), radius_m)
+    return car, model_window(widest_front_grip(commonroad_model_vehicle(model.car(vehicle_id))), radius_m)
+
+
+def windows_text(vehicle_id: int, radius_m: float, car: tuple[float, float] | None,
+                 own: tuple[float, float] | None) -> str:
+    """Where a job of this car on a circle of ``radius_m`` can drift (:func:`_windows`): a job needs both."""
     return (f"On a {radius_m:g} m circle (sideslips 0.20-0.80 rad scanned) CommonRoad vehicle {vehicle_id} drifts with "
             f"countersteer both ways at {_range_text(car)}, the controller's model of it at {_range_text(own)}: a "
             f"job of this car needs a scenario.sideslip_rad in {_range_text(_overlap(car, own))}")

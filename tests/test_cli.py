@@ -45,6 +45,16 @@ def test_the_window_of_a_car_that_cannot_drift_at_the_presets_sideslip_is_printe
     assert main(["episode", "--plant", "commonroad_std", "--set", "plant.commonroad_vehicle=3"]) == 2
     refused = capsys.readouterr().err
     assert "sideslip 0.5 rad" in refused and "needs a scenario.sideslip_rad in 0.5" in refused
+    # A sideslip the user gives is kept, and refused: only the preset's is moved into the window.
+    from driftlab.core.config import EpisodeConfig, overrides_inside_window
+    from driftlab.core.errors import OutsideDriftWindowError
+
+    with pytest.raises(OutsideDriftWindowError) as given:
+        overrides_inside_window(EpisodeConfig.preset("commonroad_std"),
+                                {"plant.commonroad_vehicle": 3, "scenario.sideslip_rad": 0.5})
+    assert given.value.field == "scenario.sideslip_rad" and given.value.window[0] > 0.5
+    moved = overrides_inside_window(EpisodeConfig.preset("commonroad_std"), {"plant.commonroad_vehicle": 3})
+    assert moved.scenario.sideslip_rad == round(sum(given.value.window) / 2, 2)
 
 
 def test_a_plant_without_a_drift_is_refused_before_any_episode(tmp_path):

@@ -12,7 +12,7 @@ from driftlab.cli.options import PLOT_SUFFIXES, check_output_file, episode_confi
 from driftlab.core.config import Theta, config_to_dict
 from driftlab.core.drivability import check_drivable, drift_window
 from driftlab.core.equilibrium import drift_equilibrium
-from driftlab.core.errors import ConfigError, NoEquilibriumError, OutsideDriftWindowError
+from driftlab.core.errors import ConfigError, NoEquilibriumError
 from driftlab.core.vehicle import pack_params
 
 
@@ -39,16 +39,9 @@ def cmd_equilibrium(args: argparse.Namespace) -> int:
 
 
 def _print_window(args: argparse.Namespace) -> int:
-    """The drift window at --radius and the scenario's radii. The window does not depend on the scenario's sideslip,
-    but a car's controller's model is fitted at it (driftlab.core.commonroad.model_fit): where the preset's sideslip
-    is outside the car's window (the VW Vanagon's 0.5 rad), the model is fitted inside it instead."""
-    try:
-        config = episode_config(args)
-    except OutsideDriftWindowError as exc:
-        if exc.window is None:
-            raise
-        inside = f"scenario.sideslip_rad={round((exc.window[0] + exc.window[1]) / 2, 2)}"
-        config = episode_config(argparse.Namespace(**{**vars(args), "set": [*(args.set or []), inside]}))
+    """The drift window at --radius and the scenario's radii (it does not depend on the scenario's sideslip; a car's
+    controller's model is fitted inside its window where the preset's sideslip is outside it)."""
+    config = episode_config(args, inside_window=True)
     scenario = config.scenario
     radii = sorted({args.radius, scenario.left_radius_m, scenario.right_radius_m})
     print(json.dumps({"window": [drift_window(config, radius).as_dict() for radius in radii]}))

@@ -8,7 +8,7 @@ import os
 import sys
 from typing import TYPE_CHECKING, Any
 
-from driftlab.core.config import PLANT_PRESETS, EpisodeConfig, apply_overrides
+from driftlab.core.config import PLANT_PRESETS, EpisodeConfig, apply_overrides, overrides_inside_window
 from driftlab.core.errors import ConfigError
 from driftlab.core.plants import installed_names
 from driftlab.core.robust import MAX_ROBUST_SAMPLES
@@ -95,9 +95,12 @@ def key_values(items: list[str], what: str) -> dict[str, str]:
 PLANT_CHOICES = (*PLANT_PRESETS, *installed_names())  # and any plant installed beside DriftLab
 
 
-def episode_config(args: argparse.Namespace) -> EpisodeConfig:
+def episode_config(args: argparse.Namespace, *, inside_window: bool = False) -> EpisodeConfig:
+    """The config of ``--plant``, ``--controller`` and ``--set``; ``inside_window``: at the middle of the car's drift
+    window where the preset's sideslip is outside it (driftlab.core.config.overrides_inside_window)."""
     preset = EpisodeConfig.preset(args.plant or "default", getattr(args, "controller", "default"))
-    return apply_overrides(preset, key_values(args.set or [], "--set"))
+    parse = overrides_inside_window if inside_window else apply_overrides
+    return parse(preset, key_values(args.set or [], "--set"))
 
 
 def dask_address(args: argparse.Namespace) -> str | None:

@@ -11,7 +11,7 @@ from collections.abc import Mapping
 from dataclasses import dataclass, field, fields, is_dataclass, replace
 from typing import Any
 
-from driftlab.core.errors import ConfigError
+from driftlab.core.errors import ConfigError, OutsideDriftWindowError
 from driftlab.core.mpc import MpcConfig
 from driftlab.core.plant import PlantConfig
 from driftlab.core.track import MAX_LAPS
@@ -277,6 +277,20 @@ def apply_overrides(config: EpisodeConfig, overrides: dict[str, Any]) -> Episode
     _switch_plant_model(sections, changes)
     updated = {s: replace(sections[s], **c) for s, c in changes.items()}
     return _refit_model_vehicle(replace(config, **{**sections, **updated}), changes)
+
+
+def overrides_inside_window(config: EpisodeConfig, overrides: dict[str, Any]) -> EpisodeConfig:
+    """:func:`apply_overrides`, except that where the controller's model of the car cannot be fitted at the preset's
+    sideslip and no ``scenario.sideslip_rad`` is given (the VW Vanagon countersteers only from 0.57 rad at 44 m), the
+    scenario's sideslip is the middle of the car's window: for what scans or searches the window (`driftlab
+    equilibrium --window`, `driftlab calibrate`), not for a job, which is refused naming the window."""
+    try:
+        return apply_overrides(config, overrides)
+    except OutsideDriftWindowError as exc:
+        if exc.window is None or "scenario.sideslip_rad" in overrides:
+            raise
+        middle_rad = round((exc.window[0] + exc.window[1]) / 2, 2)
+        return apply_overrides(config, {**overrides, "scenario.sideslip_rad": middle_rad})
 
 
 def _switch_plant_model(sections: dict[str, Any], changes: dict[str, dict[str, Any]]) -> None:

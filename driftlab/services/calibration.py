@@ -26,7 +26,7 @@ from driftlab.core.calibration import (
     point_config,
     split_drivable,
 )
-from driftlab.core.config import EpisodeConfig, Theta, apply_overrides, config_to_dict
+from driftlab.core.config import EpisodeConfig, Theta, apply_overrides, config_to_dict, overrides_inside_window
 from driftlab.core.drivability import drift_window
 from driftlab.core.errors import ConfigError
 from driftlab.core.limits import check_int
@@ -85,7 +85,8 @@ class CalibrationRequest:
             raise ConfigError("rounds: a round learns a theta at one point; with one_set there are several (use "
                               "rounds 1)", field="rounds")
         Theta.from_mapping(self.theta)
-        config = apply_overrides(EpisodeConfig.preset(self.plant), self.sets)
+        # A car that cannot drift at its preset's sideslip is calibrated around the middle of its window.
+        config = overrides_inside_window(EpisodeConfig.preset(self.plant), self.sets)
         for point in parse_points(self.points) or []:  # in the scenario's ranges (ScenarioConfig checks them)
             try:
                 replace(config.scenario, sideslip_rad=point.sideslip_rad, left_radius_m=point.radius_m,

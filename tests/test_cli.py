@@ -42,9 +42,6 @@ def test_the_window_of_a_car_that_cannot_drift_at_the_presets_sideslip_is_printe
     (window,) = json.loads(capsys.readouterr().out)["window"]
     (low, high), = window["sideslip_ranges_rad"]
     assert window["radius_m"] == 44.0 and 0.5 < low <= 0.6 < 0.62 < high
-    assert main(["episode", "--plant", "commonroad_std", "--set", "plant.commonroad_vehicle=3"]) == 2
-    refused = capsys.readouterr().err
-    assert "sideslip 0.5 rad" in refused and "needs a scenario.sideslip_rad in 0.5" in refused
     # A sideslip the user gives is kept, and refused: only the preset's is moved into the window.
     from driftlab.core.config import EpisodeConfig, overrides_inside_window
     from driftlab.core.errors import OutsideDriftWindowError
@@ -53,6 +50,11 @@ def test_the_window_of_a_car_that_cannot_drift_at_the_presets_sideslip_is_printe
         overrides_inside_window(EpisodeConfig.preset("commonroad_std"),
                                 {"plant.commonroad_vehicle": 3, "scenario.sideslip_rad": 0.5})
     assert given.value.field == "scenario.sideslip_rad" and given.value.window[0] > 0.5
+    assert main(["episode", "--plant", "commonroad_std", "--set", "plant.commonroad_vehicle=3"]) == 2
+    refused = capsys.readouterr().err
+    low_rad, high_rad = given.value.window
+    assert "sideslip 0.5 rad" in refused
+    assert f"needs a scenario.sideslip_rad in {low_rad:.2f}-{high_rad:.2f} rad" in refused
     moved = overrides_inside_window(EpisodeConfig.preset("commonroad_std"), {"plant.commonroad_vehicle": 3})
     assert moved.scenario.sideslip_rad == round(sum(given.value.window) / 2, 2)
 

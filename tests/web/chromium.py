@@ -9,6 +9,8 @@ import os
 import shutil
 import time
 
+from playwright.sync_api import TimeoutError as PlaywrightTimeoutError
+
 CHROMIUM = os.environ.get("DRIFTLAB_CHROMIUM") or shutil.which("chromium") or "/usr/bin/chromium"
 # Software WebGL without a GPU (docs/reference.md, The view in a headless browser); no background connections on a
 # closed network.
@@ -16,10 +18,9 @@ CHROMIUM_ARGS = ["--headless=new", "--no-sandbox", "--disable-gpu", "--use-angle
                  "--enable-unsafe-swiftshader", "--disable-background-networking", "--disable-component-update",
                  "--disable-sync", "--no-first-run", "--disable-dev-shm-usage"]
 WAIT_MS = 120_000
-# The page draws at most FRAMES_PER_S frames a second: a software-rendered WebGL canvas redrawn at 60 Hz kept 1.5 of
+# The page draws at most FRAMES_PER_S frames a second: a software-rendered WebGL canvas redrawn at 60 Hz kept ~1.4 of
 # the machine's 2 cores busy for the whole browser group (the rest of the suite ran beside it on what was left).
-# What the tests check (what is drawn, where the camera goes, what is played) does not depend on the frame rate;
-# Playwright's own frame waits run in its isolated world and keep the browser's rate.
+# What the tests check (what is drawn, where the camera goes, what is played) does not depend on the frame rate.
 FRAMES_PER_S = 4
 _FRAME_CAP = f"""(() => {{
   const draw = window.requestAnimationFrame.bind(window);
@@ -60,6 +61,6 @@ def choose_option(page, combobox: str, option: str, *, exact: bool = True) -> No
         try:
             choice.click(timeout=5_000)
             return
-        except Exception:  # closed again before the click: playwright's TimeoutError
+        except PlaywrightTimeoutError:  # closed again before the click
             if time.time() > deadline:
                 raise

@@ -40,7 +40,8 @@ def fitted_model_vehicle(vehicle_id: int, radius_m: float, sideslip_rad: float,
     steering as strongly as the car does, its front grip, :func:`matched_front_grip`).
 
     Raises:
-        ConfigError: the car has no countersteer drift there, or no friction of the model reaches its speed.
+        OutsideDriftWindowError: the sideslip is outside the car's window on this circle (the error carries it).
+        ConfigError: inside it, no friction of the model reaches the car's speed.
 
     ``drive_coupling``: the model takes the rear friction circle with the coupling at which its yaw rate answers a
     drive step from the drift as the car's does (:func:`matched_rear_coupling`).
@@ -58,8 +59,10 @@ def _fitted(vehicle_id: int, radius_m: float, sideslip_rad: float, model: Any, d
         return _fit(vehicle_id, radius_m, sideslip_rad, model, drive_coupling)
     except ConfigError as exc:
         car, own = _windows(vehicle_id, radius_m, model)
-        raise OutsideDriftWindowError(f"{exc}. {windows_text(vehicle_id, radius_m, car, own)}", field=exc.field,
-                                      window=_overlap(car, own)) from None
+        message, window = f"{exc}. {windows_text(vehicle_id, radius_m, car, own)}", _overlap(car, own)
+        if window is not None and window[0] <= abs(sideslip_rad) <= window[1]:
+            raise ConfigError(message, field=exc.field) from None  # inside the window, but no fit: not its edge
+        raise OutsideDriftWindowError(message, field=exc.field, window=window) from None
 
 
 def _windows(vehicle_id: int, radius_m: float, model: Any) -> tuple[tuple[float, float] | None, ...]:

@@ -166,9 +166,10 @@ def run_episode(theta: Theta, config: EpisodeConfig, *, seed: int = 0) -> Episod
     # A plant stepped in Python has no compiled parameters: the kernel gets placeholders of the same types.
     args = (plant.params, plant.actuators) if plant.kind != PLANT_EXTERNAL else (np.zeros(1), np.zeros(4))
     # One loop for every plant: the kernel returns here for a constrained QP, and, for a plant without a compiled
-    # step (plant.kind PLANT_EXTERNAL), after each control step for the plant's own Python step.
-    while (code := run_until_constrained(settings, loop, qa_left, qa_right, model.params, *args,
-                                         variation.noise)) != DONE:
+    # step (plant.kind PLANT_EXTERNAL), after each control step for the plant's own Python step, unless the plant
+    # brings a compiled loop of its own that steps it (``run_loop``, CommonRoad's MB).
+    run = getattr(plant, "run_loop", None) or (lambda *a: run_until_constrained(*a[:5], *args, a[5]))
+    while (code := run(settings, loop, qa_left, qa_right, model.params, variation.noise)) != DONE:
         if code == NEEDS_QP:
             direction = int(loop.ints[I_DIRECTION])
             du, ok = sessions[direction].solve_constrained(loop.qp_q, loop.qp_lower, loop.qp_upper)

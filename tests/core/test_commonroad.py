@@ -204,6 +204,42 @@ def test_an_mb_episode_runs_in_the_same_loop_and_is_pure():
     assert first.trajectory[0, 4] == pytest.approx(20.39, abs=0.2)  # it starts in MB's own drift
 
 
+def test_mb_stepped_in_its_compiled_loop_is_mb_stepped_from_python_bit_for_bit(monkeypatch):
+    from driftlab.core.commonroad.plant import CommonRoadMbPlant
+
+    config = apply_overrides(EpisodeConfig.preset("commonroad_mb"), {"scenario.max_time_s": 4.0})
+    compiled = run_episode(Theta(), config, seed=2)
+    monkeypatch.setattr(CommonRoadMbPlant, "run_loop", None)  # the kernel returns for each plant step
+    from_python = run_episode(Theta(), config, seed=2)
+    assert len(compiled.trajectory) > 70
+    assert np.array_equal(compiled.trajectory, from_python.trajectory) and compiled.J == from_python.J
+    assert compiled.metrics.plant_validity == from_python.metrics.plant_validity
+
+
+def test_mbs_substep_integrates_a_control_step_as_a_fine_one_does(monkeypatch):
+    """The preset's RK4 substep against a 0.1 ms one, over the control steps of an episode: the fastest mode (a
+    wheel's speed, ~ -300 1/s) stays inside RK4's stability bound and the step's error is far below the noise."""
+    from driftlab.core.commonroad import plant as crp
+
+    config = apply_overrides(EpisodeConfig.preset("commonroad_mb"), {"scenario.max_time_s": 3.0})
+    steps = []
+    record = crp.mb_recorded_step
+
+    def recording(state, steer, drive, dt, substep_s, p, act, lowest, validity):
+        steps.append((state.copy(), steer, drive, dt, p, act))
+        return record(state, steer, drive, dt, substep_s, p, act, lowest, validity)
+
+    monkeypatch.setattr(crp, "mb_recorded_step", recording)
+    monkeypatch.setattr(crp.CommonRoadMbPlant, "run_loop", None)  # each step through Python, to be recorded
+    run_episode(Theta(), config, seed=3)
+    assert config.plant.substep_s == 0.003 and len(steps) > 50
+    for state, steer, drive, dt, p, act in steps[::4]:
+        fine = crp.mb_plant_step(state, steer, drive, dt, 1e-4, p, act)
+        preset = crp.mb_plant_step(state, steer, drive, dt, config.plant.substep_s, p, act)
+        assert np.hypot(*(preset[:2] - fine[:2])) < 2e-5  # position [m]
+        assert abs(preset[4] - fine[4]) < 2e-5 and abs(preset[5] - fine[5]) < 1e-3  # sideslip, yaw rate
+
+
 def test_the_mb_model_answers_the_steering_as_the_car_does_and_std_keeps_its_read_off_grip():
     from driftlab.core.commonroad.mb_equilibrium import mb_main_drift
     from driftlab.core.commonroad.steering_gain import car_yaw_response, model_yaw_response

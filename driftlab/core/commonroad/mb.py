@@ -4,7 +4,8 @@ statement for statement on packed parameters; ``tests/core/test_commonroad.py`` 
 
 State (the package's layout): x, y, delta, vx, psi, r, roll, roll rate, pitch, pitch rate, vy, z, vz, front
 unsprung roll, its rate, vy, z, vz, the same for the rear, the four wheel speeds (lf, rf, lr, rr) and the two
-axles' lateral compliance (delta_y_f, delta_y_r). Its suspension modes are stiff: RK4 needs ~1 ms substeps.
+axles' lateral compliance (delta_y_f, delta_y_r). Its fastest mode is a wheel's speed (its slip stiffness over
+its inertia and forward speed: ~ -350 1/s in the 0.5 rad drift, ~1/V below it), which sets RK4's substep.
 """
 
 from __future__ import annotations
@@ -109,10 +110,18 @@ def mb_wheel_loads(x, p):
     return out
 
 
-@njit(cache=True, error_model="numpy")  # x / 0 is inf (then a failed episode), as in the package's numpy floats
+@njit(cache=True, error_model="numpy")
 def mb_derivatives(x, u_init, p):
     """d/dt of the MB state under [steering velocity, longitudinal acceleration] (the package's
     ``vehicle_dynamics_mb``; like it, a negative wheel speed's derivative is 0: the caller clamps the speed)."""
+    f = np.empty(N_MB)
+    mb_derivatives_into(x, u_init, p, f)
+    return f
+
+
+@njit(cache=True, error_model="numpy")  # x / 0 is inf (then a failed episode), as in the package's numpy floats
+def mb_derivatives_into(x, u_init, p, f):
+    """:func:`mb_derivatives` written into ``f`` (the first 29 entries): the integrator's stages allocate nothing."""
     g = GRAVITY_MPS2
     t = p[MB_TYRE - CR_TYRE:]  # the tyre functions read PAC2002's coefficients at STD's packed indices
     u0 = _steering_constraints(x[2], u_init[0], p)
@@ -228,7 +237,6 @@ def mb_derivatives(x, u_init, p):
                 - f_raf * math.cos(x[6]) - (f_slf + f_srf) * math.sin(x[6]))
     sum_y_ur = (f_y_lr + f_y_rr) - f_rar * math.cos(x[6]) - (f_slr + f_srr) * math.sin(x[6])
 
-    f = np.empty(N_MB)
     if abs(x[3]) < 0.1:
         lwb = a + b
         beta_ks = math.atan(math.tan(x[2]) * b / lwb)
@@ -280,4 +288,3 @@ def mb_derivatives(x, u_init, p):
             f[i] = 0.0
     f[27] = dot_delta_y_f
     f[28] = dot_delta_y_r
-    return f

@@ -148,8 +148,11 @@ class CommonRoadPlantType(PlantType):
 COMMONROAD_BUILT_INS = (
     CommonRoadPlantType("commonroad_std", "driftlab.core.commonroad.plant:CommonRoadStdPlant", substep_s=0.002,
                         weights="driftlab.core.commonroad.weights:std_weights", preset_name="commonroad_std"),
+    # MB at 3 ms (17 RK4 substeps a control step): its fastest mode, a front wheel's speed, is -260 to -350 1/s in
+    # the drift and ~ -580 1/s at 9 m/s (docs/results.md), inside RK4's real-axis bound 2.785 / h = 950 1/s above
+    # the failure limit's 8 m/s; a control step lands within 2e-5 m and rad of a 0.1 ms reference.
     CommonRoadPlantType("commonroad_mb", "driftlab.core.commonroad.plant:CommonRoadMbPlant", multibody=True,
-                        substep_s=0.001, weights="driftlab.core.commonroad.weights:mb_weights",
+                        substep_s=0.003, weights="driftlab.core.commonroad.weights:mb_weights",
                         preset_name="commonroad_mb"),
     # The package's own Python functions behind the same actuators: the reference STD is checked against.
     CommonRoadPlantType("commonroad_std_reference", "driftlab.core.commonroad.reference:ReferenceStdPlant"),

@@ -58,11 +58,12 @@ def mb_steps_of_an_episode() -> list[tuple]:
         steps.append((state.copy(), steer, drive, dt, self.params, self.actuators))
         return step(self, state, steer, drive, dt)
 
-    crp.CommonRoadMbPlant.step = recording
+    run_loop = crp.CommonRoadMbPlant.run_loop
+    crp.CommonRoadMbPlant.step, crp.CommonRoadMbPlant.run_loop = recording, None  # every step through Python
     try:
         run_episode(Theta(), EpisodeConfig.preset("commonroad_mb"))
     finally:
-        crp.CommonRoadMbPlant.step = step
+        crp.CommonRoadMbPlant.step, crp.CommonRoadMbPlant.run_loop = step, run_loop
     return steps
 
 

@@ -16,7 +16,7 @@ import numpy as np
 from numba import njit
 
 from driftlab.core.blas_threads import with_one_blas_thread
-from driftlab.core.equilibrium import Equilibrium, drift_equilibrium
+from driftlab.core.equilibrium import Equilibrium, drift_equilibrium, has_drift_equilibrium
 from driftlab.core.errors import NoEquilibriumError
 from driftlab.core.mpc import KN, MpcConfig, ReferenceQp
 from driftlab.core.track import LEFT
@@ -68,6 +68,17 @@ def no_drift_reason(vehicle: VehicleParams, left_radius_m: float, right_radius_m
     except NoEquilibriumError as exc:
         return str(exc)
     return None
+
+
+def has_drift(vehicle: VehicleParams, left_radius_m: float, right_radius_m: float, sideslip_rad: float) -> bool:
+    """Whether :func:`no_drift_reason` is None, answered by each side's first start that finds its drift
+    (:func:`driftlab.core.equilibrium.has_drift_equilibrium`): the optimizer's check of every proposal."""
+    left_params, right_params = pack_params(vehicle), pack_params(vehicle, right=True)
+    if not has_drift_equilibrium(left_radius_m, -abs(sideslip_rad), left_params):
+        return False
+    if right_radius_m == left_radius_m and np.array_equal(right_params, left_params):
+        return True  # its right drift is its left one mirrored
+    return has_drift_equilibrium(right_radius_m, abs(sideslip_rad), right_params)
 
 
 @lru_cache(maxsize=16)

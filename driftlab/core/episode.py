@@ -29,7 +29,7 @@ from driftlab.core.closed_loop import (
     run_until_constrained,
 )
 from driftlab.core.config import EpisodeConfig, Theta
-from driftlab.core.controller import ControllerModel, build_controller_model, no_drift_reason
+from driftlab.core.controller import ControllerModel, build_controller_model, has_drift, no_drift_reason
 from driftlab.core.errors import ConfigError, NoEquilibriumError
 from driftlab.core.metrics import EpisodeMetrics, compute_metrics
 from driftlab.core.mpc import QpSession
@@ -119,8 +119,11 @@ def refusal_reason(theta: Theta, config: EpisodeConfig) -> str | None:
 
 def runs(config: EpisodeConfig, theta: dict[str, float]) -> bool:
     """Whether an episode of ``theta`` (any subset of its keys; the others untuned) would run: the optimizer's
-    known constraint (driftlab.core.optimizer.BayesianOptimizer's ``feasible``)."""
-    return refusal_reason(Theta.from_mapping(Theta.filled(theta)), config) is None
+    known constraint (driftlab.core.optimizer.BayesianOptimizer's ``feasible``): :func:`refusal_reason` is None,
+    without solving more of the model's drift than it takes to find it."""
+    s = config.scenario
+    vehicle = Theta.from_mapping(Theta.filled(theta)).model_vehicle(config.vehicle)
+    return has_drift(vehicle, s.left_radius_m, s.right_radius_m, s.sideslip_rad)
 
 
 @with_one_blas_thread

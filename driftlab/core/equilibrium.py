@@ -10,6 +10,7 @@ from __future__ import annotations
 
 import itertools
 import math
+from collections.abc import Iterator
 from dataclasses import dataclass
 
 import numpy as np
@@ -110,8 +111,26 @@ def drift_equilibrium(radius_m: float, sideslip_rad: float, p: np.ndarray) -> Eq
     if not (0.0 < abs(sideslip_rad) < 1.2):
         raise NoEquilibriumError(f"a drift needs 0 < |beta| < 1.2 rad, got beta={sideslip_rad!r} "
                                  f"(radius={radius_m})")
-    left_beta = -abs(sideslip_rad)
-    found: list[Equilibrium] = []
+    found = list(_countersteer_drifts(radius_m, -abs(sideslip_rad), p))
+    if not found:
+        raise NoEquilibriumError(f"no countersteer drift equilibrium at radius={radius_m} m, "
+                                 f"beta={sideslip_rad} rad")
+    # Distinct starts converge to the same branch; keep the slowest if several remain.
+    best = min(found, key=lambda e: e.speed_mps)
+    best = _polish(best, radius_m, p)
+    return best if sideslip_rad < 0 else best.mirrored()
+
+
+def has_drift_equilibrium(radius_m: float, sideslip_rad: float, p: np.ndarray) -> bool:
+    """Whether :func:`drift_equilibrium` finds the drift (does not raise): its starts in its order, up to the first
+    that converges to a countersteer drift (a feasible model answers after one or a few of the 60, ~0.2 ms)."""
+    if not (radius_m > 0.0 and math.isfinite(radius_m) and 0.0 < abs(sideslip_rad) < 1.2):
+        return False
+    return next(_countersteer_drifts(radius_m, -abs(sideslip_rad), p), None) is not None
+
+
+def _countersteer_drifts(radius_m: float, left_beta: float, p: np.ndarray) -> Iterator[Equilibrium]:
+    """The countersteer drift each start converges to (left-hand form), in the starts' order."""
     for v0, d0, f0 in itertools.product(_START_SPEEDS_MPS, _START_STEERS_RAD, _START_DRIVE_KN):
         sol = root(_residual, np.array([v0, d0, f0]), args=(radius_m, left_beta, p), method="hybr")
         if not np.all(np.isfinite(sol.x)) or np.max(np.abs(_residual(sol.x, radius_m, left_beta, p))) > 1e-7:
@@ -121,14 +140,7 @@ def drift_equilibrium(radius_m: float, sideslip_rad: float, p: np.ndarray) -> Eq
             continue
         eq = Equilibrium(speed, left_beta, speed / radius_m, steer, drive_kn * 1e3)
         if _is_countersteer_drift(eq, p):
-            found.append(eq)
-    if not found:
-        raise NoEquilibriumError(f"no countersteer drift equilibrium at radius={radius_m} m, "
-                                 f"beta={sideslip_rad} rad")
-    # Distinct starts converge to the same branch; keep the slowest if several remain.
-    best = min(found, key=lambda e: e.speed_mps)
-    best = _polish(best, radius_m, p)
-    return best if sideslip_rad < 0 else best.mirrored()
+            yield eq
 
 
 def _polish(eq: Equilibrium, radius_m: float, p: np.ndarray) -> Equilibrium:

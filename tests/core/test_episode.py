@@ -87,6 +87,23 @@ def test_a_theta_whose_model_cannot_drift_is_refused_saying_why():
     assert run_episode(Theta(), std).metrics.failure_reason is None and refusal_reason(Theta(), std) is None
 
 
+def test_the_optimizers_quick_check_answers_as_the_refusal_does_across_the_corrections_box():
+    """``runs`` stops at the first start that finds each drift; ``refusal_reason`` solves them whole. On STD's BMW
+    a part of the box has no drift (refused), the rest has one: the two agree on both, and on unequal radii."""
+    from driftlab.core.episode import refusal_reason, runs
+
+    for config in (EpisodeConfig.preset("commonroad_std"),
+                   apply_overrides(EpisodeConfig.preset("commonroad_std"), {"scenario.right_radius_m": 30.0})):
+        answers = []
+        for mu in np.linspace(0.85, 1.2, 5):
+            for c in np.linspace(0.85, 1.3, 6):
+                theta = {"model_mu_scale": float(mu), "model_c_scale": float(c)}
+                refused = refusal_reason(Theta.from_mapping(Theta.filled(theta)), config) is not None
+                assert runs(config, theta) is not refused, theta
+                answers.append(refused)
+        assert 0 < sum(answers) < len(answers)
+
+
 def test_path_stays_on_both_circles(nominal_run):
     phase = nominal_run.column("phase")
     assert {int(p) for p in phase} >= {Phase.LEFT_DRIFT, Phase.RIGHT_DRIFT, Phase.LEFT_DRIFT_FINAL}

@@ -1,6 +1,8 @@
 """Fixtures every test folder may use."""
 
 import os
+import subprocess
+import sys
 
 import pytest
 from threadpoolctl import threadpool_limits
@@ -29,3 +31,18 @@ def pytest_collection_modifyitems(items):
     for item in items:
         if "browser" in getattr(item, "fixturenames", ()):
             item.add_marker(pytest.mark.xdist_group("browser"))
+
+
+@pytest.hookimpl(tryfirst=True)
+def pytest_sessionstart(session):
+    """Under xdist, the controller compiles the episode kernels before any worker starts: on a fresh clone (no
+    numba cache) each test process and each server a test starts compiled the same kernel at once otherwise (~40 s
+    of a core each, several at a time on 2 cores, while browser tests waited on their pages). MB first: its loop
+    compiles the shared kernel too. With the cache warm this costs ~5 s."""
+    if hasattr(session.config, "workerinput") or session.config.getoption("numprocesses", None) is None:
+        return
+    warm = [sys.executable, "-m", "driftlab.cli", "episode", "--set", "scenario.max_time_s=2", "--plant"]
+    subprocess.run([*warm, "commonroad_mb"], check=True, capture_output=True, timeout=900)
+    rest = [subprocess.Popen([*warm, plant], stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
+            for plant in ("commonroad_std", "default")]  # the kernel is compiled: these load it
+    assert all(p.wait(timeout=900) == 0 for p in rest)

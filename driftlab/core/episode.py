@@ -171,7 +171,10 @@ def run_episode(theta: Theta, config: EpisodeConfig, *, seed: int = 0) -> Episod
     # One loop for every plant: the kernel returns here for a constrained QP, and, for a plant without a compiled
     # step (plant.kind PLANT_EXTERNAL), after each control step for the plant's own Python step, unless the plant
     # brings a compiled loop of its own that steps it (``run_loop``, CommonRoad's MB).
-    run = getattr(plant, "run_loop", None) or (lambda *a: run_until_constrained(*a[:5], *args, a[5]))
+    def run_kernel(settings, loop, qa_left, qa_right, model_params, noise):
+        return run_until_constrained(settings, loop, qa_left, qa_right, model_params, *args, noise)
+
+    run = getattr(plant, "run_loop", None) or run_kernel
     while (code := run(settings, loop, qa_left, qa_right, model.params, variation.noise)) != DONE:
         if code == NEEDS_QP:
             direction = int(loop.ints[I_DIRECTION])

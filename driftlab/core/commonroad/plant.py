@@ -232,8 +232,9 @@ def mb_recorded_step(state, steer_cmd, drive_cmd, duration_s, substep_s, p, act,
     ``record`` the validity record (``R_*``)."""
     new = mb_plant_step(state, steer_cmd, drive_cmd, duration_s, substep_s, p, act)
     loads = mb_wheel_loads(new[MB_FIRST:MB_FIRST + N_MB], p)
-    for i in range(4):
-        lowest_load_n[i] = min(lowest_load_n[i], loads[i])
+    for i in range(4):  # np.minimum's rule: a NaN (a diverged step) stays
+        if math.isnan(loads[i]) or loads[i] < lowest_load_n[i]:
+            lowest_load_n[i] = loads[i]
     record[R_ELAPSED_S] += duration_s
     if loads.min() < 0.0:
         record[R_NEGATIVE_LOAD_S] += duration_s

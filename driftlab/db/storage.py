@@ -17,7 +17,6 @@ from __future__ import annotations
 
 import json
 import math
-import zlib
 from collections.abc import Iterator
 from contextlib import contextmanager
 from datetime import datetime
@@ -30,6 +29,7 @@ from sqlalchemy.orm import Session, sessionmaker
 from driftlab.core.statuses import EpisodeStatus
 from driftlab.db import schema
 from driftlab.db.models import Evaluation, Job, JobStatus, Trajectory
+from driftlab.db.trajectory_bytes import PackedTrajectory, unpack
 
 _BUSY_TIMEOUT_MS = 30_000
 _BEGIN_OPTION = "driftlab_sqlite_begin"
@@ -197,33 +197,26 @@ def unique_job_name(session: Session, base: str) -> str:
 # -- evaluations -------------------------------------------------------------------------------------------
 def add_evaluation(session: Session, *, job_id: int, theta: dict[str, float], J: float, status: str,
                    metrics: dict[str, Any], trigger_points: list[dict[str, float]], wall_ms: float,
-                   columns: list[str], trajectory: np.ndarray, seeds: list[dict[str, Any]] | None = None,
-                   trajectory_seed: int | None = None, max_trajectories: int | None = None,
-                   packed: bytes | None = None, enqueued: bool = False) -> Evaluation:
+                   columns: list[str], trajectory: np.ndarray | PackedTrajectory,
+                   seeds: list[dict[str, Any]] | None = None, trajectory_seed: int | None = None,
+                   max_trajectories: int | None = None, enqueued: bool = False) -> Evaluation:
     """Appends the next evaluation of a job (its index is the count so far, so numbering survives resumes).
 
     Its trajectory (up to ~100 kB) is kept while the job holds fewer than ``max_trajectories`` of them, and always
     when the evaluation is the job's new best: a long job's storage stays bounded and its best stays watchable.
-    ``packed`` is the trajectory already packed (:func:`pack_trajectory`, before the write transaction: compressing
-    takes longer than the rest of the commit, and the write lock is held meanwhile)."""
+    ``trajectory`` may come packed already (a :class:`PackedTrajectory`, as the episode's worker sends it):
+    compressing takes longer than the rest of the commit, and the write lock is held meanwhile."""
     index = count_evaluations(session, job_id=job_id)
     evaluation = Evaluation(job_id=job_id, index=index, theta=theta, J=J, status=status, metrics=metrics,
                             trigger_points=trigger_points, wall_ms=wall_ms, seeds=seeds,
                             trajectory_seed=trajectory_seed, enqueued=enqueued)
     if (max_trajectories is None or count_trajectories(session, job_id=job_id) < max_trajectories
             or _beats_best(session, job_id=job_id, J=J, completed=status == EpisodeStatus.COMPLETED)):
-        evaluation.trajectory = Trajectory(columns=list(columns), rows=int(trajectory.shape[0]),
-                                           data=packed if packed is not None else pack_trajectory(trajectory))
+        packed = trajectory if isinstance(trajectory, PackedTrajectory) else PackedTrajectory.of(trajectory)
+        evaluation.trajectory = Trajectory(columns=list(columns), rows=packed.rows, data=packed.data)
     session.add(evaluation)
     session.flush()
     return evaluation
-
-
-def pack_trajectory(trajectory: np.ndarray) -> bytes:
-    """A trajectory as stored: zlib-compressed float64, row-major. Level 1: float64 samples hardly compress (level 6
-    made a default episode's 102 kB 80 kB, level 1 81 kB) and level 6 took twice as long (~4 ms, in the job's
-    thread, for every evaluation)."""
-    return zlib.compress(np.ascontiguousarray(trajectory, dtype=np.float64).tobytes(), 1)
 
 
 def count_trajectories(session: Session, *, job_id: int) -> int:
@@ -314,5 +307,4 @@ def trajectory_array(session: Session, *, evaluation_id: int) -> tuple[list[str]
         raise NotFound(f"the trajectory of evaluation {evaluation_id} was not kept (its job held "
                        f"DRIFTLAB_MAX_TRAJECTORIES_PER_JOB of them; the best's always are): re-run it with "
                        f"`driftlab episode` from its theta, config and trajectory_seed (an episode is deterministic)")
-    data = np.frombuffer(zlib.decompress(traj.data), dtype=np.float64).reshape(traj.rows, len(traj.columns))
-    return traj.columns, data
+    return traj.columns, unpack(traj.data, traj.rows, len(traj.columns))

@@ -123,7 +123,6 @@ def _store(factory: sessionmaker[Session], lease: _Lease, evaluation: _PendingEv
     score, samples, shown = scored
     metrics = {**shown.metrics, "n_samples": len(samples), "n_completed": score.n_completed,
                "J_samples_mean": score.J}
-    packed = storage.pack_trajectory(shown.trajectory)  # before the write lock (dropped if not kept)
     with storage.transaction(factory) as session:
         job = session.get(Job, lease.job_id)
         if job is None or job.runner_id != lease.runner:
@@ -134,9 +133,9 @@ def _store(factory: sessionmaker[Session], lease: _Lease, evaluation: _PendingEv
         storage.add_evaluation(session, job_id=lease.job_id, theta=evaluation.theta, J=score.J, status=score.status,
                                metrics=metrics, trigger_points=shown.trigger_points,
                                wall_ms=sum(o.wall_ms for o in evaluation.outcomes.values()),
-                               columns=shown.columns, trajectory=shown.trajectory,
+                               columns=shown.columns, trajectory=shown.packed,  # packed by its worker
                                seeds=[s.as_dict() for s in samples], trajectory_seed=shown.seed,
-                               max_trajectories=lease.max_trajectories, packed=packed,
+                               max_trajectories=lease.max_trajectories,
                                enqueued=evaluation.enqueued_id is not None)
         if evaluation.enqueued_id is not None:  # stored and taken off the queue in one commit
             enqueued.remove(session, row_id=evaluation.enqueued_id)

@@ -31,10 +31,10 @@ class ShuffledExecutor:
         def finish():
             time.sleep(delay_s)
             j = (theta["k"] - 0.05) ** 2 * 100 + (theta["dV"] - 0.1) ** 2 + 0.01 * seed - 2.0
-            future.set_result(EpisodeOutcome(theta=dict(theta), seed=seed, status="completed", J=j,
-                                             metrics={"completed_fraction": 1.0, "mean_abs_e_m": 0.1},
-                                             trigger_points=[], wall_ms=1.0, columns=["t_s"],
-                                             trajectory=np.zeros((2, 1))))
+            future.set_result(EpisodeOutcome.packing(theta=dict(theta), seed=seed, status="completed", J=j,
+                                                     metrics={"completed_fraction": 1.0, "mean_abs_e_m": 0.1},
+                                                     trigger_points=[], wall_ms=1.0, columns=["t_s"],
+                                                     trajectory=np.zeros((2, 1))))
 
         threading.Thread(target=finish, daemon=True).start()
         return future
@@ -160,10 +160,11 @@ class FailingSeedExecutor:
         self.ran.setdefault(theta["k"], []).append(seed)
         fails = theta["k"] > 0.06
         future: Future = Future()
-        future.set_result(EpisodeOutcome(theta=dict(theta), seed=seed, status="spun_out" if fails else "completed",
-                                         J=6.0 if fails else theta["k"] - 2.0,
-                                         metrics={"completed_fraction": 0.3 if fails else 1.0, "mean_abs_e_m": 0.1},
-                                         trigger_points=[], wall_ms=1.0, columns=["t_s"], trajectory=np.zeros((2, 1))))
+        future.set_result(EpisodeOutcome.packing(
+            theta=dict(theta), seed=seed, status="spun_out" if fails else "completed",
+            J=6.0 if fails else theta["k"] - 2.0,
+            metrics={"completed_fraction": 0.3 if fails else 1.0, "mean_abs_e_m": 0.1},
+            trigger_points=[], wall_ms=1.0, columns=["t_s"], trajectory=np.zeros((2, 1))))
         return future
 
     def shutdown(self) -> None:

@@ -50,9 +50,9 @@ class FakeCluster:
             job = seed // MAX_ROBUST_SAMPLES
             self.in_flight[job] -= 1
         j = (theta["k"] - 0.05) ** 2 * 100 + 0.01 * seed - 2.0
-        return EpisodeOutcome(theta=dict(theta), seed=seed, status="completed", J=j,
-                              metrics={"completed_fraction": 1.0, "mean_abs_e_m": 0.1}, trigger_points=[],
-                              wall_ms=1.0, columns=["t_s"], trajectory=np.zeros((2, 1)))
+        return EpisodeOutcome.packing(theta=dict(theta), seed=seed, status="completed", J=j,
+                                      metrics={"completed_fraction": 1.0, "mean_abs_e_m": 0.1}, trigger_points=[],
+                                      wall_ms=1.0, columns=["t_s"], trajectory=np.zeros((2, 1)))
 
     def submit(self, theta, config_doc, seed=0) -> Future:
         with self.lock:

@@ -14,6 +14,7 @@ import numpy as np
 
 from driftlab.core.robust import SampleResult
 from driftlab.core.statuses import EpisodeStatus
+from driftlab.db.trajectory_bytes import PackedTrajectory
 
 
 @dataclass
@@ -28,7 +29,15 @@ class EpisodeOutcome:
     trigger_points: list[dict[str, float]]
     wall_ms: float
     columns: list[str]
-    trajectory: np.ndarray
+    packed: PackedTrajectory  # packed where the episode ran: the server stores the bytes as they come
+
+    @classmethod
+    def packing(cls, *, trajectory: np.ndarray, **fields: Any) -> EpisodeOutcome:
+        return cls(packed=PackedTrajectory.of(trajectory), **fields)
+
+    @property
+    def trajectory(self) -> np.ndarray:
+        return self.packed.array(len(self.columns))
 
     @property
     def completed(self) -> bool:
@@ -67,6 +76,6 @@ def evaluate_episode(theta: dict[str, float], config_doc: dict[str, Any], seed: 
 
     config = _config_of(json.dumps(config_doc))  # key order kept: dotted keys apply in order
     result = run_episode(Theta.from_mapping(theta), config, seed=seed)
-    return EpisodeOutcome(theta=dict(theta), seed=seed, status=result.status, J=float(result.J),
-                          metrics=result.metrics.as_dict(), trigger_points=result.trigger_points,
-                          wall_ms=float(result.wall_ms), columns=list(COLUMNS), trajectory=result.trajectory)
+    return EpisodeOutcome.packing(theta=dict(theta), seed=seed, status=result.status, J=float(result.J),
+                                  metrics=result.metrics.as_dict(), trigger_points=result.trigger_points,
+                                  wall_ms=float(result.wall_ms), columns=list(COLUMNS), trajectory=result.trajectory)

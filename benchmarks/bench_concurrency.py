@@ -32,7 +32,7 @@ from dataclasses import replace
 
 os.environ.setdefault("OMP_NUM_THREADS", "1")
 
-from driftlab.core.tuning import TuningSpec  # noqa: E402
+from driftlab.core.tuning import DEFAULT_ROBUST_SAMPLES, TuningSpec  # noqa: E402
 from driftlab.db import storage, studies  # noqa: E402
 from driftlab.services.studies import start_study  # noqa: E402
 from driftlab.worker import job_loop  # noqa: E402
@@ -186,7 +186,7 @@ def measure(mode: str, db_dir: str, spec: dict, executor, workers: int) -> dict:
     return {"wall": wall, "rate": n / wall, "ask_ms": 1000 * statistics.median(meter.ask_s),
             "store_ms": 1000 * statistics.median(meter.store_s),
             "job": max(meter.thread_s.values()) / wall, "db": sum(meter.store_s) / wall, "cpu": cpu / wall,
-            "work": episodes_s / (workers * wall)}
+            "work": episodes_s / (workers * wall), "cpu_ms": 1000 * cpu / n}
 
 
 def _row(label: str, seq: dict, conc: dict) -> str:
@@ -215,6 +215,13 @@ def _limits(rows: list[tuple[int, dict, dict]]) -> None:
                  else "the jobs' asks (CPU)" if conc["cpu"] >= 0.8 else "latency (asks between rounds)")
         solo = "its optimizer" if seq["job"] >= 0.8 else "the workers" if seq["work"] >= 0.8 else "latency"
         print(f"  {n:>2} workers: one job at a time is bound by {solo}; 8 at once by {bound}")
+    print("\nshare of the cluster's capacity (N / (episode s x the job default's 4 seeds) evaluations/s) and this "
+          "process's CPU per evaluation, the 8 jobs at once:")
+    for n, _, conc in rows:
+        capacity = n / (EPISODE_S * DEFAULT_ROBUST_SAMPLES)
+        share = 100 * conc["rate"] / capacity
+        print(f"  {n:>2} workers: {conc['rate']:6.1f} of {capacity:6.0f} evaluations/s ({share:3.0f} %), "
+              f"{conc['cpu_ms']:5.1f} ms of CPU an evaluation")
 
 
 def simulated(workers: list[int], evaluations: int, db_dir: str) -> None:

@@ -48,7 +48,7 @@ def main() -> None:
 
 def mb_steps_of_an_episode() -> list[tuple]:
     """(state, steer, drive, dt, params, actuators) of each MB plant step of the preset's untuned episode."""
-    from driftlab.core.commonroad import plant as crp
+    from driftlab.core.commonroad import mb_plant as crp
     from driftlab.core.config import EpisodeConfig, Theta
     from driftlab.core.episode import run_episode
 
@@ -69,7 +69,7 @@ def mb_steps_of_an_episode() -> list[tuple]:
 
 def fastest_mode_per_s(z: np.ndarray, steer: float, drive: float, p: np.ndarray, act: np.ndarray) -> float:
     """The largest |eigenvalue| of MB's Jacobian (actuator included) at ``z``, by forward differences."""
-    from driftlab.core.commonroad.plant import _mb_integrated_derivatives
+    from driftlab.core.commonroad.mb_plant import _mb_integrated_derivatives
 
     u, f0, f = np.empty(2), np.empty(len(z)), np.empty(len(z))
     _mb_integrated_derivatives(z, steer, drive, p, act, u, f0)
@@ -83,7 +83,7 @@ def fastest_mode_per_s(z: np.ndarray, steer: float, drive: float, p: np.ndarray,
 
 
 def mb_substeps() -> None:
-    from driftlab.core.commonroad.plant import MB_FIRST, mb_plant_step
+    from driftlab.core.commonroad.mb_plant import MB_FIRST, mb_plant_step
 
     steps = mb_steps_of_an_episode()
     modes = [fastest_mode_per_s(s[MB_FIRST:], steer, drive, p, act) for s, steer, drive, _, p, act in steps[::10]]

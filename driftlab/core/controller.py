@@ -45,18 +45,28 @@ class ControllerModel:
 DISTURBANCE_LIMIT = np.array([5.0, 2.0, 5.0])
 
 
+DriftProblem = tuple[float, float, np.ndarray]  # radius [m], sideslip [rad], packed parameters
+
+
+def _drift_problems(vehicle: VehicleParams, left_radius_m: float, right_radius_m: float,
+                    sideslip_rad: float) -> tuple[DriftProblem, DriftProblem | None]:
+    """(radius, sideslip, packed parameters) of each side's drift; the right side None where it is the left one
+    mirrored (equal radii, a symmetric model: the same solve in the same left-hand form, the same bits)."""
+    left_params, right_params = pack_params(vehicle), pack_params(vehicle, right=True)
+    left = (left_radius_m, -abs(sideslip_rad), left_params)
+    if right_radius_m == left_radius_m and np.array_equal(right_params, left_params):
+        return left, None
+    return left, (right_radius_m, abs(sideslip_rad), right_params)
+
+
 @lru_cache(maxsize=16)
 def _reference_equilibria(vehicle: VehicleParams, left_radius_m: float, right_radius_m: float,
                           sideslip_rad: float) -> tuple[Equilibrium, Equilibrium]:
-    # drift_equilibrium solves the left-hand form and mirrors it: the right side's offsets in that form.
-    left_params, right_params = pack_params(vehicle), pack_params(vehicle, right=True)
-    left = drift_equilibrium(left_radius_m, -abs(sideslip_rad), left_params)
-    if right_radius_m == left_radius_m and np.array_equal(right_params, left_params):
-        # The same solve in the same left-hand form, mirrored: the same bits, one solve (~3.4 ms) instead of two
-        # (with the model corrections every evaluation's theta is a new model, built in each worker that runs one
-        # of its seeds).
-        return left, left.mirrored()
-    return left, drift_equilibrium(right_radius_m, abs(sideslip_rad), right_params)
+    # One solve instead of two where the right drift is the left one mirrored (~3.4 ms; with the model corrections
+    # every evaluation's theta is a new model, built in each worker that runs one of its seeds).
+    left_problem, right_problem = _drift_problems(vehicle, left_radius_m, right_radius_m, sideslip_rad)
+    left = drift_equilibrium(*left_problem)
+    return left, left.mirrored() if right_problem is None else drift_equilibrium(*right_problem)
 
 
 def no_drift_reason(vehicle: VehicleParams, left_radius_m: float, right_radius_m: float,
@@ -73,12 +83,8 @@ def no_drift_reason(vehicle: VehicleParams, left_radius_m: float, right_radius_m
 def has_drift(vehicle: VehicleParams, left_radius_m: float, right_radius_m: float, sideslip_rad: float) -> bool:
     """Whether :func:`no_drift_reason` is None, answered by each side's first start that finds its drift
     (:func:`driftlab.core.equilibrium.has_drift_equilibrium`): the optimizer's check of every proposal."""
-    left_params, right_params = pack_params(vehicle), pack_params(vehicle, right=True)
-    if not has_drift_equilibrium(left_radius_m, -abs(sideslip_rad), left_params):
-        return False
-    if right_radius_m == left_radius_m and np.array_equal(right_params, left_params):
-        return True  # its right drift is its left one mirrored
-    return has_drift_equilibrium(right_radius_m, abs(sideslip_rad), right_params)
+    return all(problem is None or has_drift_equilibrium(*problem)
+               for problem in _drift_problems(vehicle, left_radius_m, right_radius_m, sideslip_rad))
 
 
 @lru_cache(maxsize=16)

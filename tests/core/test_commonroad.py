@@ -205,7 +205,7 @@ def test_an_mb_episode_runs_in_the_same_loop_and_is_pure():
 
 
 def test_mb_stepped_in_its_compiled_loop_is_mb_stepped_from_python_bit_for_bit(monkeypatch):
-    from driftlab.core.commonroad.plant import CommonRoadMbPlant
+    from driftlab.core.commonroad.mb_plant import CommonRoadMbPlant
 
     config = apply_overrides(EpisodeConfig.preset("commonroad_mb"), {"scenario.max_time_s": 4.0})
     compiled = run_episode(Theta(), config, seed=2)
@@ -219,7 +219,7 @@ def test_mb_stepped_in_its_compiled_loop_is_mb_stepped_from_python_bit_for_bit(m
 def test_mbs_substep_integrates_a_control_step_as_a_fine_one_does(monkeypatch):
     """The preset's RK4 substep against a 0.1 ms one, over the control steps of an episode: the fastest mode (a
     wheel's speed, ~ -300 1/s) stays inside RK4's stability bound and the step's error is far below the noise."""
-    from driftlab.core.commonroad import plant as crp
+    from driftlab.core.commonroad import mb_plant as crp
 
     config = apply_overrides(EpisodeConfig.preset("commonroad_mb"), {"scenario.max_time_s": 3.0})
     steps = []

@@ -89,7 +89,7 @@ class CommonRoadPlantType(PlantType):
         """The rear wheel starts at the slip ratio of the car's own (left-hand) drift there: any other start is a
         step of the rear force the first seconds spend recovering from, or do not (the VW Vanagon drifts at 0.62
         rad, 44 m with its rear wheel at -0.93; started at -0.5 it grips up within 3 s). The multi-body car
-        starts every wheel in its own drift already (driftlab.core.commonroad.plant.CommonRoadMbPlant)."""
+        starts every wheel in its own drift already (driftlab.core.commonroad.mb_plant.CommonRoadMbPlant)."""
         if self.multibody:
             return config
         family = self.drifts(config.commonroad_vehicle, radius_m, sideslip_rad, False, config.friction_scale,
@@ -151,7 +151,7 @@ COMMONROAD_BUILT_INS = (
     # MB at 3 ms (17 RK4 substeps a control step): its fastest mode, a front wheel's speed, is -260 to -350 1/s in
     # the drift and ~ -580 1/s at 9 m/s (docs/results.md), inside RK4's real-axis bound 2.785 / h = 950 1/s above
     # the failure limit's 8 m/s; a control step lands within 2e-5 m and rad of a 0.1 ms reference.
-    CommonRoadPlantType("commonroad_mb", "driftlab.core.commonroad.plant:CommonRoadMbPlant", multibody=True,
+    CommonRoadPlantType("commonroad_mb", "driftlab.core.commonroad.mb_plant:CommonRoadMbPlant", multibody=True,
                         substep_s=0.003, weights="driftlab.core.commonroad.weights:mb_weights",
                         preset_name="commonroad_mb"),
     # The package's own Python functions behind the same actuators: the reference STD is checked against.

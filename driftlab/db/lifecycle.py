@@ -96,12 +96,16 @@ def release(session: Session, *, job_id: int, runner: str, status: JobStatus, er
             stop_reason: str | None = None) -> None:
     """The runner stops: the job takes ``status`` unless someone changed it meanwhile (driftlab.db.lease), adds this
     run's wall time to the time it has run in all (``run_s``, what a time budget counts), and keeps the stop rule
-    that finished it, if one did."""
+    that finished it, if one did. A job the runner would finish goes back to the queue instead when its budget
+    was raised after the runner last read it (a PATCH between the runner's last look and this transaction)."""
     job = session.get(Job, job_id)
     if job is not None and job.runner_id == runner and job.started_at is not None:
         ran_s = (lease.naive(utcnow()) - lease.naive(job.started_at)).total_seconds()
         job.run_s = (job.run_s or 0.0) + max(ran_s, 0.0)
         job.stop_reason = stop_reason
+        if (status == JobStatus.FINISHED and stop_reason is None
+                and int(job.spec["iterations"]) > count_evaluations(session, job_id=job_id)):
+            status = JobStatus.QUEUED
     lease.release(session, Job, row_id=job_id, runner=runner, status=status, error=error)
 
 

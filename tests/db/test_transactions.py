@@ -76,3 +76,25 @@ def test_two_writers_never_store_the_same_index(factory):
         w.join()
     with storage.snapshot(factory) as session:
         assert sorted(e.index for e in storage.evaluations(session, job_id=1)) == list(range(40))
+
+
+def test_a_budget_raised_after_the_runners_last_look_queues_the_job_it_would_finish(factory):
+    with storage.transaction(factory) as session:
+        lifecycle.claim(session, job_id=1, runner="r")
+    for _ in range(2):
+        with storage.transaction(factory) as session:
+            storage.add_evaluation(session, job_id=1, theta={"k": 0.1}, J=1.0, status="completed", metrics={},
+                                   trigger_points=[], wall_ms=1.0, columns=["t"], trajectory=np.zeros((2, 1)))
+    with storage.transaction(factory) as session:  # the runner read 2 as its budget; a PATCH raises it to 5
+        lifecycle.extend(session, job_id=1, iterations=5)
+    with storage.transaction(factory) as session:
+        lifecycle.release(session, job_id=1, runner="r", status=lifecycle.JobStatus.FINISHED)
+    with storage.snapshot(factory) as session:
+        job = session.get(Job, 1)
+        assert (job.status, job.runner_id) == ("queued", None)
+    with storage.transaction(factory) as session:  # a budget that is spent finishes it
+        lifecycle.claim(session, job_id=1, runner="r2")
+        lifecycle.extend(session, job_id=1, iterations=2)
+        lifecycle.release(session, job_id=1, runner="r2", status=lifecycle.JobStatus.FINISHED)
+    with storage.snapshot(factory) as session:
+        assert session.get(Job, 1).status == "finished"

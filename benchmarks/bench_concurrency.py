@@ -16,7 +16,7 @@ optimizer is the limit), "db" the write transactions' share of the wall time (ne
 workers' (episode time / (N x wall)), and "cpu" this process's CPU seconds per wall second (2 cores here).
 
 Run: OMP_NUM_THREADS=1 python benchmarks/bench_concurrency.py [--workers 1 2 4 8 16 32] [--evaluations 30]
-     [--real-evaluations 6] [--real-repeats 3] [--skip-real] [--skip-simulated]
+     [--real-evaluations 6] [--real-repeats 3] [--skip-real] [--skip-simulated] [--optimizer-process] [--db URL]
 """
 
 from __future__ import annotations
@@ -124,12 +124,15 @@ class Meter:
 DATABASE_URL: str | None = None  # --db: every measurement's study in this database (else an SQLite file each)
 
 
-def _study(db_dir: str, spec: dict, name: str):
-    factory = storage.open_database(DATABASE_URL or f"sqlite:///{os.path.join(db_dir, name + '.db')}")
+def _database(db_dir: str, name: str):
+    return storage.open_database(DATABASE_URL or f"sqlite:///{os.path.join(db_dir, name + '.db')}")
+
+
+def _study(factory, spec: dict):
     with storage.transaction(factory) as session:
         study = start_study(session, doc={"kind": "seeds", "seeds": SEEDS, "spec": spec})
         jobs = [j.id for j in studies.study_jobs(session, study_id=study.id)]
-    return factory, study.id, jobs
+    return study.id, jobs
 
 
 def _one_after_another(factory, jobs, executor, workers: int) -> None:
@@ -151,31 +154,44 @@ class _Lent:
         pass
 
 
-def _at_once(factory, study_id, executor, workers: int) -> None:
-    runner = JobRunner(factory, workers=workers)
+OPTIMIZER_PROCESS = False  # --optimizer-process: the runner's jobs ask in processes of their own
+
+
+def started_runner(factory, executor, workers: int) -> JobRunner:
+    """The server's runner, started (its optimizer processes answering) before the study it will run exists: a
+    server runs many studies, and starts once."""
+    runner = JobRunner(factory, workers=workers, optimizer_process=OPTIMIZER_PROCESS)
     runner.start(executor=_Lent(executor))
-    try:
-        while True:
-            with storage.snapshot(factory) as session:
-                status = studies.study_status(session, studies.get_study(session, study_id=study_id))
-            if status == "finished":
-                return
-            if status in ("failed", "paused"):
-                raise RuntimeError(f"the study is {status}")
-            time.sleep(0.05)
-    finally:
-        runner.stop()
+    if runner.optimizers is not None:
+        runner.optimizers.wait_started()
+    return runner
+
+
+def _at_once(factory, study_id, runner: JobRunner) -> None:
+    runner.wake()
+    while True:
+        with storage.snapshot(factory) as session:
+            status = studies.study_status(session, studies.get_study(session, study_id=study_id))
+        if status == "finished":
+            return
+        if status in ("failed", "paused"):
+            raise RuntimeError(f"the study is {status}")
+        time.sleep(0.05)
 
 
 def measure(mode: str, db_dir: str, spec: dict, executor, workers: int) -> dict:
-    factory, study_id, jobs = _study(db_dir, spec, f"{mode}-{workers}-{time.monotonic_ns()}")
+    factory = _database(db_dir, f"{mode}-{workers}-{time.monotonic_ns()}")
+    runner = started_runner(factory, executor, workers) if mode != "sequential" else None
+    study_id, jobs = _study(factory, spec)
     with Meter() as meter:
         wall0, cpu0 = time.perf_counter(), time.process_time()
-        if mode == "sequential":
+        if runner is None:
             _one_after_another(factory, jobs, executor, workers)
         else:
-            _at_once(factory, study_id, executor, workers)
+            _at_once(factory, study_id, runner)
         wall, cpu = time.perf_counter() - wall0, time.process_time() - cpu0
+    if runner is not None:
+        runner.stop()
     with storage.snapshot(factory) as session:
         stored = [storage.evaluations(session, job_id=j) for j in jobs]
     for evaluations in stored:  # numbered once each, none missing
@@ -265,10 +281,13 @@ def main() -> None:
     parser.add_argument("--skip-simulated", action="store_true")
     parser.add_argument("--db", help="an SQLAlchemy URL every study is stored in, e.g. a PostgreSQL database "
                                      "(postgresql+psycopg://...); default: a new SQLite file per measurement")
+    parser.add_argument("--optimizer-process", action="store_true",
+                        help="the runner's jobs ask in processes of their own (DRIFTLAB_OPTIMIZER_PROCESS=1)")
     args = parser.parse_args()
-    global DATABASE_URL
-    DATABASE_URL = args.db
-    print(f"storage: {storage.open_database(args.db).kw['bind'].dialect.name if args.db else 'sqlite'}")
+    global DATABASE_URL, OPTIMIZER_PROCESS
+    DATABASE_URL, OPTIMIZER_PROCESS = args.db, args.optimizer_process
+    print(f"storage: {storage.open_database(args.db).kw['bind'].dialect.name if args.db else 'sqlite'}; the jobs "
+          f"ask {'in processes of their own' if args.optimizer_process else 'on their threads'} (at once)")
     with tempfile.TemporaryDirectory() as db_dir:
         if not args.skip_simulated:
             simulated(args.workers, args.evaluations, db_dir)

@@ -47,11 +47,13 @@ class Settings(BaseSettings):
         request_threads: threads that run the API's request handlers at once (DRIFTLAB_REQUEST_THREADS, default 8;
             FastAPI's own default is 40): the handlers share one interpreter, and 40 threads taking turns at it
             served no more requests than 8, only in a less fair order (the longest waits grew).
-        optimizer_process: the running jobs' optimizers (ask and tell) in one process beside the server
-            (DRIFTLAB_OPTIMIZER_PROCESS=1; default off: each on its job's thread). Measured both ways in
-            docs/benchmarks.md: with one job and 30 API clients on 2 cores, on: 80 requests/s and 145 evaluations
-            of the job in 90 s (off: 65-73 and 88-111); with an 8-job study on a simulated 16-worker cluster, on:
-            27-28 evaluations/s against 39 off (the one process takes every job's asks in turn).
+        optimizer_process: each running job's optimizer (ask and tell) in a process of its own beside the server
+            (DRIFTLAB_OPTIMIZER_PROCESS=1; default off: each on its job's thread; up to 8 processes started with
+            the runner, each ~100 MB). Measured both ways in docs/benchmarks.md: with one job and 30 API clients on
+            2 cores, on: 80 requests/s and 145 evaluations of the job in 90 s (off: 65-73 and 88-111); with an
+            8-job study on a simulated 16-worker cluster, on: 113-130 evaluations/s against 90-103 off. Off by
+            default because a local 2-core server gains little and starts each process's imports (~1 s of a
+            core); compose.yaml (a cluster) sets it.
         max_rescore_episodes: episodes that queued and running rescores may wait for, all jobs together
             (DRIFTLAB_MAX_RESCORE_EPISODES, default 5000): rescores share the job runner's workers.
     """

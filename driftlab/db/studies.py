@@ -88,7 +88,7 @@ def study_status(session: Session, study: Study) -> str:
     any waits, else paused, failed, or finished when all are."""
     if study.kind != StudyKind.SEEDS:
         return study.status
-    statuses = {j.status for j in study_jobs(session, study_id=study.id)}
+    statuses = set(session.scalars(select(Job.status).where(Job.study_id == study.id).distinct()))
     for status in (JobStatus.RUNNING, JobStatus.QUEUED, JobStatus.PAUSED, JobStatus.FAILED):
         if status in statuses:
             return str(status)

@@ -20,7 +20,7 @@ from driftlab.core.convergence import best_so_far
 from driftlab.core.robust import RobustScore, SampleResult, aggregate
 from driftlab.core.statuses import EpisodeStatus
 from driftlab.core.tuning import TuningSpec
-from driftlab.db import enqueued, lifecycle, storage
+from driftlab.db import enqueued, group_commit, lifecycle, storage
 from driftlab.db.lifecycle import JobStatus
 from driftlab.db.models import Job
 from driftlab.settings import MAX_TRAJECTORIES_PER_JOB
@@ -123,14 +123,16 @@ def _store(factory: sessionmaker[Session], lease: _Lease, evaluation: _PendingEv
     score, samples, shown = scored
     metrics = {**shown.metrics, "n_samples": len(samples), "n_completed": score.n_completed,
                "J_samples_mean": score.J}
-    with storage.transaction(factory) as session:
-        job = session.get(Job, lease.job_id)
+
+    def store(session: Session) -> str:
+        job = storage.job_for_store(session, job_id=lease.job_id)
         if job is None or job.runner_id != lease.runner:
             return LOST
-        lease.observe(job)
-        if storage.count_evaluations(session, job_id=lease.job_id) >= lease.iterations:
+        lease.observe(job.status, job.iterations)
+        if job.n_evaluations >= lease.iterations:
             return OVER_BUDGET
-        storage.add_evaluation(session, job_id=lease.job_id, theta=evaluation.theta, J=score.J, status=score.status,
+        storage.add_evaluation(session, job_id=lease.job_id, index=job.n_evaluations, theta=evaluation.theta,
+                               J=score.J, status=score.status,
                                metrics=metrics, trigger_points=shown.trigger_points,
                                wall_ms=sum(o.wall_ms for o in evaluation.outcomes.values()),
                                columns=shown.columns, trajectory=shown.packed,  # packed by its worker
@@ -139,7 +141,9 @@ def _store(factory: sessionmaker[Session], lease: _Lease, evaluation: _PendingEv
                                enqueued=evaluation.enqueued_id is not None)
         if evaluation.enqueued_id is not None:  # stored and taken off the queue in one commit
             enqueued.remove(session, row_id=evaluation.enqueued_id)
-    return STORED
+        return STORED
+
+    return group_commit.write(factory, store)  # committed with the other jobs' evaluations waiting then
 
 
 def claim_job(factory: sessionmaker[Session], job_id: int, runner: str,
@@ -163,10 +167,10 @@ class _Lease:
         self.enqueued = True  # until the first ask has looked
         self._last = time.monotonic()
 
-    def observe(self, job: Job) -> None:
+    def observe(self, status: str, iterations: int) -> None:
         """What the stored job says now: paused (by a request) means stop; the budget may have changed."""
-        self.iterations = int(job.spec["iterations"])
-        if job.status != JobStatus.RUNNING:
+        self.iterations = iterations
+        if status != JobStatus.RUNNING:
             self.held = False
 
     def renew_if_due(self, force: bool = False) -> None:
@@ -176,7 +180,7 @@ class _Lease:
             self.held = lifecycle.heartbeat(session, job_id=self.job_id, runner=self.runner)
             job = session.get(Job, self.job_id)
             if job is not None:
-                self.observe(job)
+                self.observe(job.status, int(job.spec["iterations"]))
             self.enqueued = enqueued.any_waiting(session, job_id=self.job_id)
         self._last = time.monotonic()
 

@@ -29,6 +29,9 @@ from driftlab.worker.rescoring import run_rescore
 from driftlab.worker.slots import EpisodeSlots
 from driftlab.worker.study_runner import run_study
 
+# Optimizer processes started with the runner (DRIFTLAB_OPTIMIZER_PROCESS=1): a job beyond them starts its own.
+OPTIMIZER_PROCESSES_AT_START = 8
+
 
 class JobRunner:
     def __init__(self, factory: sessionmaker[Session], workers: int | None = 2, poll_s: float = 0.2,
@@ -54,6 +57,11 @@ class JobRunner:
         self.current_study_id: int | None = None
 
     @property
+    def optimizers(self) -> OptimizerHost | None:
+        """The jobs' optimizer processes (None: the jobs ask on their own threads)."""
+        return self._optimizers
+
+    @property
     def running_job_ids(self) -> list[int]:
         """The jobs this runner runs now (several at once, up to the executor's capacity)."""
         return [] if self._jobs is None else self._jobs.running
@@ -69,8 +77,8 @@ class JobRunner:
         self._jobs = JobPool(self.factory, self._executor, self._slots, runner=self.runner_id,
                              should_stop=self._stop.is_set, max_trajectories=self.max_trajectories_per_job,
                              optimizers=self._optimizers, on_done=lambda job_id, status: self._wake.set())
-        if self._optimizers is not None:
-            self._optimizers.start()
+        if self._optimizers is not None:  # one a job, for as many jobs as the executor runs at once (at most 8)
+            self._optimizers.start(processes=min(self.workers, OPTIMIZER_PROCESSES_AT_START))
         self._thread = threading.Thread(target=self._loop, name="driftlab-job-runner", daemon=True)
         self._thread.start()
 

@@ -1,15 +1,16 @@
-"""Jobs' optimizers in a process beside the server's (DRIFTLAB_OPTIMIZER_PROCESS=1): ask and tell run there, the job
-loop only sends thetas and values.
+"""Jobs' optimizers in processes beside the server's (DRIFTLAB_OPTIMIZER_PROCESS=1), one a job: ask and tell run
+there, the job loop only sends thetas and values.
 
 An ask is the Bayesian optimizer's whole work (the GP's hyperparameters fitted, the acquisition maximized from many
 starts): 20 ms to 0.7 s of Python. On a thread of the server it held the one interpreter that also answers every
 request; in a 30-client load with one job running it was 19% of what held the server's interpreter. Here it runs on
-another core. Every running job's optimizer lives in the one host process, keyed by a name of its own; the calls
-are the same as on a local optimizer, in the same order, with the same arguments, so a job asks what it asked in
-the server's thread (the host inherits the server's environment, and with it the BLAS thread count).
+another core, and the running jobs' asks run at once (in one shared process they took turns: an 8-job study asked
+slower there than on the jobs' threads). The calls are the same as on a local optimizer, in the same order, with
+the same arguments, so a job asks what it asked in the server's thread (the processes inherit the server's
+environment, and with it the BLAS thread count).
 
-If the host dies, the next call starts a new one and restores the optimizer from what was told so far, as a job
-resumed after a crash is (:func:`restore_optimizer`, which the job loop uses on its own thread too).
+If a job's process dies, the next call starts a new one and restores the optimizer from what was told so far, as a
+job resumed after a crash is (:func:`restore_optimizer`, which the job loop uses on its own thread too).
 """
 
 from __future__ import annotations
@@ -20,32 +21,51 @@ import threading
 import uuid
 from concurrent.futures import ProcessPoolExecutor
 from concurrent.futures.process import BrokenProcessPool
-from typing import Any
+from dataclasses import dataclass
+from typing import TYPE_CHECKING, Any
 
 from driftlab.core.optimizer import BayesianOptimizer
-from driftlab.core.tuning import TuningSpec
 from driftlab.worker.child_process import follow_parent
+
+if TYPE_CHECKING:  # an optimizer process imports this module: not the config's parsing and physics
+    from driftlab.core.tuning import TuningSpec
 
 History = list[tuple[dict[str, float], float | None, float]]
 
-def restore_optimizer(spec: TuningSpec, history: list[tuple[dict[str, float], float | None, float]]
-                      ) -> BayesianOptimizer:
+
+@dataclass(frozen=True)
+class OptimizerStart:
+    """What a job's optimizer is built from: its bounds and options, and what its warm start tells it first
+    (theta, value, stored J). Plain values: an optimizer process builds it without parsing the job's config."""
+
+    bounds: dict[str, tuple[float, float]]
+    options: dict[str, Any]
+    told: History
+
+    @classmethod
+    def of(cls, spec: TuningSpec) -> OptimizerStart:
+        told = [(o.theta, o.value, o.stored_j) for o in spec.warm_start.told] if spec.warm_start is not None else []
+        return cls(dict(spec.bounds), dict(spec.optimizer_options), told)
+
+    def restored(self, history: History) -> BayesianOptimizer:
+        optimizer = BayesianOptimizer(self.bounds, **self.options)
+        for theta, value, stored_j in [*self.told, *history]:
+            optimizer.tell(theta, value, stored_j)
+        return optimizer
+
+
+def restore_optimizer(spec: TuningSpec, history: History) -> BayesianOptimizer:
     """An optimizer in the state it had after telling ``history`` (theta, J or None if failed, the stored J), told
     first what the job's warm start takes from jobs of its own config (driftlab.core.warm_start)."""
-    optimizer = BayesianOptimizer(spec.bounds, **spec.optimizer_options)
-    for observation in spec.warm_start.told if spec.warm_start is not None else ():
-        optimizer.tell(observation.theta, observation.value, observation.stored_j)
-    for theta, value, stored_j in history:
-        optimizer.tell(theta, value, stored_j)
-    return optimizer
+    return OptimizerStart.of(spec).restored(history)
 
 
-# In the host process: the optimizers of the jobs it serves.
+# In an optimizer process: the optimizer of the job it serves (a process serves one job at a time).
 _OPTIMIZERS: dict[str, Any] = {}
 
 
-def _open(key: str, spec_doc: dict[str, Any], history: History) -> None:
-    _OPTIMIZERS[key] = restore_optimizer(TuningSpec.from_dict(spec_doc), history)
+def _open(key: str, start: OptimizerStart, history: History) -> None:
+    _OPTIMIZERS[key] = start.restored(history)
 
 
 def _ask(key: str) -> dict[str, float]:
@@ -60,6 +80,16 @@ def _close(key: str) -> None:
     _OPTIMIZERS.pop(key, None)
 
 
+def _warm() -> int:
+    """What a job's first ask would load otherwise (~1 s of a core): the episode module its known constraint calls
+    (a theta whose corrected model has no drift is not asked), and that check's compiled functions."""
+    from driftlab.core.config import EpisodeConfig
+    from driftlab.core.episode import runs
+
+    runs(EpisodeConfig(), {})
+    return os.getpid()
+
+
 def _init_host(niceness: int, parent_pid: int) -> None:
     if niceness:
         os.nice(niceness)
@@ -68,40 +98,18 @@ def _init_host(niceness: int, parent_pid: int) -> None:
     follow_parent(parent_pid, kernel_signal=False)
 
 
-class OptimizerHost:
-    """The process that holds the running jobs' optimizers (started with the runner, :meth:`start`; spawned: the
-    server has threads, and a fork would copy their locks)."""
+class _Process:
+    """One optimizer process (spawned: the server has threads, and a fork would copy their locks); a dead one is
+    replaced on the next call."""
 
-    def __init__(self, niceness: int = 0) -> None:
-        """``niceness`` > 0 lowers the host's CPU priority (a job's work, below the requests the server answers)."""
+    def __init__(self, niceness: int) -> None:
         self.niceness = niceness
         self._pool: ProcessPoolExecutor | None = None
+        self._ended: ProcessPoolExecutor | None = None
         self._lock = threading.Lock()
-
-    def start(self) -> None:
-        """Start the host process now (else the first job's first ask waits ~1 s for it)."""
-        self.call(os.getpid)
-
-    def open(self, spec: TuningSpec, history: History) -> RemoteOptimizer:
-        """The job's optimizer, in the state it had after telling ``history``."""
-        optimizer = RemoteOptimizer(self, spec.to_dict(), list(history))
-        optimizer.restore()
-        return optimizer
 
     def call(self, fn, *args) -> Any:
         return self.current_pool().submit(fn, *args).result()
-
-    def replace_broken(self, broken: ProcessPoolExecutor) -> None:
-        with self._lock:
-            if self._pool is broken:
-                self._pool = None
-        broken.shutdown(wait=False, cancel_futures=True)
-
-    def shutdown(self) -> None:
-        with self._lock:
-            pool, self._pool = self._pool, None
-        if pool is not None:
-            pool.shutdown(wait=True, cancel_futures=True)
 
     def current_pool(self) -> ProcessPoolExecutor:
         with self._lock:
@@ -110,16 +118,102 @@ class OptimizerHost:
                                                  initializer=_init_host, initargs=(self.niceness, os.getpid()))
             return self._pool
 
+    def replace_broken(self, broken: ProcessPoolExecutor) -> None:
+        with self._lock:
+            if self._pool is broken:
+                self._pool = None
+        broken.shutdown(wait=False, cancel_futures=True)
+
+    def shutdown(self, wait: bool = True) -> None:
+        with self._lock:
+            pool, self._pool = self._pool, None
+            self._ended = pool
+        if pool is not None:
+            pool.shutdown(wait=wait, cancel_futures=True)
+
+    def join(self) -> None:
+        """Wait until the process told to end (:meth:`shutdown`) has."""
+        if self._ended is not None:
+            self._ended.shutdown(wait=True)
+
+
+class OptimizerHost:
+    """The running jobs' optimizers, each job's in a process of its own: the jobs' asks run at once on as many
+    cores as there are, and none of them on the server's interpreter. A process whose job ended waits for the next
+    job (starting one costs ~1 s of imports), so a server keeps as many as it ran jobs at once."""
+
+    def __init__(self, niceness: int = 0) -> None:
+        """``niceness`` > 0 lowers the processes' CPU priority (a job's work, below the requests the server answers)."""
+        self.niceness = niceness
+        self._lock = threading.Lock()
+        self._idle: list[_Process] = []
+        self._busy: set[_Process] = set()
+        self._closed = False
+
+    def start(self, processes: int = 1) -> None:
+        """Start ``processes`` idle processes (else the first jobs' first asks wait for theirs); returns at once."""
+        started = [_Process(self.niceness) for _ in range(processes)]
+        for process in started:
+            process.current_pool().submit(_warm)
+        with self._lock:
+            self._idle.extend(started)
+
+    def wait_started(self) -> None:
+        """Return once every idle process answers."""
+        with self._lock:
+            idle = list(self._idle)
+        for process in idle:
+            process.call(os.getpid)
+
+    def open(self, spec: TuningSpec, history: History) -> RemoteOptimizer:
+        """The job's optimizer, in a process of its own, in the state it had after telling ``history``."""
+        optimizer = RemoteOptimizer(self, self._take(), OptimizerStart.of(spec), list(history))
+        optimizer.restore()
+        return optimizer
+
+    def _take(self) -> _Process:
+        with self._lock:
+            if self._closed:
+                raise RuntimeError("the optimizer host is shut down")
+            process = self._idle.pop() if self._idle else _Process(self.niceness)
+            self._busy.add(process)
+        return process
+
+    def release(self, process: _Process) -> None:
+        """A job's optimizer is closed: its process waits for the next job."""
+        with self._lock:
+            self._busy.discard(process)
+            if not self._closed:
+                self._idle.append(process)
+                return
+        process.shutdown(wait=False)
+
+    def shutdown(self) -> None:
+        with self._lock:
+            self._closed = True
+            processes = [*self._idle, *self._busy]
+            self._idle.clear()
+            self._busy.clear()
+        for process in processes:  # all told to end first: each ends on its own clock
+            process.shutdown(wait=False)
+        for process in processes:
+            process.join()
+
 
 class RemoteOptimizer:
-    """A job's optimizer in the host: ask and tell as on driftlab.core.optimizer.BayesianOptimizer."""
+    """A job's optimizer in its process: ask and tell as on driftlab.core.optimizer.BayesianOptimizer."""
 
-    def __init__(self, host: OptimizerHost, spec_doc: dict[str, Any], history: History) -> None:
-        self._host, self._spec_doc, self._told = host, spec_doc, history
+    def __init__(self, host: OptimizerHost, process: _Process, start: OptimizerStart, history: History) -> None:
+        self._host, self._process, self._start, self._told = host, process, start, history
         self._key = uuid.uuid4().hex
 
+    @property
+    def pid(self) -> int:
+        """Its process's id (a test kills it)."""
+        return self._process.call(os.getpid)
+
     def restore(self) -> None:
-        self._host.call(_open, self._key, self._spec_doc, self._told)
+        self._process.call(_open, self._key, self._start, self._told)
 
     def ask(self) -> dict[str, float]:
         return self._call(_ask, self._key)
@@ -130,15 +224,16 @@ class RemoteOptimizer:
 
     def close(self) -> None:
         try:
-            self._host.call(_close, self._key)
+            self._process.call(_close, self._key)
         except (BrokenProcessPool, RuntimeError):
-            pass  # the host is gone or shut down, and this optimizer with it
+            self._process.shutdown(wait=False)  # gone: the next job that takes it starts a new one
+        self._host.release(self._process)
 
     def _call(self, fn, *args) -> Any:
-        pool = self._host.current_pool()
+        pool = self._process.current_pool()
         try:
             return pool.submit(fn, *args).result()
         except BrokenProcessPool:
-            self._host.replace_broken(pool)
+            self._process.replace_broken(pool)
             self.restore()
-            return self._host.call(fn, *args)
+            return self._process.call(fn, *args)

@@ -98,3 +98,53 @@ def test_a_budget_raised_after_the_runners_last_look_queues_the_job_it_would_fin
         lifecycle.release(session, job_id=1, runner="r2", status=lifecycle.JobStatus.FINISHED)
     with storage.snapshot(factory) as session:
         assert session.get(Job, 1).status == "finished"
+
+
+def _writes_behind_a_held_writer(factory, writes: dict) -> dict:
+    """Each of ``writes`` (name -> fn(session)) handed to the group committer on a thread of its own while its writer
+    thread is held by a first write; their results (or exceptions) by name."""
+    from driftlab.db import group_commit
+
+    release, results = threading.Event(), {}
+
+    def call(name, fn):
+        try:
+            results[name] = group_commit.write(factory, fn)
+        except ValueError as exc:
+            results[name] = exc
+
+    first = threading.Thread(target=call, args=("first", lambda session: release.wait(5)))
+    first.start()
+    time.sleep(0.2)
+    threads = [threading.Thread(target=call, args=item) for item in writes.items()]
+    for thread in threads:
+        thread.start()
+    time.sleep(0.2)
+    release.set()
+    for thread in [first, *threads]:
+        thread.join(10)
+    return results
+
+
+def _append(session, j):
+    return storage.add_evaluation(session, job_id=1, theta={"k": j}, J=j, status="completed", metrics={},
+                                  trigger_points=[], wall_ms=1.0, columns=["t"], trajectory=np.zeros((2, 1))).index
+
+
+def test_writes_waiting_together_commit_together_and_one_writes_error_is_its_callers_alone(factory):
+    from sqlalchemy import event
+
+    commits = []
+    engine = storage.engine_of(factory)
+    event.listen(engine, "commit", lambda connection: commits.append(1))
+    together = _writes_behind_a_held_writer(factory, {"a": lambda s: _append(s, 1.0), "b": lambda s: _append(s, 2.0)})
+    assert sorted([together["a"], together["b"]]) == [0, 1] and len(commits) == 2  # the held write's, then one
+
+    def broken(session):
+        _append(session, 9.0)  # written, then rolled back with its error
+        raise ValueError("this write's own error")
+
+    apart = _writes_behind_a_held_writer(factory, {"bad": broken, "c": lambda s: _append(s, 3.0)})
+    assert isinstance(apart["bad"], ValueError) and apart["c"] == 2
+    with storage.snapshot(factory) as session:
+        assert sorted(e.J for e in storage.evaluations(session, job_id=1)) == [1.0, 2.0, 3.0]

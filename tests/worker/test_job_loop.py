@@ -66,8 +66,8 @@ def _thetas(tmp_path, name, deterministic, workers, rng_seed, optimizers=None):
 
 
 def test_the_optimizer_host_asks_what_the_optimizer_asks_on_the_jobs_thread(tmp_path):
-    """The server's jobs ask in a process beside it (driftlab.worker.optimizer_host): the same thetas, bit for bit,
-    and a host that dies mid-job is replaced and restored from what was told."""
+    """The server's jobs ask in processes beside it, one a job (driftlab.worker.optimizer_host): the same thetas, bit
+    for bit, and a job's process that dies mid-job is replaced and restored from what was told."""
     here = _thetas(tmp_path, "here", True, 1, 0)
     host = OptimizerHost()
     try:
@@ -76,11 +76,15 @@ def test_the_optimizer_host_asks_what_the_optimizer_asks_on_the_jobs_thread(tmp_
         first = [remote.ask() for _ in range(2)]
         for theta in first:
             remote.tell(theta, 1.0, 1.0)
-        pid = host.call(os.getpid)
+        other = host.open(TuningSpec(iterations=14, seed_points=4, seed=4), [])
+        pid = remote.pid
+        assert other.pid != pid  # each job's optimizer in a process of its own
         os.kill(pid, signal.SIGKILL)
-        after = remote.ask()  # a new host, the optimizer restored from the two tells
-        assert host.call(os.getpid) != pid and set(after) == set(first[0])
+        after = remote.ask()  # a new process, the optimizer restored from the two tells
+        assert remote.pid != pid and set(after) == set(first[0])
+        assert set(other.ask()) == set(first[0])  # the other job's process is untouched
         remote.close()
+        other.close()
     finally:
         host.shutdown()
 

@@ -271,9 +271,12 @@ def _beats_best(session: Session, *, job_id: int, J: float, completed: bool) -> 
     _, best_completed, best_failed = session.execute(_COUNT_AND_BEST, {"job_id": job_id}).one()
     if best_completed is None and best_failed is None:
         return True
-    if best_completed is None:
-        return completed or J < session.scalar(select(Evaluation.J).where(Evaluation.id == best_failed))
-    return completed and J < session.scalar(select(Evaluation.J).where(Evaluation.id == best_completed))
+    if best_completed is None and completed:
+        return True
+    if best_completed is not None and not completed:
+        return False
+    best_j = session.execute(select(Evaluation.J).where(Evaluation.id == (best_completed or best_failed))).scalar_one()
+    return J < best_j
 
 
 def evaluations(session: Session, *, job_id: int, after: int = -1, limit: int | None = None) -> list[Evaluation]:

@@ -25,7 +25,7 @@ from datetime import datetime
 from typing import Any
 
 import numpy as np
-from sqlalchemy import Engine, bindparam, create_engine, event, func, select
+from sqlalchemy import Engine, bindparam, create_engine, event, func, insert, select
 from sqlalchemy.orm import Session, sessionmaker
 
 from driftlab.core.statuses import EpisodeStatus
@@ -233,32 +233,44 @@ def unique_job_name(session: Session, base: str) -> str:
 
 
 # -- evaluations -------------------------------------------------------------------------------------------
+@dataclass(frozen=True)
+class StoredEvaluation:
+    """Where :func:`add_evaluation` put an evaluation: its row id and its index in the job."""
+
+    id: int
+    index: int
+
+
 def add_evaluation(session: Session, *, job_id: int, theta: dict[str, float], J: float, status: str,
                    metrics: dict[str, Any], trigger_points: list[dict[str, float]], wall_ms: float,
                    columns: list[str], trajectory: np.ndarray | PackedTrajectory,
                    seeds: list[dict[str, Any]] | None = None, trajectory_seed: int | None = None,
                    max_trajectories: int | None = None, enqueued: bool = False,
-                   index: int | None = None) -> Evaluation:
+                   index: int | None = None) -> StoredEvaluation:
     """Appends the next evaluation of a job (its index is the count so far, so numbering survives resumes).
 
     Its trajectory (up to ~100 kB) is kept while the job holds fewer than ``max_trajectories`` of them, and always
     when the evaluation is the job's new best: a long job's storage stays bounded and its best stays watchable.
     ``trajectory`` may come packed already (a :class:`PackedTrajectory`, as the episode's worker sends it):
     compressing takes longer than the rest of the commit, and the write lock is held meanwhile. ``index``: the
-    job's number of evaluations, where the caller has just read it in this transaction."""
+    job's number of evaluations, where the caller has just read it in this transaction. Two INSERT statements, not
+    the ORM's unit of work: its flush was half of a store's work, and a server stores for every running job."""
     index = count_evaluations(session, job_id=job_id) if index is None else index
-    evaluation = Evaluation(job_id=job_id, index=index, theta=theta, J=J, status=status, metrics=metrics,
-                            trigger_points=trigger_points, wall_ms=wall_ms, seeds=seeds,
-                            trajectory_seed=trajectory_seed, enqueued=enqueued)
-    # A job holds at most as many trajectories as evaluations: below the cap there is nothing to count.
-    if (max_trajectories is None or index < max_trajectories
+    # A job holds at most as many trajectories as evaluations: below the cap there is nothing to count. (Decided
+    # before the evaluation's own row exists: it would be the best it is compared with.)
+    keep = (max_trajectories is None or index < max_trajectories
             or count_trajectories(session, job_id=job_id) < max_trajectories
-            or _beats_best(session, job_id=job_id, J=J, completed=status == EpisodeStatus.COMPLETED)):
+            or _beats_best(session, job_id=job_id, J=J, completed=status == EpisodeStatus.COMPLETED))
+    evaluation_id = session.execute(
+        insert(Evaluation).returning(Evaluation.id),
+        [{"job_id": job_id, "index": index, "theta": theta, "J": J, "status": status, "metrics": metrics,
+          "trigger_points": trigger_points, "wall_ms": wall_ms, "seeds": seeds, "trajectory_seed": trajectory_seed,
+          "enqueued": enqueued}]).scalar_one()
+    if keep:
         packed = trajectory if isinstance(trajectory, PackedTrajectory) else PackedTrajectory.of(trajectory)
-        evaluation.trajectory = Trajectory(columns=list(columns), rows=packed.rows, data=packed.data)
-    session.add(evaluation)
-    session.flush()
-    return evaluation
+        session.execute(insert(Trajectory), [{"evaluation_id": evaluation_id, "columns": list(columns),
+                                              "rows": packed.rows, "data": packed.data}])
+    return StoredEvaluation(evaluation_id, index)
 
 
 def count_trajectories(session: Session, *, job_id: int) -> int:

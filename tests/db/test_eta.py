@@ -5,14 +5,14 @@ from datetime import timedelta
 import numpy as np
 
 from driftlab.db import lifecycle, storage
-from driftlab.db.models import Job, utcnow
+from driftlab.db.models import Evaluation, Job, utcnow
 from driftlab.server.serialize import COMPILING, job_detail, job_dict
 
 
 def _evaluation(session, job_id, at):
     e = storage.add_evaluation(session, job_id=job_id, theta={"k": 0.1}, J=1.0, status="completed", metrics={},
                                trigger_points=[], wall_ms=1.0, columns=["t"], trajectory=np.zeros((2, 1)))
-    e.created_at = at.replace(tzinfo=None)
+    session.get(Evaluation, e.id).created_at = at.replace(tzinfo=None)
 
 
 def test_eta_after_a_three_minute_pause_is_the_rate_since_the_resume(tmp_path):

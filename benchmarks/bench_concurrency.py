@@ -202,7 +202,8 @@ def measure(mode: str, db_dir: str, spec: dict, executor, workers: int) -> dict:
     return {"wall": wall, "rate": n / wall, "ask_ms": 1000 * statistics.median(meter.ask_s),
             "store_ms": 1000 * statistics.median(meter.store_s),
             "job": max(meter.thread_s.values()) / wall, "db": sum(meter.store_s) / wall, "cpu": cpu / wall,
-            "work": episodes_s / (workers * wall), "cpu_ms": 1000 * cpu / n}
+            "work": episodes_s / (workers * wall), "cpu_ms": 1000 * cpu / n,
+            "episodes": sum(len(e.seeds or ()) for evaluations in stored for e in evaluations) / n}
 
 
 def _row(label: str, seq: dict, conc: dict) -> str:
@@ -237,7 +238,8 @@ def _limits(rows: list[tuple[int, dict, dict]]) -> None:
         capacity = n / (EPISODE_S * DEFAULT_ROBUST_SAMPLES)
         share = 100 * conc["rate"] / capacity
         print(f"  {n:>2} workers: {conc['rate']:6.1f} of {capacity:6.0f} evaluations/s ({share:3.0f} %), "
-              f"{conc['cpu_ms']:5.1f} ms of CPU an evaluation")
+              f"{conc['cpu_ms']:5.1f} ms of CPU an evaluation; the workers busy {100 * conc['work']:3.0f} % "
+              f"({conc['episodes']:.2f} episodes an evaluation: a would-be best runs its confirmation seeds too)")
 
 
 def simulated(workers: list[int], evaluations: int, db_dir: str) -> None:

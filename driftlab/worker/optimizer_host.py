@@ -19,9 +19,9 @@ import multiprocessing
 import os
 import threading
 import uuid
-from concurrent.futures import ProcessPoolExecutor
-from concurrent.futures.process import BrokenProcessPool
 from dataclasses import dataclass
+from multiprocessing.connection import Connection
+from multiprocessing.process import BaseProcess
 from typing import TYPE_CHECKING, Any
 
 from driftlab.core.optimizer import BayesianOptimizer
@@ -90,51 +90,103 @@ def _warm() -> int:
     return os.getpid()
 
 
-def _init_host(niceness: int, parent_pid: int) -> None:
+def _serve(connection: Connection, niceness: int, parent_pid: int) -> None:
+    """An optimizer process: answers (function, arguments) on its pipe until it is closed."""
     if niceness:
         os.nice(niceness)
-    # The host may be (re)started from a job's thread, which ends with its job: no kernel signal (it follows the
+    # The process may be (re)started from a job's thread, which ends with its job: no kernel signal (it follows the
     # starting thread), the watcher alone (an ask runs Python, so the watcher gets its turn within 0.5 s).
     follow_parent(parent_pid, kernel_signal=False)
+    while True:
+        try:
+            fn, args = connection.recv()
+        except (EOFError, OSError):
+            return
+        try:
+            answer: tuple[bool, Any] = (True, fn(*args))
+        except Exception as exc:  # noqa: BLE001  # the caller raises it
+            answer = (False, exc)
+        connection.send(answer)
+
+
+class ProcessGone(RuntimeError):
+    """The optimizer process died (or was ended) before it answered."""
 
 
 class _Process:
-    """One optimizer process (spawned: the server has threads, and a fork would copy their locks); a dead one is
-    replaced on the next call."""
+    """One optimizer process (spawned: the server has threads, and a fork would copy their locks), called through a
+    pipe on the caller's own thread: no executor threads between a job and its optimizer. A dead one is started
+    again on the next call (:meth:`restart`)."""
 
     def __init__(self, niceness: int) -> None:
         self.niceness = niceness
-        self._pool: ProcessPoolExecutor | None = None
-        self._ended: ProcessPoolExecutor | None = None
         self._lock = threading.Lock()
+        self._process: BaseProcess | None = None
+        self._connection: Connection | None = None
+        self._unanswered = 0  # calls sent without waiting (the warm-up), answered before the next call's
+
+    def _started(self) -> Connection:
+        if self._connection is None:
+            context = multiprocessing.get_context("spawn")
+            here, there = context.Pipe()
+            self._process = context.Process(target=_serve, args=(there, self.niceness, os.getpid()), daemon=True)
+            self._process.start()
+            there.close()
+            self._connection, self._unanswered = here, 0
+        return self._connection
+
+    def send(self, fn, *args) -> None:
+        """Start ``fn(*args)`` without waiting for it (its answer is read, and dropped, by the next :meth:`call`)."""
+        with self._lock:
+            self._started().send((fn, args))
+            self._unanswered += 1
 
     def call(self, fn, *args) -> Any:
-        return self.current_pool().submit(fn, *args).result()
-
-    def current_pool(self) -> ProcessPoolExecutor:
         with self._lock:
-            if self._pool is None:
-                self._pool = ProcessPoolExecutor(1, mp_context=multiprocessing.get_context("spawn"),
-                                                 initializer=_init_host, initargs=(self.niceness, os.getpid()))
-            return self._pool
+            connection = self._started()
+            try:
+                while self._unanswered:
+                    connection.recv()
+                    self._unanswered -= 1
+                connection.send((fn, args))
+                ok, value = connection.recv()
+            except (EOFError, OSError) as exc:
+                raise ProcessGone(f"the optimizer process ended: {exc!r}") from exc
+        if not ok:
+            raise value
+        return value
 
-    def replace_broken(self, broken: ProcessPoolExecutor) -> None:
+    def restart(self) -> None:
+        """End what is left of the process; the next call starts a new one."""
         with self._lock:
-            if self._pool is broken:
-                self._pool = None
-        broken.shutdown(wait=False, cancel_futures=True)
+            self._end()
+
+    def _end(self) -> None:
+        connection, process = self._connection, self._process
+        self._connection = None
+        if connection is not None:
+            connection.close()  # the process's recv ends: it returns
+        if process is not None and process.is_alive():
+            process.join(timeout=0.1)
+            if process.is_alive():
+                process.kill()
 
     def shutdown(self, wait: bool = True) -> None:
         with self._lock:
-            pool, self._pool = self._pool, None
-            self._ended = pool
-        if pool is not None:
-            pool.shutdown(wait=wait, cancel_futures=True)
+            connection, self._connection = self._connection, None
+        if connection is not None:
+            connection.close()
+        if wait:
+            self.join()
 
     def join(self) -> None:
         """Wait until the process told to end (:meth:`shutdown`) has."""
-        if self._ended is not None:
-            self._ended.shutdown(wait=True)
+        process = self._process
+        if process is not None:
+            process.join(timeout=10)
+            if process.is_alive():
+                process.kill()
+                process.join()
 
 
 class OptimizerHost:
@@ -154,7 +206,7 @@ class OptimizerHost:
         """Start ``processes`` idle processes (else the first jobs' first asks wait for theirs); returns at once."""
         started = [_Process(self.niceness) for _ in range(processes)]
         for process in started:
-            process.current_pool().submit(_warm)
+            process.send(_warm)
         with self._lock:
             self._idle.extend(started)
 
@@ -225,15 +277,14 @@ class RemoteOptimizer:
     def close(self) -> None:
         try:
             self._process.call(_close, self._key)
-        except (BrokenProcessPool, RuntimeError):
-            self._process.shutdown(wait=False)  # gone: the next job that takes it starts a new one
+        except ProcessGone:
+            self._process.restart()  # gone: the next job that takes it starts a new one
         self._host.release(self._process)
 
     def _call(self, fn, *args) -> Any:
-        pool = self._process.current_pool()
         try:
-            return pool.submit(fn, *args).result()
-        except BrokenProcessPool:
-            self._process.replace_broken(pool)
+            return self._process.call(fn, *args)
+        except ProcessGone:
+            self._process.restart()
             self.restore()
             return self._process.call(fn, *args)

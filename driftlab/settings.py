@@ -49,9 +49,9 @@ class Settings(BaseSettings):
             served no more requests than 8, only in a less fair order (the longest waits grew).
         optimizer_process: each running job's optimizer (ask and tell) in a process of its own beside the server
             (DRIFTLAB_OPTIMIZER_PROCESS=1; default off: each on its job's thread; up to 8 processes started with
-            the runner, each ~100 MB). Measured both ways in docs/benchmarks.md: with one job and 30 API clients on
-            2 cores, on: 80 requests/s and 145 evaluations of the job in 90 s (off: 65-73 and 88-111); with an
-            8-job study on a simulated 16-worker cluster, on: 148 evaluations/s (the workers 83 % busy) against
+            the runner, each ~220 MB resident). Measured both ways in docs/benchmarks.md: with one job and 30 API
+            clients on 2 cores, on: 80 requests/s and 145 evaluations of the job in 90 s (off: 65-73 and 88-111);
+            with an 8-job study on a simulated 16-worker cluster, on: 148 evaluations/s (the workers 83 % busy) against
             122 off. Off by default because a local 2-core server gains little and starts each process's imports
             (~1 s of a core); compose.yaml (a cluster) sets it.
         max_rescore_episodes: episodes that queued and running rescores may wait for, all jobs together

@@ -6,8 +6,9 @@ eight commits, each writer holding the lock while the interpreter ran the other 
 takes every write waiting when it frees up and runs them one after another in one transaction (a group commit,
 as databases do with their logs). Nothing is acknowledged before its commit: a caller's result comes after it.
 
-A write that raises rolls the batch back; the writes of that batch are then run again one transaction each, so one
-write's error is its caller's alone.
+A write that raises rolls the batch back; the writes of a batch of several are then run again one transaction each,
+so one write's error is its caller's alone (a write may therefore run twice: its effects outside the database must
+bear it).
 """
 
 from __future__ import annotations
@@ -55,17 +56,12 @@ class _Writer:
         try:
             with storage.transaction(self.factory) as session:
                 results = [write(session) for write, _ in batch]
-        except BaseException:  # noqa: BLE001  # one write's error: each runs again on its own (below)
+        except Exception as exc:  # noqa: BLE001  # a write's error goes to its caller, the others run again
             if len(batch) == 1:
-                _, future = batch[0]
-                try:
-                    with storage.transaction(self.factory) as session:
-                        future.set_result(batch[0][0](session))
-                except BaseException as exc:  # noqa: BLE001  # its caller gets it
-                    future.set_exception(exc)
-                return
-            for item in batch:
-                self.commit([item])
+                batch[0][1].set_exception(exc)
+            else:
+                for item in batch:
+                    self.commit([item])
             return
         for (_, future), result in zip(batch, results, strict=True):
             future.set_result(result)

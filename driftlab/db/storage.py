@@ -281,14 +281,12 @@ def count_trajectories(session: Session, *, job_id: int) -> int:
 def _beats_best(session: Session, *, job_id: int, J: float, completed: bool) -> bool:
     """Would an evaluation with this J and status become the job's best (best_evaluation's order)?"""
     _, best_completed, best_failed = session.execute(_COUNT_AND_BEST, {"job_id": job_id}).one()
-    if best_completed is None and best_failed is None:
+    best_id = best_completed if best_completed is not None else best_failed
+    if best_id is None:
         return True
-    if best_completed is None and completed:
-        return True
-    if best_completed is not None and not completed:
-        return False
-    best_j = session.execute(select(Evaluation.J).where(Evaluation.id == (best_completed or best_failed))).scalar_one()
-    return J < best_j
+    if completed != (best_completed is not None):
+        return completed
+    return J < session.execute(select(Evaluation.J).where(Evaluation.id == best_id)).scalar_one()
 
 
 def evaluations(session: Session, *, job_id: int, after: int = -1, limit: int | None = None) -> list[Evaluation]:

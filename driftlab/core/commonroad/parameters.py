@@ -138,6 +138,16 @@ def pack_commonroad(car: int | ParameterSet, *, friction_scale: float = 1.0, mas
     return v
 
 
+def steering_limit_rad(car: int | ParameterSet) -> float:
+    """How far the car steers either way [rad] (the package's ``steering.min``/``max``: 1.066 for the BMW 320i,
+    1.023 for the VW Vanagon), within what an MPC may be given (driftlab.core.mpc.MpcConfig)."""
+    from driftlab.core.mpc.config import STEER_LIMIT_RANGE_RAD
+
+    p = package_parameters(car)
+    reach = min(abs(float(p.steering.min)), float(p.steering.max))
+    return min(max(reach, STEER_LIMIT_RANGE_RAD[0]), STEER_LIMIT_RANGE_RAD[1])
+
+
 def commonroad_model_vehicle(car: int | ParameterSet):
     """The controller's model of a CommonRoad car: mass, geometry, yaw inertia and CG height of the parameter set,
     and the paper's simplified Pacejka (mu, B, C) read off PAC2002's pure lateral formula at zero camber:

@@ -14,6 +14,7 @@ N_PER_KN = 1e3  # its inverse, exactly (1 / KN is not)
 N_X = 3
 N_U = 2
 N_Z = N_X + N_U
+STEER_LIMIT_RANGE_RAD = (0.05, 1.2)  # what ``steer_limit_rad`` may be set to
 
 
 @dataclass(frozen=True)
@@ -98,7 +99,7 @@ class MpcConfig:
 
     def __post_init__(self) -> None:
         ranges = {
-            "dt_s": (0.005, 0.5), "horizon": (1, 100), "steer_limit_rad": (0.05, 1.2),
+            "dt_s": (0.005, 0.5), "horizon": (1, 100), "steer_limit_rad": STEER_LIMIT_RANGE_RAD,
             "drive_min_n": (-30000.0, 0.0), "drive_max_n": (0.0, 30000.0), "steer_rate_radps": (0.05, 50.0),
             "drive_rate_nps": (100.0, 1e6), "disturbance_gain": (0.0, 1.0), "osqp_eps": (1e-10, 1e-2),
             "model_steer_lag_s": (0.0, 0.5), "model_drive_lag_s": (0.0, 1.0), "estimator_hold_s": (0.0, 10.0),

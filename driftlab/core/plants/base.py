@@ -60,8 +60,8 @@ class PlantType(ABC):
         sideslip); most plants need none."""
         return config
 
-    def controller(self) -> MpcConfig:
-        """The default controller's weights for this plant."""
+    def controller(self, config: PlantConfig) -> MpcConfig:
+        """The default controller for this plant driving the car ``config`` sets (its weights and limits)."""
         return MpcConfig()
 
     def model_reason(self, vehicle: VehicleParams, radius_m: float, sideslip_rad: float, circle: str) -> str | None:

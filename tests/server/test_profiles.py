@@ -80,7 +80,8 @@ def test_a_calibration_knows_each_calibrated_cars_newest_weights_then_the_shippe
     assert [mpc.q_speed for _, mpc in known[:2]] == [3.0, 2.0]  # the older profile of the heavy car is not there
     assert known[0][1] == replace(std, q_speed=3.0)  # a profile's weights on the car's own set
     shipped = [mpc for label, mpc in known if "shipped" in label]
-    assert MpcConfig() in shipped and plant_type("commonroad_mb").controller(plant_type("commonroad_mb").preset()) in shipped
+    mb = plant_type("commonroad_mb")
+    assert MpcConfig() in shipped and mb.controller(mb.preset()) in shipped
     assert std not in [mpc for _, mpc in known]  # the car's own set is its start, not a known one
 
 

@@ -50,17 +50,37 @@ class Chromium:
 
 
 def choose_option(page, combobox: str, option: str, *, exact: bool = True) -> None:
-    """Open viser's dropdown ``combobox`` and click its ``option``. The server may redraw the panel while the list is
+    """Open viser's dropdown ``combobox`` and choose its ``option``. The server may redraw the panel while the list is
     open (a job's status changes, the compare panel fills in), which closes it: then it is opened again, until
-    WAIT_S has passed."""
+    WAIT_S has passed. The option gets its click as a DOM event once it is in the list: a pointer click first waits
+    for the list to stand still over two animation frames, which a loaded machine at FRAMES_PER_S may not give it
+    between two redraws."""
     deadline = time.time() + WAIT_S
+    box = page.get_by_role("combobox", name=combobox)
     choice = page.get_by_role("option", name=option, exact=exact).first
     while True:
         if not choice.is_visible():
-            page.get_by_role("combobox", name=combobox).click()
+            box.click()
         try:
-            choice.click(timeout=5_000)
-            return
+            choice.dispatch_event("click", timeout=5_000)
+            if not exact or box.input_value(timeout=5_000) == option:
+                return
         except PlaywrightTimeoutError:  # closed again before the click
+            pass
+        if time.time() > deadline:
+            raise AssertionError(f"{option!r} could not be chosen in {combobox!r} within {WAIT_S:g} s")
+
+
+def click_until_shown(page, button: str, shown) -> None:
+    """Click ``button`` until the locator ``shown`` is visible, until WAIT_S has passed. For a button whose server
+    side reads other inputs: an input's new value and the click travel as separate messages, and on a loaded
+    machine the click can be handled before the value has landed (the server then shows what was there before)."""
+    deadline = time.time() + WAIT_S
+    while True:
+        page.get_by_role("button", name=button).click()
+        try:
+            shown.wait_for(timeout=10_000)
+            return
+        except PlaywrightTimeoutError:
             if time.time() > deadline:
                 raise

@@ -10,7 +10,7 @@ import pytest
 from matplotlib import image as mpimg
 
 from tests.server_process import free_port, start_server
-from tests.web.chromium import choose_option
+from tests.web.chromium import choose_option, click_until_shown
 from tests.web.test_view_browser import SCREENSHOT_DIR, ConsoleLog, _wait_until_played
 
 pytestmark = pytest.mark.e2e  # real processes: servers, browsers, Dask, the CLI
@@ -52,22 +52,23 @@ def _save(png, name, tmp_path):
     return mpimg.imread(io.BytesIO(png))[..., :3]
 
 
-def _open_compare(browser, url, study_label):
+def _open_compare(browser, url, study_label, shown):
+    """The view's Compare panel showing the study ``study_label``, once the text ``shown`` is drawn."""
     page = browser.new_page(viewport={"width": 1400, "height": 1300})
     log = ConsoleLog(page)
     page.goto(f"{url}/viser/")
     log.wait_for("Connected!")
     page.get_by_text("Compare", exact=True).click()
     choose_option(page, "Study", study_label)
-    page.get_by_role("button", name="Show comparison").click()
+    click_until_shown(page, "Show comparison", page.get_by_text(shown).first)
     return page
 
 
 def test_compare_mode_overlays_a_seeds_study_and_plays_its_best_episodes_together(server, browser, tmp_path):
     url, seeds, _ = server
-    page = _open_compare(browser, url, f"{seeds['id']} · three · seeds · finished")
+    page = _open_compare(browser, url, f"{seeds['id']} · three · seeds · finished",
+                         "three (seeds, finished); final best J from")
     summary = page.get_by_text("three (seeds, finished); final best J from")
-    summary.wait_for()
     final = seeds["final_best_J"]
     assert f"from {min(final):.4g} to {max(final):.4g}, median {np.median(final):.4g}" in summary.inner_text()
     for job_id in seeds["job_ids"]:  # one row per job, its best J as the API has it
@@ -103,8 +104,8 @@ def test_compare_mode_overlays_a_seeds_study_and_plays_its_best_episodes_togethe
 
 def test_the_heatmap_shows_each_cell_as_stored(server, browser, tmp_path):
     url, _, grid = server
-    page = _open_compare(browser, url, f"{grid['id']} · grip · robustness · finished")
-    page.get_by_text("grip (robustness, finished): 12 of 12 cells run").wait_for()
+    page = _open_compare(browser, url, f"{grid['id']} · grip · robustness · finished",
+                         "grip (robustness, finished): 12 of 12 cells run")
     table = page.locator("table", has=page.get_by_text("plant.friction_scale"))
     table.wait_for()
     rows = table.locator("tr").all()[2:]  # below the column key's row and the column values' row

@@ -181,7 +181,7 @@ class EpisodeConfig:
         or a plant installed under the entry-point group ``driftlab.plants`` (its own preset);
         controller: "default" (DriftLab's extended MPC) or "paper" (the paper's formulation)."""
         plant_config = _plant_preset(plant)
-        controllers = {"default": lambda: plant_config.plant_type.controller(plant_config), "paper": MpcConfig.paper}
+        controllers = {"default": plant_config.plant_type.controller, "paper": MpcConfig.paper}
         if controller not in controllers:
             raise ConfigError(f"controller must be 'default' or 'paper', got {controller!r}")
         sideslip_rad = plant_config.plant_type.default_sideslip_rad
@@ -319,7 +319,7 @@ def _refit_model_vehicle(config: EpisodeConfig, changes: dict[str, dict[str, Any
     then starts in the car's drift (:func:`started_in_drift`) unless ``plant.initial_rear_slip`` is given."""
     plant_switched = "model" in changes.get("plant", {}) or "commonroad_vehicle" in changes.get("plant", {})
     if plant_switched and "mpc" not in changes:  # and the default controller's weights for that car
-        config = replace(config, mpc=config.plant.plant_type.controller(config.plant))
+        config = replace(config, mpc=config.plant.plant_type.controller())
     if "vehicle" in changes or not ({"plant", "scenario"} & set(changes)):
         return config
     if not config.plant.plant_type.own_car and not plant_switched:

@@ -31,7 +31,7 @@ from driftlab.core.drivability import drift_window
 from driftlab.core.errors import ConfigError
 from driftlab.core.limits import check_int
 from driftlab.db import profiles, storage
-from driftlab.services.profiles import drift_distance, known_weight_sets
+from driftlab.services.profiles import drift_distance, known_weight_sets, limits_of
 
 Event = Callable[[dict[str, Any]], None]
 LIMITS = {"iterations": (1, 5000), "seeds": (1, 64), "rounds": (1, 5)}
@@ -100,12 +100,20 @@ class CalibrationRequest:
 
 
 def _model_candidates(base: EpisodeConfig, sets: dict[str, Any]) -> list[dict[str, Any]]:
-    """The controller's models to calibrate: for a car with its own tyres (a CommonRoad car) both the paper's
-    independent rear forces and the rear friction circle matched to the car's drive answer, unless the request
-    chose one; the weights are searched for each and the better model kept."""
-    if not base.plant.plant_type.own_car or "plant.model_drive_coupling" in sets:
-        return [{}]
-    return [{}, {"plant.model_drive_coupling": not base.plant.model_drive_coupling}]
+    """The controllers to calibrate, the weights searched for each and the best kept: for a car with its own tyres
+    (a CommonRoad car) both the paper's independent rear forces and the rear friction circle matched to the car's
+    drive answer; for a car whose steering reach is known (``PlantType.steering_reach_rad``), the controller's own
+    steering limit (the paper's car's 0.6 rad, which the shipped weights were found with) and the car's whole reach
+    (the VW Vanagon holds its drift at 0.62 rad, 44 m with 0.5 rad of countersteer and needs the rest for its
+    flick: docs/results.md). What the request sets itself is not varied."""
+    couplings: list[dict[str, Any]] = [{}]
+    if base.plant.plant_type.own_car and "plant.model_drive_coupling" not in sets:
+        couplings.append({"plant.model_drive_coupling": not base.plant.model_drive_coupling})
+    limits: list[dict[str, Any]] = [{}]
+    reach_rad = base.plant.plant_type.steering_reach_rad(base.plant)
+    if reach_rad is not None and reach_rad != base.mpc.steer_limit_rad and "mpc.steer_limit_rad" not in sets:
+        limits.append({"mpc.steer_limit_rad": reach_rad})
+    return [{**coupling, **limit} for limit in limits for coupling in couplings]
 
 
 def _summary(result, points) -> dict[str, Any]:
@@ -170,10 +178,10 @@ def _calibrate_group(run: _Run, centre: EpisodeConfig, points: Sequence[Calibrat
         inside, outside = split_drivable(base, points)
         if not inside:
             continue
-        coupling = base.plant.model_drive_coupling
+        coupling, steer_limit_rad = base.plant.model_drive_coupling, base.mpc.steer_limit_rad
         run.say(f"calibrating {', '.join(p.label() for p in points)} with plant.model_drive_coupling="
-                f"{str(coupling).lower()}")
-        run.stage.update(step="weights", model_drive_coupling=coupling)
+                f"{str(coupling).lower()}, mpc.steer_limit_rad={steer_limit_rad:g}")
+        run.stage.update(step="weights", model_drive_coupling=coupling, steer_limit_rad=steer_limit_rad)
 
         def progress(calibration) -> None:
             best, last = calibration.best, calibration.tried[-1]
@@ -196,7 +204,8 @@ def _calibrate_group(run: _Run, centre: EpisodeConfig, points: Sequence[Calibrat
         "plant_model": base.plant.model, "vehicle_id": base.plant.commonroad_vehicle,
         "plant": config_to_dict(base)["plant"], "mpc": {**config_to_dict(base)["mpc"], **best.weights},
         **_summary(best, calibration.points), "start": _summary(start, calibration.points),
-        "candidates": [{"model_drive_coupling": b.plant.model_drive_coupling, **_summary(c.best, c.points)}
+        "candidates": [{"model_drive_coupling": b.plant.model_drive_coupling,
+                        "steer_limit_rad": b.mpc.steer_limit_rad, **_summary(c.best, c.points)}
                        for b, c, _, _ in candidates],
         "known": [{"from": label, **_summary(result, calibration.points)}
                   for (label, _), result in zip(run.known, calibration.known_results(), strict=True) if result],
@@ -217,7 +226,7 @@ def _learned_theta(run: _Run, point: CalibrationPoint, last: dict[str, Any]) -> 
     coupling = last["plant"].get("model_drive_coupling", False)
     if record["completed"] and coupling != config.plant.model_drive_coupling:  # the model those weights were for
         config = apply_overrides(config, {"plant.model_drive_coupling": coupling})
-    config = replace(config, mpc=replace(config.mpc, **weights))
+    config = replace(config, mpc=replace(config.mpc, **weights, **(limits_of(last) if record["completed"] else {})))
     run.stage.update(step="theta")
     theta, score = learn_theta(config, run.run_batch, iterations=request.iterations, seeds=request.seeds,
                                seed=request.seed,

@@ -39,8 +39,7 @@ def known_weight_sets(session: Session, car: MpcConfig) -> list[tuple[str, MpcCo
 
     found = [(f"profile {profile.id} ({profile.plant_model}, vehicle {profile.vehicle_id})",
               replace(car, **profile.document["weights"])) for profile in profiles.newest_profiles(session)]
-    found += [(f"{name}'s shipped weights", plant_type(name).controller(plant_type(name).preset()))
-              for name in built_in_names()]
+    found += [(f"{name}'s shipped weights", plant_type(name).controller()) for name in built_in_names()]
     unique, seen = [], {car}
     for label, mpc in found:
         if mpc not in seen:
@@ -147,7 +146,7 @@ def with_profile(session: Session, spec: TuningSpec, config_document: Any) -> tu
     if coupling != config.plant.model_drive_coupling and "plant.model_drive_coupling" not in dotted_config(
             config_document or {}):
         config = apply_overrides(config, {"plant.model_drive_coupling": coupling})  # the model refitted
-    mpc = replace(config.mpc, **profile.document["weights"], **_limits_of(profile.document))
+    mpc = replace(config.mpc, **profile.document["weights"], **limits_of(profile.document))
     spec = replace(spec, config=replace(config, mpc=mpc))
     start = profile_start(profile.id, profile.document.get("theta"), spec.bounds)
     if start is not None:
@@ -155,7 +154,7 @@ def with_profile(session: Session, spec: TuningSpec, config_document: Any) -> tu
     return spec, profile.id
 
 
-def _limits_of(document: dict[str, Any]) -> dict[str, Any]:
+def limits_of(document: dict[str, Any]) -> dict[str, Any]:
     """The controller's limits a profile's weights were found with (what its ``mpc`` stored): weights found for
     0.6 rad of steering do not carry over to the car's whole reach."""
     stored = document.get("mpc", {})

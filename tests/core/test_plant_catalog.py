@@ -34,14 +34,7 @@ def test_each_built_in_plant_is_one_catalog_entry_with_its_presets():
     assert isinstance(std, CommonRoadPlantType) and not std.multibody and mb.multibody
     assert PlantConfig.commonroad_std(3) == std.preset(3) and std.preset(3).substep_s == 0.002
     assert plant_type("driftlab").local_phase and not std.local_phase
-    assert EpisodeConfig.preset("commonroad_std").mpc == std.controller(std.preset()) != MpcConfig()
-    # The controller steers as far as the car does (the package's steering.max), not the paper's car's 0.6 rad.
-    assert std.controller(std.preset()).steer_limit_rad == 1.066
-    assert EpisodeConfig.preset("commonroad_std").mpc.steer_limit_rad == 1.066
-    assert apply_overrides(EpisodeConfig.preset("commonroad_std"), {"plant.commonroad_vehicle": 3,
-                                                                    "scenario.sideslip_rad": 0.7}
-                           ).mpc.steer_limit_rad == 1.023
-    assert EpisodeConfig.preset("commonroad_std", "paper").mpc.steer_limit_rad == MpcConfig().steer_limit_rad
+    assert EpisodeConfig.preset("commonroad_std").mpc == std.controller() != MpcConfig()
     assert plant_type("nonexistent") is None
 
 
@@ -58,7 +51,7 @@ def test_a_plant_type_registered_by_a_user_brings_its_own_model_and_weights():
         def model_vehicle(self, config, radius_m, sideslip_rad):
             return replace(VehicleParams(), mass_kg=VehicleParams().mass_kg * 1.2)
 
-        def controller(self, config):
+        def controller(self):
             return replace(MpcConfig(), q_sideslip=500.0)
 
     register_plant("heavier", Heavier)
@@ -89,8 +82,7 @@ def test_a_commonroad_variant_drives_its_own_scaled_parameters():
     config = EpisodeConfig.preset("scaled_bmw")
     assert config.plant.model == "scaled_bmw" and config.scenario.sideslip_rad == 0.5
     assert config.vehicle.mass_kg == pytest.approx(1.3 * published.m)
-    std = plant_type("commonroad_std")
-    assert config.mpc == std.controller(std.preset())  # the base car's weights until calibrated
+    assert config.mpc == plant_type("commonroad_std").controller()  # the base car's weights until calibrated
 
 
 def test_a_variant_with_no_scales_is_its_base_car_bit_for_bit():

@@ -46,7 +46,9 @@ def test_a_calibration_runs_reports_its_progress_and_its_profile_drives_the_next
     with ThreadPoolExecutor(1) as pool:
         executor = InThreadExecutor(pool)
         assert _run_queued(api, executor) == "finished"
-    assert executor.submitted == 2  # two weight sets on one point and seed (the model was chosen)
+    # Two weight sets on one point and seed for each steering limit: the controller's 0.6 rad and the car's whole
+    # 1.066 rad (the model was chosen).
+    assert executor.submitted == 4
     state = api.get(f"/api/calibrations/{queued.json()['id']}").json()
     assert state["status"] == "finished" and state["error"] is None, state
     assert state["progress"]["tried"] == 2 and state["progress"]["of"] == 2 and state["progress"]["step"] == "weights"
@@ -57,12 +59,17 @@ def test_a_calibration_runs_reports_its_progress_and_its_profile_drives_the_next
     document = api.get(f"/api/profiles/{profile_id}")
     assert document.status_code == 200 and "attachment" in document.headers["content-disposition"]
     assert document.json()["per_point"][0]["episodes"] == 1 and document.json()["iterations"] == 2
+    candidates = document.json()["candidates"]
+    assert sorted(c["steer_limit_rad"] for c in candidates) == [0.6, 1.066]
+    assert document.json()["mpc"]["steer_limit_rad"] == min(
+        candidates, key=lambda c: (c["score"], -c["completed"]))["steer_limit_rad"]
     if document.json()["per_point"][0]["completed"]:  # its weights drove the point: a job there takes them
         job = api.post("/api/jobs", json={"iterations": 1, "config": {"plant.model": "commonroad_std",
                                                                           "scenario.sideslip_rad": 0.5}}).json()
         assert job["profile_id"] == profile_id
         mpc = job["spec"]["config"]["mpc"]
         assert all(mpc[k] == v for k, v in document.json()["weights"].items())
+        assert mpc["steer_limit_rad"] == document.json()["mpc"]["steer_limit_rad"]  # the limit they were found with
     assert api.get("/api/profiles/999").status_code == 404
     assert api.get("/api/calibrations/999").status_code == 404
 

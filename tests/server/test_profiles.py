@@ -41,17 +41,16 @@ def test_a_profile_brings_the_controllers_model_it_was_calibrated_with(tmp_path)
 
 
 def test_a_profile_brings_the_steering_limit_its_weights_were_found_with(tmp_path):
+    beyond = {**CAR, "scenario.sideslip_rad": 0.78}  # more than a step from every shipped profile's point
     with in_process_client(tmp_path / "limited.db") as client:
-        job = client.post("/api/jobs", json={"iterations": 1, "config": {**CAR, "plant.commonroad_vehicle": 3,
-                                                                          "scenario.sideslip_rad": 0.7}}).json()
-        assert job["profile_id"] is None and job["spec"]["config"]["mpc"]["steer_limit_rad"] == 1.023  # the car's
+        job = client.post("/api/jobs", json={"iterations": 1, "config": beyond}).json()
+        assert job["profile_id"] is None and job["spec"]["config"]["mpc"]["steer_limit_rad"] == 0.6  # the default
         with storage.transaction(client.app.state.factory) as session:
-            profile_id = profiles.add_profile(session, plant_model="commonroad_std", vehicle_id=3, document={
-                "weights": WEIGHTS, "mpc": {**WEIGHTS, "steer_limit_rad": 0.6, "horizon": 7}}).id
-        job = client.post("/api/jobs", json={"iterations": 1, "config": {**CAR, "plant.commonroad_vehicle": 3,
-                                                                          "scenario.sideslip_rad": 0.7}}).json()
+            profile_id = profiles.add_profile(session, plant_model="commonroad_std", vehicle_id=2, document={
+                "weights": WEIGHTS, "mpc": {**WEIGHTS, "steer_limit_rad": 1.066, "horizon": 7}}).id
+        job = client.post("/api/jobs", json={"iterations": 1, "config": beyond}).json()
         mpc = job["spec"]["config"]["mpc"]
-        assert job["profile_id"] == profile_id and mpc["steer_limit_rad"] == 0.6
+        assert job["profile_id"] == profile_id and mpc["steer_limit_rad"] == 1.066
         assert mpc["horizon"] == 20  # its weights and limits, not the rest of the controller it was stored with
 
 
@@ -70,7 +69,7 @@ def test_a_calibration_knows_each_calibrated_cars_newest_weights_then_the_shippe
                                          document={"weights": {"q_speed": 2.0}}).id
             vanagon = profiles.add_profile(session, plant_model="commonroad_std", vehicle_id=3,
                                            document={"weights": {"q_speed": 3.0}}).id
-        std = plant_type("commonroad_std").controller(plant_type("commonroad_std").preset())
+        std = plant_type("commonroad_std").controller()
         with storage.transaction(factory) as session:
             known = known_weight_sets(session, std)
     finally:
@@ -80,8 +79,7 @@ def test_a_calibration_knows_each_calibrated_cars_newest_weights_then_the_shippe
     assert [mpc.q_speed for _, mpc in known[:2]] == [3.0, 2.0]  # the older profile of the heavy car is not there
     assert known[0][1] == replace(std, q_speed=3.0)  # a profile's weights on the car's own set
     shipped = [mpc for label, mpc in known if "shipped" in label]
-    mb = plant_type("commonroad_mb")
-    assert MpcConfig() in shipped and mb.controller(mb.preset()) in shipped
+    assert MpcConfig() in shipped and plant_type("commonroad_mb").controller() in shipped
     assert std not in [mpc for _, mpc in known]  # the car's own set is its start, not a known one
 
 

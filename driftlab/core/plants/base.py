@@ -60,9 +60,14 @@ class PlantType(ABC):
         sideslip); most plants need none."""
         return config
 
-    def controller(self, config: PlantConfig) -> MpcConfig:
-        """The default controller for this plant driving the car ``config`` sets (its weights and limits)."""
+    def controller(self) -> MpcConfig:
+        """The default controller's weights for this plant."""
         return MpcConfig()
+
+    def steering_reach_rad(self, config: PlantConfig) -> float | None:
+        """How far the car ``config`` sets steers either way [rad], where the plant says (None: unknown). A
+        calibration also searches with the controller steering that far (driftlab.services.calibration)."""
+        return None
 
     def model_reason(self, vehicle: VehicleParams, radius_m: float, sideslip_rad: float, circle: str) -> str | None:
         """Why the controller's model ``vehicle`` (or, for a plant whose model is refitted at each drift, the model

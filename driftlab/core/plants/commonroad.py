@@ -99,17 +99,17 @@ class CommonRoadPlantType(PlantType):
         low, high = PLANT_LIMITS["initial_rear_slip"]
         return replace(config, initial_rear_slip=min(max(round(family[0].rear_slip, 4), low), high))
 
-    def controller(self, config: PlantConfig) -> MpcConfig:
-        """Its default weights, steering as far as the car itself can (the package's ``steering.max``; the paper's
-        0.6 rad is its own car's): the VW Vanagon holds its drift at 0.62 rad, 44 m with 0.52 rad of countersteer,
-        so that 0.6 rad would leave its flick 0.08 rad (docs/results.md, "The VW Vanagon")."""
+    def controller(self) -> MpcConfig:
+        if self.weights is None:
+            return MpcConfig()
+        module_name, _, attribute = self.weights.partition(":")
+        return getattr(importlib.import_module(module_name), attribute)()
+
+    def steering_reach_rad(self, config: PlantConfig) -> float | None:
+        """The car's own (the package's ``steering.max``: 1.066 rad for the BMW 320i, 1.023 for the VW Vanagon)."""
         from driftlab.core.commonroad.parameters import steering_limit_rad
 
-        weights = MpcConfig()
-        if self.weights is not None:
-            module_name, _, attribute = self.weights.partition(":")
-            weights = getattr(importlib.import_module(module_name), attribute)()
-        return replace(weights, steer_limit_rad=steering_limit_rad(self.car(config.commonroad_vehicle)))
+        return steering_limit_rad(self.car(config.commonroad_vehicle))
 
     def drifts(self, vehicle_id: int, radius_m: float, sideslip_rad: float, right: bool = False,
                friction_scale: float = 1.0, mass_scale: float = 1.0) -> tuple:

@@ -36,6 +36,9 @@ def test_each_built_in_plant_is_one_catalog_entry_with_its_presets():
     assert plant_type("driftlab").local_phase and not std.local_phase
     assert EpisodeConfig.preset("commonroad_std").mpc == std.controller() != MpcConfig()
     assert plant_type("nonexistent") is None
+    # How far each car steers (the package's steering.max), which a calibration also tries the controller with.
+    assert std.steering_reach_rad(std.preset(2)) == 1.066 and mb.steering_reach_rad(mb.preset(3)) == 1.023
+    assert plant_type("driftlab").steering_reach_rad(PlantConfig()) is None
 
 
 def test_a_plant_type_registered_by_a_user_brings_its_own_model_and_weights():

@@ -138,7 +138,7 @@ def pack_commonroad(car: int | ParameterSet, *, friction_scale: float = 1.0, mas
     return v
 
 
-def steering_limit_rad(car: int | ParameterSet) -> float:
+def steering_reach_rad(car: int | ParameterSet) -> float:
     """How far the car steers either way [rad] (the package's ``steering.min``/``max``: 1.066 for the BMW 320i,
     1.023 for the VW Vanagon), within what an MPC may be given (driftlab.core.mpc.MpcConfig)."""
     from driftlab.core.mpc.config import STEER_LIMIT_RANGE_RAD

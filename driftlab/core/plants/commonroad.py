@@ -107,9 +107,9 @@ class CommonRoadPlantType(PlantType):
 
     def steering_reach_rad(self, config: PlantConfig) -> float | None:
         """The car's own (the package's ``steering.max``: 1.066 rad for the BMW 320i, 1.023 for the VW Vanagon)."""
-        from driftlab.core.commonroad.parameters import steering_limit_rad
+        from driftlab.core.commonroad.parameters import steering_reach_rad
 
-        return steering_limit_rad(self.car(config.commonroad_vehicle))
+        return steering_reach_rad(self.car(config.commonroad_vehicle))
 
     def drifts(self, vehicle_id: int, radius_m: float, sideslip_rad: float, right: bool = False,
                friction_scale: float = 1.0, mass_scale: float = 1.0) -> tuple:

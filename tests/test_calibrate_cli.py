@@ -15,16 +15,22 @@ def _run(*args, timeout=600):
                           timeout=timeout)
 
 
+# What these tests check (points, known sets, rounds, the profile a job takes) does not depend on the candidate
+# controllers (tests/server/test_calibrations.py checks those): one candidate, a quarter of the episodes.
+ONE_CANDIDATE = ("--set", "plant.model_drive_coupling=false", "--set", "mpc.steer_limit_rad=0.6")
+
+
 def test_calibrate_stores_a_profile_that_the_next_job_of_that_car_takes(tmp_path):
     db, out_file = tmp_path / "lab.db", tmp_path / "std.json"
-    out = _run("calibrate", "--plant", "commonroad_std", "--points", "0.5@44,0.2@44", "--iterations", "3",
-               "--seeds", "1", "--workers", "2", "--db", str(db), "--out", str(out_file))
+    out = _run("calibrate", "--plant", "commonroad_std", *ONE_CANDIDATE, "--points", "0.5@44,0.2@44",
+               "--iterations", "3", "--seeds", "1", "--workers", "2", "--db", str(db), "--out", str(out_file))
     assert out.returncode == 0, out.stderr
     summary, = json.loads(out.stdout)["profiles"]  # the point outside the window got none
     assert summary["profile_id"] == 1 and summary["plant_model"] == "commonroad_std" and summary["episodes"] == 1
     assert "skipped 0.2 rad @ R 44 m" in out.stderr  # outside the window: not run, and said why
     profile, = json.loads(out_file.read_text())["profiles"]
-    assert profile["command"].startswith("driftlab calibrate --plant commonroad_std --points 0.5@44,0.2@44")
+    assert profile["command"].startswith("driftlab calibrate --plant commonroad_std --set plant.model_drive_coupling")
+    assert "--points 0.5@44,0.2@44" in profile["command"]
     assert profile["skipped"][0]["sideslip_rad"] == 0.2 and profile["start"]["per_point"][0]["episodes"] == 1
     assert profile["score"] <= profile["start"]["score"]  # the warm start is among the sets tried
     tune = _run("tune", "--plant", "commonroad_std", "--iterations", "1", "--seed-points", "1",
@@ -44,8 +50,8 @@ def test_calibrate_stores_a_profile_that_the_next_job_of_that_car_takes(tmp_path
 
 def test_each_point_is_calibrated_on_its_own_from_the_scenarios_drift_outwards(tmp_path):
     db, out_file = tmp_path / "points.db", tmp_path / "points.json"
-    out = _run("calibrate", "--plant", "commonroad_std", "--points", "0.45@44,0.5@44", "--iterations", "2",
-               "--seeds", "1", "--workers", "2", "--db", str(db), "--out", str(out_file))
+    out = _run("calibrate", "--plant", "commonroad_std", *ONE_CANDIDATE, "--points", "0.45@44,0.5@44",
+               "--iterations", "2", "--seeds", "1", "--workers", "2", "--db", str(db), "--out", str(out_file))
     assert out.returncode == 0, out.stderr
     written = json.loads(out_file.read_text())["profiles"]
     # (A point where the 2 sets complete nothing gets a second round: round 1 of each is what this test reads.)
@@ -59,15 +65,15 @@ def test_each_point_is_calibrated_on_its_own_from_the_scenarios_drift_outwards(t
         assert tried_first["from"] == "profile 1 (0.5 rad @ R 44 m)" and tried_first["weights"] == first["weights"]
     else:
         assert tried_first["from"] == "driftlab's shipped weights"  # (2 iterations: the own set and one more)
-    together = _run("calibrate", "--plant", "commonroad_std", "--points", "0.45@44,0.5@44", "--iterations", "1",
-                    "--seeds", "1", "--workers", "2", "--one-set", "--theta", "dV=0.1", "--db", str(db),
-                    "--out", str(out_file))
+    together = _run("calibrate", "--plant", "commonroad_std", *ONE_CANDIDATE, "--points", "0.45@44,0.5@44",
+                    "--iterations", "1", "--seeds", "1", "--workers", "2", "--one-set", "--theta", "dV=0.1",
+                    "--db", str(db), "--out", str(out_file))
     assert together.returncode == 0, together.stderr
     profile, = json.loads(together.stdout)["profiles"]
     assert len(profile["per_point"]) == 2 and profile["profile_id"] == len(written) + 1
     assert json.loads(out_file.read_text())["profiles"][0]["theta"]["dV"] == 0.1
-    rounds = _run("calibrate", "--plant", "commonroad_std", "--points", "0.5@44", "--iterations", "2", "--seeds", "1",
-                  "--workers", "2", "--rounds", "2", "--db", str(db), "--out", str(out_file))
+    rounds = _run("calibrate", "--plant", "commonroad_std", *ONE_CANDIDATE, "--points", "0.5@44", "--iterations", "2",
+                  "--seeds", "1", "--workers", "2", "--rounds", "2", "--db", str(db), "--out", str(out_file))
     assert rounds.returncode == 0, rounds.stderr
     first, second = json.loads(out_file.read_text())["profiles"]
     assert [first["round"], second["round"]] == [1, 2]

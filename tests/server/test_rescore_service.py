@@ -96,7 +96,7 @@ def test_the_servers_runner_runs_a_calibration_beside_the_jobs(tmp_path):
     try:
         queued = httpx.post(f"{url}/api/calibrations", json={
             "plant": "commonroad_std", "points": "0.5@44", "iterations": 2, "seeds": 1,
-            "config": {"plant.model_drive_coupling": False}})
+            "config": {"plant.model_drive_coupling": False, "mpc.steer_limit_rad": 0.6}})
         assert queued.status_code == 202, queued.text
         job = httpx.post(f"{url}/api/jobs", json={"iterations": 2, "robust_samples": 1, "confirm_samples": 0}).json()
         state = wait_for(f"{url}/api/calibrations/{queued.json()['id']}",

@@ -154,15 +154,15 @@ def with_profile(session: Session, spec: TuningSpec, config_document: Any) -> tu
     return spec, profile.id
 
 
+# The MPC settings a profile carries besides its weights (driftlab.core.calibration searches only the weights).
+PROFILE_LIMITS = ("steer_limit_rad",)
+
+
 def limits_of(document: dict[str, Any]) -> dict[str, Any]:
     """The controller's limits a profile's weights were found with (what its ``mpc`` stored): weights found for
     0.6 rad of steering do not carry over to the car's whole reach."""
     stored = document.get("mpc", {})
     return {name: stored[name] for name in PROFILE_LIMITS if name in stored}
-
-
-# The MPC settings a profile carries besides its weights (driftlab.core.calibration searches only the weights).
-PROFILE_LIMITS = ("steer_limit_rad",)
 
 
 def profile_summary(profile: Any) -> dict[str, Any]:

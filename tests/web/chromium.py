@@ -71,16 +71,23 @@ def choose_option(page, combobox: str, option: str, *, exact: bool = True) -> No
             raise AssertionError(f"{option!r} could not be chosen in {combobox!r} within {WAIT_S:g} s")
 
 
-def click_until_shown(page, button: str, shown) -> None:
-    """Click ``button`` until the locator ``shown`` is visible, until WAIT_S has passed. For a button whose server
-    side reads other inputs: an input's new value and the click travel as separate messages, and on a loaded
-    machine the click can be handled before the value has landed (the server then shows what was there before)."""
+def click_until_shown(clicked, shown) -> None:
+    """Click the locator ``clicked`` until the locator ``shown`` is visible, until WAIT_S has passed. For a button
+    whose server side reads other inputs (an input's new value and the click travel as separate messages, and on a
+    loaded machine the click can be handled before the value has landed), for a ``<details>`` summary clicked while
+    the page still lays out its first data (the click can land beside it), and for a viser folder's title, which a
+    panel redrawn under it may never let stand still for a pointer click: every other attempt is a DOM click."""
     deadline = time.time() + WAIT_S
+    pointer = True
     while True:
-        page.get_by_role("button", name=button).click()
         try:
+            if pointer:
+                clicked.click(timeout=10_000)
+            else:
+                clicked.dispatch_event("click", timeout=10_000)
             shown.wait_for(timeout=10_000)
             return
         except PlaywrightTimeoutError:
             if time.time() > deadline:
                 raise
+        pointer = not pointer

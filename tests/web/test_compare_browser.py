@@ -58,9 +58,9 @@ def _open_compare(browser, url, study_label, shown):
     log = ConsoleLog(page)
     page.goto(f"{url}/viser/")
     log.wait_for("Connected!")
-    page.get_by_text("Compare", exact=True).click()
+    click_until_shown(page.get_by_text("Compare", exact=True), page.get_by_role("button", name="Show comparison"))
     choose_option(page, "Study", study_label)
-    click_until_shown(page, "Show comparison", page.get_by_text(shown).first)
+    click_until_shown(page.get_by_role("button", name="Show comparison"), page.get_by_text(shown).first)
     return page
 
 

@@ -6,10 +6,10 @@ import re
 
 import httpx
 import pytest
-from playwright.sync_api import TimeoutError as PlaywrightTimeout
 from playwright.sync_api import expect
 
 from tests.server_process import free_port, start_server, wait_released
+from tests.web.chromium import click_until_shown
 from tests.web.test_view_browser import SCREENSHOT_DIR, ConsoleLog
 
 pytestmark = pytest.mark.e2e  # real processes: servers, browsers, Dask, the CLI
@@ -30,20 +30,6 @@ def _page(browser, url):
     page.on("pageerror", lambda e: errors.append(str(e)))
     page.goto(url)
     return page, errors
-
-
-def _open_details(page, selector):
-    """Click the summary of ``<details>`` at ``selector`` until it is open: a click while the page is still laying
-    out its first data (the job list above it growing) can land beside the summary, which then stays closed."""
-    details = page.locator(selector)
-    for _ in range(20):
-        details.locator("summary").click()
-        try:
-            page.wait_for_function("(sel) => document.querySelector(sel).open", arg=selector, timeout=3000)
-            return
-        except PlaywrightTimeout:
-            continue
-    raise AssertionError(f"{selector} did not open")
 
 
 def _wait_count(page, selector, attribute, more_than):
@@ -111,7 +97,7 @@ def test_a_job_started_from_the_page_pauses_resumes_and_its_plots_follow(server,
     _wait_count(page, "#convergence", "data-n", paused_at)
     _wait_count(page, "#search-space", "data-n-evaluations", paused_at)
 
-    _open_details(page, "#notes-box")
+    click_until_shown(page.locator("#notes-box summary"), page.locator("#notes"))
     page.locator("#notes").fill("nominal plant, 20 ms lag")
     page.get_by_role("button", name="Save notes").click()
     expect(page.locator("#notes-saved")).to_have_text("saved")
@@ -215,7 +201,7 @@ def test_clone_with_changes_starts_from_the_jobs_settings(server, browser):
 
 def test_a_car_calibrated_from_the_page_shows_its_progress_and_its_profile(server, browser):
     page, errors = _page(browser, f"{server}/dashboard/")
-    _open_details(page, "#calibration-box")
+    click_until_shown(page.locator("#calibration-box summary"), page.locator("#calibration-form"))
     form = page.locator("#calibration-form")
     expect(form.locator("select[name=plant]")).to_have_value("commonroad_std")
     form.locator("textarea[name=sets]").fill("plant.model_drive_coupling=false")

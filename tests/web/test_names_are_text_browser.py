@@ -71,10 +71,11 @@ def test_the_view_shows_names_as_typed_and_runs_none_of_them(server, browser):
         page.get_by_role("option", name=f"{job_id} · {name} · finished").wait_for()
     choose_option(page, "Job", f"{ids[0]} · {NAMES[0]} · finished")
     page.get_by_text(NAMES[0], exact=True).wait_for()  # the job line: **name**, read as typed
-    page.get_by_text("Compare", exact=True).click()
+    click_until_shown(page.get_by_text("Compare", exact=True), page.get_by_role("button", name="Show comparison"))
     # "Job ids" (viser's text input has no label of its own)
     page.locator("input.mantine-TextInput-input").last.fill(",".join(str(i) for i in ids))
-    click_until_shown(page, "Show comparison", page.get_by_text(f"{NAMES[0]} (id {ids[0]})", exact=True).first)
+    show = page.get_by_role("button", name="Show comparison")
+    click_until_shown(show, page.get_by_text(f"{NAMES[0]} (id {ids[0]})", exact=True).first)
     for job_id, name in zip(ids, NAMES, strict=True):
         page.get_by_text(f"{name} (id {job_id})", exact=True).first.wait_for()  # table and diff
     assert page.locator("iframe, svg[onload], img[onerror]").count() == 0
@@ -87,9 +88,10 @@ def test_the_study_dropdown_and_the_dashboard_show_names_as_text(server, browser
     url, ids = server
     page, log, seen = _watched(browser, f"{url}/viser/")
     log.wait_for("Connected!")
-    page.get_by_text("Compare", exact=True).click()
+    click_until_shown(page.get_by_text("Compare", exact=True), page.get_by_role("button", name="Show comparison"))
     choose_option(page, "Study", f"1 · {STUDY_NAME} · seeds", exact=False)
-    click_until_shown(page, "Show comparison", page.get_by_text(STUDY_NAME, exact=True).first)
+    show = page.get_by_role("button", name="Show comparison")
+    click_until_shown(show, page.get_by_text(STUDY_NAME, exact=True).first)
     _nothing_ran(seen)
     page.close()
     page, _, seen = _watched(browser, f"{url}/dashboard/?job={ids[0]}")

@@ -9,7 +9,7 @@ import sys
 from typing import Any
 
 from driftlab.cli.options import PLOT_SUFFIXES, check_output_file, episode_config, finite, key_values
-from driftlab.core.config import Theta, config_to_dict
+from driftlab.core.config import Theta, config_to_dict, fitted
 from driftlab.core.drivability import check_drivable, drift_window
 from driftlab.core.equilibrium import drift_equilibrium
 from driftlab.core.errors import ConfigError, NoEquilibriumError
@@ -19,7 +19,7 @@ from driftlab.core.vehicle import pack_params
 def cmd_equilibrium(args: argparse.Namespace) -> int:
     if args.window:
         return _print_window(args)
-    config = episode_config(args)
+    config = fitted(episode_config(args))
     try:
         eq = drift_equilibrium(args.radius, args.beta, pack_params(config.vehicle))
     except NoEquilibriumError as exc:
@@ -59,6 +59,7 @@ def cmd_episode(args: argparse.Namespace) -> int:
     if args.plot and os.path.splitext(args.plot)[1].lower() not in PLOT_SUFFIXES:
         raise ConfigError(f"--plot {args.plot}: the file name must end in one of {', '.join(PLOT_SUFFIXES)}")
     check_drivable(config)
+    config = fitted(config)  # what runs, and what the CSV records for a re-run
     result = run_episode(theta, config, seed=args.seed)
     print(json.dumps(finite(result.summary())))
     if args.csv:

@@ -22,7 +22,7 @@ from collections.abc import Callable, Sequence
 from dataclasses import dataclass, field, replace
 from typing import Any
 
-from driftlab.core.config import EpisodeConfig, Theta, apply_overrides, config_to_dict
+from driftlab.core.config import EpisodeConfig, Theta, apply_overrides, config_to_dict, fitted
 from driftlab.core.drivability import drivable_reason
 from driftlab.core.episode import failure_penalty
 from driftlab.core.mpc import MpcConfig
@@ -67,8 +67,9 @@ def default_points(config: EpisodeConfig) -> list[CalibrationPoint]:
 
 
 def point_config(base: EpisodeConfig, point: CalibrationPoint) -> EpisodeConfig:
-    """``base`` driving ``point``: the controller's model refitted there (its plant's catalog entry decides how)."""
-    return apply_overrides(base, point.overrides())
+    """``base`` driving ``point``: the controller's model fitted there (its plant's catalog entry decides how; a
+    calibration is where a car's fits happen, before its episodes are sent out)."""
+    return fitted(apply_overrides(base, point.overrides()))
 
 
 def split_drivable(base: EpisodeConfig, points: Sequence[CalibrationPoint]

@@ -164,15 +164,29 @@ class FailureLimits:
             "gripup_grace_s": (0.0, 10.0)})
 
 
+# What a plant that fits the controller's model to itself (PlantType.fits_model) fits when a config first runs:
+# the controller's model at the scenario's drift, and the plant's start in that drift.
+MODEL_FIT = "vehicle"
+START_FIT = "plant.initial_rear_slip"
+
+
 @dataclass(frozen=True)
 class EpisodeConfig:
-    """Everything an episode needs besides theta."""
+    """Everything an episode needs besides theta.
+
+    Attributes:
+        to_fit: what is still to be fitted to the plant before the config runs (:data:`MODEL_FIT`, :data:`START_FIT`;
+            :func:`fitted`). Parsing does no physics: a CommonRoad car's model is fitted to its drift when the
+            config first runs (a job's when a runner claims it, and stored with the job), and a config document
+            leaves out what is still to be fitted (:func:`config_to_dict`).
+    """
 
     vehicle: VehicleParams = field(default_factory=VehicleParams)
     plant: PlantConfig = field(default_factory=PlantConfig)
     mpc: MpcConfig = field(default_factory=MpcConfig)
     scenario: ScenarioConfig = field(default_factory=ScenarioConfig)
     failure: FailureLimits = field(default_factory=FailureLimits)
+    to_fit: frozenset[str] = frozenset()
 
     @classmethod
     def preset(cls, plant: str = "default", controller: str = "default") -> EpisodeConfig:
@@ -186,8 +200,8 @@ class EpisodeConfig:
             raise ConfigError(f"controller must be 'default' or 'paper', got {controller!r}")
         sideslip_rad = plant_config.plant_type.default_sideslip_rad
         scenario = ScenarioConfig() if sideslip_rad is None else ScenarioConfig(sideslip_rad=sideslip_rad)
-        return cls(plant=started_in_drift(plant_config, scenario), vehicle=model_vehicle_for(plant_config, scenario),
-                   scenario=scenario, mpc=controllers[controller]())
+        return _fitted_unless_costly(cls(plant=plant_config, scenario=scenario, mpc=controllers[controller](),
+                                         to_fit=frozenset((MODEL_FIT, START_FIT))))
 
 
 def _plant_presets() -> dict[str, Any]:
@@ -211,6 +225,28 @@ def _plant_preset(name: str) -> PlantConfig:
     if entry is None:
         raise ConfigError(f"plant must be one of {', '.join((*PLANT_PRESETS, *installed_names()))}, got {name!r}")
     return entry.preset()
+
+
+def fitted(config: EpisodeConfig) -> EpisodeConfig:
+    """``config`` with what is still to be fitted to its plant fitted (:attr:`EpisodeConfig.to_fit`): the
+    controller's model (:func:`model_vehicle_for`), then the plant's start in the drift (:func:`started_in_drift`).
+    A CommonRoad car costs 0.3-0.8 s the first time in a process (cached after).
+
+    Raises:
+        OutsideDriftWindowError: the scenario's sideslip is outside the car's window (naming it).
+        ConfigError: inside it, the model cannot be fitted.
+    """
+    if not config.to_fit:
+        return config
+    vehicle = model_vehicle_for(config.plant, config.scenario) if MODEL_FIT in config.to_fit else config.vehicle
+    plant = started_in_drift(config.plant, config.scenario) if START_FIT in config.to_fit else config.plant
+    return replace(config, vehicle=vehicle, plant=plant, to_fit=frozenset())
+
+
+def _fitted_unless_costly(config: EpisodeConfig) -> EpisodeConfig:
+    """A plant that fits no model to itself (DriftLab's: Table I, no physics) is fitted at once; a plant that does
+    (PlantType.fits_model) waits for :func:`fitted`."""
+    return config if config.plant.plant_type.fits_model else fitted(config)
 
 
 def model_vehicle_for(plant: PlantConfig, scenario: ScenarioConfig) -> VehicleParams:
@@ -274,6 +310,9 @@ def apply_overrides(config: EpisodeConfig, overrides: dict[str, Any]) -> Episode
                               field=dotted)
         current = getattr(sections[section], name)
         changes.setdefault(section, {})[name] = _coerce(section, name, current, raw)
+    if MODEL_FIT in config.to_fit and set(changes.get("vehicle", ())) - {f.name for f in fields(VehicleParams)}:
+        config = fitted(config)  # some of the model's settings changed: a change to the model fitted to the car
+        sections = {f.name: getattr(config, f.name) for f in fields(config)}
     _switch_plant_model(sections, changes)
     updated = {s: replace(sections[s], **c) for s, c in changes.items()}
     return _refit_model_vehicle(replace(config, **{**sections, **updated}), changes)
@@ -285,12 +324,12 @@ def overrides_inside_window(config: EpisodeConfig, overrides: dict[str, Any]) ->
     scenario's sideslip is the middle of the car's window: for what scans or searches the window (`driftlab
     equilibrium --window`, `driftlab calibrate`), not for a job, which is refused naming the window."""
     try:
-        return apply_overrides(config, overrides)
+        return fitted(apply_overrides(config, overrides))
     except OutsideDriftWindowError as exc:
         if exc.window is None or "scenario.sideslip_rad" in overrides:
             raise
         middle_rad = round((exc.window[0] + exc.window[1]) / 2, 2)
-        return apply_overrides(config, {**overrides, "scenario.sideslip_rad": middle_rad})
+        return fitted(apply_overrides(config, {**overrides, "scenario.sideslip_rad": middle_rad}))
 
 
 def _switch_plant_model(sections: dict[str, Any], changes: dict[str, dict[str, Any]]) -> None:
@@ -313,21 +352,22 @@ def _switch_plant_model(sections: dict[str, Any], changes: dict[str, dict[str, A
 def _refit_model_vehicle(config: EpisodeConfig, changes: dict[str, dict[str, Any]]) -> EpisodeConfig:
     """The controller follows the plant's car: switching back to DriftLab's plant restores Table I and the default
     weights, switching to a CommonRoad car takes its weights (driftlab.core.commonroad.weights; unless ``mpc.*``
-    keys are given), and a
-    CommonRoad plant's model is fitted to the car's drift at the scenario's radius and sideslip whenever the plant
-    or the scenario changes (driftlab.core.commonroad.model_fit), unless ``vehicle.*`` keys are given; the plant
-    then starts in the car's drift (:func:`started_in_drift`) unless ``plant.initial_rear_slip`` is given."""
-    plant_switched = "model" in changes.get("plant", {}) or "commonroad_vehicle" in changes.get("plant", {})
+    keys are given), and a CommonRoad plant's model is to be fitted to the car's drift at the scenario's radius and
+    sideslip whenever the plant or the scenario changes (driftlab.core.commonroad.model_fit; :func:`fitted`),
+    unless ``vehicle.*`` keys are given; the plant then starts in the car's drift (:func:`started_in_drift`)
+    unless ``plant.initial_rear_slip`` is given."""
+    plant_changes = changes.get("plant", {})
+    plant_switched = "model" in plant_changes or "commonroad_vehicle" in plant_changes
     if plant_switched and "mpc" not in changes:  # and the default controller's weights for that car
         config = replace(config, mpc=config.plant.plant_type.controller())
-    if "vehicle" in changes or not ({"plant", "scenario"} & set(changes)):
-        return config
-    if not config.plant.plant_type.own_car and not plant_switched:
-        return config
-    config = replace(config, vehicle=model_vehicle_for(config.plant, config.scenario))
-    if "initial_rear_slip" in changes.get("plant", {}):
-        return config
-    return replace(config, plant=started_in_drift(config.plant, config.scenario))
+    to_fit = set(config.to_fit) - ({MODEL_FIT} if "vehicle" in changes else set())
+    refit = ("vehicle" not in changes and bool({"plant", "scenario"} & set(changes))
+             and (config.plant.plant_type.own_car or plant_switched))
+    if refit:
+        to_fit |= {MODEL_FIT, START_FIT}
+    if "initial_rear_slip" in plant_changes:
+        to_fit.discard(START_FIT)
+    return _fitted_unless_costly(replace(config, to_fit=frozenset(to_fit)))
 
 
 def dotted_config(document: Any) -> dict[str, Any]:
@@ -371,9 +411,22 @@ def check_json_types(values: dict[str, Any]) -> None:
 
 
 def config_to_dict(config: EpisodeConfig) -> dict[str, dict[str, Any]]:
-    """Nested plain dict {section: {field: value}}."""
-    return {f.name: {g.name: getattr(getattr(config, f.name), g.name) for g in fields(getattr(config, f.name))}
-            for f in fields(config) if is_dataclass(getattr(config, f.name))}
+    """Nested plain dict {section: {field: value}}, without what is still to be fitted (:func:`fitted`): parsed
+    again, it is to be fitted again."""
+    out = {f.name: {g.name: getattr(getattr(config, f.name), g.name) for g in fields(getattr(config, f.name))}
+           for f in fields(config) if is_dataclass(getattr(config, f.name))}
+    return without_keys(out, config.to_fit)
+
+
+def without_keys(document: dict[str, dict[str, Any]], keys: frozenset[str]) -> dict[str, dict[str, Any]]:
+    """A nested config document without ``keys`` (a section, "vehicle", or a dotted key, "plant.initial_rear_slip"):
+    a config still to be fitted compares with a stored, fitted one of the same settings as this."""
+    out = {section: dict(values) for section, values in document.items() if section not in keys}
+    for key in keys:
+        section, _, name = key.partition(".")
+        if name and section in out:
+            out[section].pop(name, None)
+    return out
 
 
 def config_from_dict(data: dict[str, dict[str, Any]], base: EpisodeConfig | None = None) -> EpisodeConfig:

@@ -14,7 +14,7 @@ from functools import lru_cache
 
 import numpy as np
 
-from driftlab.core.config import EpisodeConfig
+from driftlab.core.config import MODEL_FIT, EpisodeConfig
 from driftlab.core.errors import ConfigError
 from driftlab.core.plant import PlantConfig
 from driftlab.core.vehicle import VehicleParams
@@ -25,37 +25,57 @@ class NotDrivableError(ConfigError):
 
 
 def check_drivable(config: EpisodeConfig) -> None:
-    """Raises :class:`NotDrivableError` naming the circle, the radius, the sideslip and what lacks a drift."""
+    """Raises :class:`NotDrivableError` naming the circle, the radius, the sideslip and what lacks a drift. A
+    config whose controller's model is still to be fitted (driftlab.core.config.fitted) is checked without the fit:
+    where it cannot be fitted, the plant's OutsideDriftWindowError names the window (PlantType.check_fit)."""
     s = config.scenario
-    reason = _reason(config.vehicle, config.plant, s.left_radius_m, s.right_radius_m, s.sideslip_rad)
+    if MODEL_FIT in config.to_fit:
+        for radius_m in dict.fromkeys((s.left_radius_m, s.right_radius_m)):
+            config.plant.plant_type.check_fit(config.plant, radius_m, s.sideslip_rad)
+    reason = _reason(_checked_model(config), config.plant, s.left_radius_m, s.right_radius_m, s.sideslip_rad)
     if reason is not None:
         raise NotDrivableError(reason)
+
+
+def _checked_model(config: EpisodeConfig) -> VehicleParams | None:
+    """The controller's model the check reads: None while it is still to be fitted (PlantType.check_fit decides)."""
+    return None if MODEL_FIT in config.to_fit else config.vehicle
 
 
 def drivable_reason(config: EpisodeConfig) -> str | None:
     """None when the configuration is drivable, else why not (the message of :func:`check_drivable`)."""
     try:
         check_drivable(config)
-    except NotDrivableError as exc:
+    except ConfigError as exc:  # NotDrivableError, or a model that cannot be fitted (OutsideDriftWindowError)
         return str(exc)
     return None
 
 
 @lru_cache(maxsize=256)
-def _reason(vehicle: VehicleParams, plant: PlantConfig, left_radius_m: float, right_radius_m: float,
+def _reason(vehicle: VehicleParams | None, plant: PlantConfig, left_radius_m: float, right_radius_m: float,
             sideslip_rad: float) -> str | None:
-    """The controller's model on each circle, then the plant's own drift (its catalog entry's check). A right-hand
-    drift mirrors a left-hand one (same V, delta, Fxr): one solve per radius is enough."""
+    """The controller's model on each circle (``vehicle``; None: still to be fitted, where the plant's fit check
+    decides), then the plant's own drift (its catalog entry's check). A right-hand drift mirrors a left-hand one
+    (same V, delta, Fxr): one solve per radius is enough."""
     entry = plant.plant_type
     circles = [("left", left_radius_m)] + ([("right", right_radius_m)] if right_radius_m != left_radius_m else [])
     for circle, radius in circles:
-        reason = entry.model_reason(vehicle, radius, sideslip_rad, circle)
+        reason = (entry.model_reason(vehicle, radius, sideslip_rad, circle) if vehicle is not None
+                  else _fit_reason(plant, radius, sideslip_rad))
         if reason is not None:
             return reason + entry.not_drivable_hint
     for circle, radius in circles:
         reason = entry.plant_reason(plant, vehicle, radius, sideslip_rad, circle)
         if reason is not None:
             return reason
+    return None
+
+
+def _fit_reason(plant: PlantConfig, radius_m: float, sideslip_rad: float) -> str | None:
+    try:
+        plant.plant_type.check_fit(plant, radius_m, sideslip_rad)
+    except ConfigError as exc:
+        return str(exc)
     return None
 
 
@@ -89,6 +109,6 @@ def drift_window(config: EpisodeConfig, radius_m: float, low_rad: float = 0.05, 
     """Where ``config`` (its plant and controller's model) drifts a circle of ``radius_m``: the sideslips of a
     WINDOW_STEP_RAD grid over [low, high] that the drivability check accepts (the same decision, per radius)."""
     grid = np.round(np.arange(low_rad, high_rad + 1e-9, WINDOW_STEP_RAD), 4)
-    ok = tuple(float(b) for b in grid
-               if _reason(config.vehicle, config.plant, radius_m, radius_m, float(b)) is None)
+    model = _checked_model(config)
+    ok = tuple(float(b) for b in grid if _reason(model, config.plant, radius_m, radius_m, float(b)) is None)
     return DriftWindow(float(radius_m), ok)

@@ -28,7 +28,7 @@ from driftlab.core.closed_loop import (
     new_loop_state,
     run_until_constrained,
 )
-from driftlab.core.config import EpisodeConfig, Theta
+from driftlab.core.config import EpisodeConfig, Theta, fitted
 from driftlab.core.controller import ControllerModel, build_controller_model, has_drift, no_drift_reason
 from driftlab.core.errors import ConfigError, NoEquilibriumError
 from driftlab.core.metrics import EpisodeMetrics, compute_metrics
@@ -112,6 +112,7 @@ def refusal_reason(theta: Theta, config: EpisodeConfig) -> str | None:
     """Why an episode of ``theta`` would stop before its first step, refused: its model corrections leave the
     controller's model without a drift on the scenario's circles (None: it runs). Solves the model's two drift
     equilibria only (~10 ms), none of the QPs."""
+    config = fitted(config)
     s = config.scenario
     reason = no_drift_reason(theta.model_vehicle(config.vehicle), s.left_radius_m, s.right_radius_m, s.sideslip_rad)
     return None if reason is None else _refusal_text(theta, reason)
@@ -121,6 +122,7 @@ def runs(config: EpisodeConfig, theta: dict[str, float]) -> bool:
     """Whether an episode of ``theta`` (any subset of its keys; the others untuned) would run: the optimizer's
     known constraint (driftlab.core.optimizer.BayesianOptimizer's ``feasible``): :func:`refusal_reason` is None,
     without solving more of the model's drift than it takes to find it."""
+    config = fitted(config)
     s = config.scenario
     vehicle = Theta.from_mapping(Theta.filled(theta)).model_vehicle(config.vehicle)
     return has_drift(vehicle, s.left_radius_m, s.right_radius_m, s.sideslip_rad)
@@ -137,6 +139,7 @@ def run_episode(theta: Theta, config: EpisodeConfig, *, seed: int = 0) -> Episod
     """
     if isinstance(seed, bool) or not isinstance(seed, int) or not 0 <= seed <= MAX_SEED:
         raise ConfigError(f"seed must be an integer in [0, {MAX_SEED}], got {seed!r}")
+    config = fitted(config)  # a config parsed, not yet run (driftlab.core.config.fitted); the fit is cached
     started = time.perf_counter()
     scenario = config.scenario
     track = FigureEight(scenario.left_radius_m, scenario.right_radius_m, scenario.laps)

@@ -7,17 +7,19 @@ One validated document, stored as the job's configuration and accepted alike by 
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from functools import partial
 from typing import Any
 
 from driftlab.core.config import (
+    MODEL_FIT,
     THETA_KEYS,
     THETA_LIMITS,
     EpisodeConfig,
     Theta,
     config_from_document,
     config_to_dict,
+    fitted,
 )
 from driftlab.core.errors import ConfigError
 from driftlab.core.limits import JOB_LIMITS, MAX_ROBUST_SAMPLES, check_int
@@ -154,7 +156,8 @@ class TuningSpec:
                                                            self.config.plant.plant_type.theta_bounds))
         if self.warm_start is not None:
             self.warm_start.check(self.bounds)
-        if self.model_correction:  # every corner of the box must be a valid car, or every episode would raise
+        if self.model_correction and MODEL_FIT not in self.config.to_fit:
+            # every corner of the box must be a valid car, or every episode would raise (checked again once fitted)
             (mu_lo, mu_hi), (c_lo, c_hi) = self.bounds["model_mu_scale"], self.bounds["model_c_scale"]
             for mu, c in ((mu_lo, c_lo), (mu_hi, c_hi)):
                 try:
@@ -162,6 +165,11 @@ class TuningSpec:
                 except ConfigError as exc:
                     raise ConfigError(f"bounds.model_mu_scale / bounds.model_c_scale reach a model outside the "
                                       f"vehicle's range ({exc})", field="bounds") from None
+
+    def fitted(self) -> TuningSpec:
+        """This job with its config fitted to its plant (driftlab.core.config.fitted: a runner does it when it claims
+        the job, and stores it), validated again."""
+        return self if not self.config.to_fit else replace(self, config=fitted(self.config))
 
     def to_dict(self) -> dict[str, Any]:
         out = {"iterations": self.iterations, "seed_points": self.seed_points, "active_set": self.active_set,

@@ -103,7 +103,10 @@ class Job(BaseModel):
     study_id: int | None
     profile_id: int | None = Field(default=None, description="the car profile (driftlab calibrate) whose MPC weights "
                                                              "the job took, if any")
-    spec: dict[str, Any] = Field(description="the validated job document (POST /api/jobs), config in full")
+    spec: dict[str, Any] = Field(description=(
+        "the validated job document (POST /api/jobs), config in full; a car whose controller's model is fitted to "
+        "its own drift (a CommonRoad car) lacks config.vehicle and config.plant.initial_rear_slip until a runner "
+        "claims the job and stores them fitted"))
     run_s: float = Field(default=0.0, description="wall time of its finished runs, in all (what a time budget "
                                                   "counts, with the current run's)")
     stop_reason: str | None = Field(default=None, description="the stop rule that finished it, if one did")

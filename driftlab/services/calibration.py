@@ -26,7 +26,14 @@ from driftlab.core.calibration import (
     point_config,
     split_drivable,
 )
-from driftlab.core.config import EpisodeConfig, Theta, apply_overrides, config_to_dict, overrides_inside_window
+from driftlab.core.config import (
+    EpisodeConfig,
+    Theta,
+    apply_overrides,
+    config_to_dict,
+    fitted,
+    overrides_inside_window,
+)
 from driftlab.core.drivability import drift_window
 from driftlab.core.errors import ConfigError
 from driftlab.core.limits import check_int
@@ -171,7 +178,7 @@ def _calibrate_group(run: _Run, centre: EpisodeConfig, points: Sequence[Calibrat
     request, candidates = run.request, []
     for change in _model_candidates(run.given, request.sets):
         try:
-            base = apply_overrides(centre, change) if change else centre
+            base = fitted(apply_overrides(centre, change)) if change else centre
         except ConfigError as exc:  # this model has no fit at the scenario's drift: the other candidates run
             run.say(f"skipped the model with {change}: {exc}")
             continue
@@ -225,7 +232,7 @@ def _learned_theta(run: _Run, point: CalibrationPoint, last: dict[str, Any]) -> 
     config = point_config(run.given, point)
     coupling = last["plant"].get("model_drive_coupling", False)
     if record["completed"] and coupling != config.plant.model_drive_coupling:  # the model those weights were for
-        config = apply_overrides(config, {"plant.model_drive_coupling": coupling})
+        config = fitted(apply_overrides(config, {"plant.model_drive_coupling": coupling}))
     config = replace(config, mpc=replace(config.mpc, **weights, **(limits_of(last) if record["completed"] else {})))
     run.stage.update(step="theta")
     theta, score = learn_theta(config, run.run_batch, iterations=request.iterations, seeds=request.seeds,

@@ -7,7 +7,7 @@ from dataclasses import replace
 
 from sqlalchemy.orm import Session
 
-from driftlab.core.config import config_to_dict
+from driftlab.core.config import config_to_dict, without_keys
 from driftlab.core.errors import ConfigError
 from driftlab.core.tuning import TuningSpec
 from driftlab.core.warm_start import SourceJob, warm_start
@@ -25,6 +25,8 @@ def with_warm_start(session: Session, spec: TuningSpec, job_ids: list[int]) -> T
         except storage.NotFound:
             raise ConfigError(f"warm_start_from: no job with id {job_id}", field="warm_start_from") from None
         evaluations = [(e.theta, e.J, e.completed) for e in storage.evaluations(session, job_id=job_id)]
-        sources.append(SourceJob(job_id, job.spec.get("config", {}), evaluations))
+        # A config still to be fitted (parsing does no physics) is the same problem as a fitted one of its settings.
+        stored = without_keys(job.spec.get("config", {}), spec.config.to_fit)
+        sources.append(SourceJob(job_id, stored, evaluations))
     start = warm_start(sources, config_to_dict(spec.config), spec.bounds)
     return replace(spec, warm_start=start if spec.warm_start is None else start.joined(spec.warm_start))

@@ -17,6 +17,7 @@ from sqlalchemy.orm import Session, sessionmaker
 
 from driftlab.core.config import Theta
 from driftlab.core.convergence import best_so_far
+from driftlab.core.errors import ConfigError
 from driftlab.core.robust import RobustScore, SampleResult, aggregate
 from driftlab.core.statuses import EpisodeStatus
 from driftlab.core.tuning import TuningSpec
@@ -185,6 +186,20 @@ class _Lease:
         self._last = time.monotonic()
 
 
+def _fit_config(factory: sessionmaker[Session], job_id: int) -> None:
+    """A job queued with its config still to be fitted to its plant (parsing does no physics: POST /api/jobs and
+    `driftlab tune` store it so) is fitted once, here, off the server's request path, and stored fitted: what every
+    episode of it runs, and what re-runs it, is the stored config (driftlab.core.config.fitted)."""
+    with storage.snapshot(factory) as session:
+        spec = TuningSpec.from_dict(storage.get_job(session, job_id=job_id).spec)
+    if not spec.config.to_fit:
+        return
+    config = spec.fitted().to_dict()["config"]
+    with storage.transaction(factory) as session:
+        job = storage.get_job(session, job_id=job_id)
+        job.spec = {**job.spec, "config": config}  # a budget raised meanwhile stays
+
+
 def _may_ask(waiting: list, evaluations: list[_PendingEvaluation], room: bool) -> bool:
     """Whether to ask the next theta now: while at most one evaluation is unfinished (the next one is asked as
     soon as the previous one starts, so its episodes wait ready when the workers free up), or while the share has
@@ -230,6 +245,13 @@ def _run(factory: sessionmaker[Session], job_id: int, executor: EpisodeExecutor,
          owner: object, wake: threading.Event, should_stop: Callable[[], bool],
          on_progress: Callable[[Progress], None] | None, optimizers: OptimizerHost | None,
          max_trajectories: int) -> str:
+    try:
+        _fit_config(factory, job_id)
+    except ConfigError as exc:  # the car cannot be fitted at this drift after all: the job fails, saying why
+        status, error = interrupted_status(exc)
+        with storage.transaction(factory) as session:
+            lifecycle.release(session, job_id=job_id, runner=runner, status=status, error=error)
+        return status
     with storage.transaction(factory) as session:
         job = storage.get_job(session, job_id=job_id)
         spec = TuningSpec.from_dict(job.spec)

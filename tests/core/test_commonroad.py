@@ -23,11 +23,18 @@ from driftlab.core.commonroad.parameters import (
 )
 from driftlab.core.commonroad.std import std_derivatives
 from driftlab.core.commonroad.weights import std_weights
-from driftlab.core.config import EpisodeConfig, Theta, apply_overrides, config_from_document, config_to_dict
+from driftlab.core.config import (
+    EpisodeConfig,
+    Theta,
+    apply_overrides,
+    config_from_document,
+    config_to_dict,
+    fitted,
+)
 from driftlab.core.drivability import drivable_reason
 from driftlab.core.episode import run_episode
 from driftlab.core.equilibrium import drift_equilibrium
-from driftlab.core.errors import ConfigError, NoEquilibriumError
+from driftlab.core.errors import ConfigError, NoEquilibriumError, OutsideDriftWindowError
 from driftlab.core.mpc import MpcConfig
 from driftlab.core.vehicle import pack_params
 
@@ -93,10 +100,38 @@ def test_a_commonroad_config_is_one_key_and_refuses_what_cannot_drift():
         apply_overrides(config, {"plant.commonroad_vehicle": 1})
     with pytest.raises(ConfigError, match="plant.tyre_c_scale shapes DriftLab's own plant"):
         apply_overrides(config, {"plant.tyre_c_scale": 1.1})
-    with pytest.raises(ConfigError, match="steers into the turn"):
-        apply_overrides(config, {"scenario.sideslip_rad": 0.4})
+    # Parsing a sideslip outside the car's window does no physics; the drivability check and the fit refuse it.
+    outside = apply_overrides(config, {"scenario.sideslip_rad": 0.4})
+    assert "steers into the turn" in drivable_reason(outside)
+    with pytest.raises(OutsideDriftWindowError, match="steers into the turn"):
+        fitted(outside)
     with pytest.raises(ConfigError, match="plant.model must be one of"):
         apply_overrides(config, {"plant.model": "carsim"})
+
+
+def test_parsing_a_commonroad_config_does_no_physics_and_its_fit_is_what_parsing_did_before(monkeypatch):
+    """The model fit (0.3-0.8 s a new drift) happens when the config first runs, never in a parse: a job's config is
+    stored with the fit still to do, and a runner fits it when it claims the job (tests/worker)."""
+    document = {"plant.model": "commonroad_std", "scenario.sideslip_rad": 0.53, "scenario.left_radius_m": 41.0}
+    import driftlab.core.commonroad.model_fit as model_fit
+
+    calls = []
+    fit = model_fit._fit
+    monkeypatch.setattr(model_fit, "_fit", lambda *args: calls.append(args) or fit(*args))
+    parsed = config_from_document(document)
+    assert calls == [] and parsed.to_fit == {"vehicle", "plant.initial_rear_slip"}
+    stored = config_to_dict(parsed)
+    assert "vehicle" not in stored and "initial_rear_slip" not in stored["plant"]
+    assert config_from_document(stored) == parsed and calls == []  # stored and read back: still to be fitted
+    done = fitted(parsed)
+    assert len(calls) == 1 and done.to_fit == frozenset()
+    assert done.vehicle == fitted_model_vehicle(2, 41.0, 0.53) and done.vehicle != EpisodeConfig().vehicle
+    assert done.plant.initial_rear_slip == pytest.approx(commonroad_drifts(2, 41.0, 0.53)[0].rear_slip, abs=1e-4)
+    assert config_from_document(config_to_dict(done)) == done  # fitted, it is stored in full and parsed as is
+    # One episode of the parsed config is the episode of the fitted one, bit for bit.
+    short = {"scenario.max_time_s": 3.0}
+    a, b = run_episode(Theta(), apply_overrides(parsed, short)), run_episode(Theta(), apply_overrides(done, short))
+    assert a.J == b.J and (a.trajectory == b.trajectory).all()
 
 
 def test_without_the_package_the_error_names_the_extra(monkeypatch):
@@ -374,9 +409,9 @@ def test_a_refused_sideslip_names_where_the_car_and_its_model_both_drift():
     """The window the refusal names, checked point by point: the car's main drift countersteers both ways at its
     edges and not one step outside. The model read off the car's tyres drifts up to 0.57 rad; above, its front grip
     is raised until it does, so the car's own window is the job's."""
-    config = EpisodeConfig.preset("commonroad_std")
+    config = fitted(EpisodeConfig.preset("commonroad_std"))
     with pytest.raises(ConfigError) as refused:
-        apply_overrides(config, {"scenario.sideslip_rad": 0.3})
+        fitted(apply_overrides(config, {"scenario.sideslip_rad": 0.3}))
     found = re.search(r"needs a scenario.sideslip_rad in (\d\.\d\d)-(\d\.\d\d) rad", str(refused.value))
     assert found and refused.value.field == "scenario.sideslip_rad", str(refused.value)
     low, high = float(found[1]), float(found[2])
@@ -392,7 +427,7 @@ def test_a_refused_sideslip_names_where_the_car_and_its_model_both_drift():
     drift_equilibrium(44.0, -0.57, model)  # raises if the model has no drift there
     with pytest.raises(NoEquilibriumError):
         drift_equilibrium(44.0, -0.58, model)
-    above = apply_overrides(config, {"scenario.sideslip_rad": 0.6})
+    above = fitted(apply_overrides(config, {"scenario.sideslip_rad": 0.6}))
     assert config.vehicle.front_grip_scale == 1.0 and 1.0 < above.vehicle.front_grip_scale <= 1.1
     drift_equilibrium(44.0, -0.6, pack_params(above.vehicle))
 
@@ -402,7 +437,7 @@ def test_an_std_car_starts_its_rear_wheel_at_the_slip_of_its_own_drift():
     wheel at slip -0.93; started at the old fixed -0.5 it grips up before its first flick, started in its drift it
     holds the drift to the trigger."""
     vanagon = {"plant.model": "commonroad_std", "plant.commonroad_vehicle": 3, "scenario.sideslip_rad": 0.62}
-    config = apply_overrides(EpisodeConfig(), vanagon)
+    config = fitted(apply_overrides(EpisodeConfig(), vanagon))
     main = commonroad_drifts(3, 44.0, 0.62)[0]
     assert config.plant.initial_rear_slip == pytest.approx(main.rear_slip, abs=1e-4) and main.rear_slip < -0.9
     held = run_episode(Theta(), config, seed=1)
@@ -412,5 +447,5 @@ def test_an_std_car_starts_its_rear_wheel_at_the_slip_of_its_own_drift():
     # A config that names its start (as every stored job's does) keeps it when it is loaded again.
     assert config_from_document(config_to_dict(old_config := apply_overrides(
         EpisodeConfig(), {**vanagon, "plant.initial_rear_slip": -0.5}))).plant == old_config.plant
-    assert EpisodeConfig.preset("commonroad_std").plant.initial_rear_slip == pytest.approx(
+    assert fitted(EpisodeConfig.preset("commonroad_std")).plant.initial_rear_slip == pytest.approx(
         commonroad_drifts(2, 44.0, 0.5)[0].rear_slip, abs=1e-4)

@@ -7,7 +7,7 @@ from pathlib import Path
 
 import pytest
 
-from driftlab.core.config import EpisodeConfig, apply_overrides
+from driftlab.core.config import EpisodeConfig, apply_overrides, fitted
 from driftlab.core.errors import ConfigError
 from driftlab.core.mpc import MpcConfig
 from driftlab.core.plant import PlantConfig
@@ -82,7 +82,7 @@ def test_a_commonroad_variant_drives_its_own_scaled_parameters():
     # Its drift is its own: 15 % less grip drifts slower (V^2 ~ mu g R), and the controller's model follows it.
     own, bmw = commonroad_drifts(car, 44.0, 0.5)[0], commonroad_drifts(2, 44.0, 0.5)[0]
     assert own.speed_mps < bmw.speed_mps - 0.5
-    config = EpisodeConfig.preset("scaled_bmw")
+    config = fitted(EpisodeConfig.preset("scaled_bmw"))
     assert config.plant.model == "scaled_bmw" and config.scenario.sideslip_rad == 0.5
     assert config.vehicle.mass_kg == pytest.approx(1.3 * published.m)
     assert config.mpc == plant_type("commonroad_std").controller()  # the base car's weights until calibrated
@@ -94,7 +94,7 @@ def test_a_variant_with_no_scales_is_its_base_car_bit_for_bit():
     from driftlab.core.plants import CommonRoadVariant
 
     register_plant("same_bmw", CommonRoadVariant({}))
-    same, bmw = EpisodeConfig.preset("same_bmw"), EpisodeConfig.preset("commonroad_std")
+    same, bmw = fitted(EpisodeConfig.preset("same_bmw")), fitted(EpisodeConfig.preset("commonroad_std"))
     assert same.vehicle == bmw.vehicle and same.mpc == bmw.mpc
     ours, theirs = run_episode(Theta(), same, seed=3), run_episode(Theta(), bmw, seed=3)
     assert ours.J == theirs.J and (ours.trajectory == theirs.trajectory).all()

@@ -160,10 +160,15 @@ def test_a_commonroad_job_is_one_config_key(server):
                                             "config": {"plant.model": "commonroad_std", "scenario.sideslip_rad": 0.5}})
     assert r.status_code == 201, r.text
     config = r.json()["spec"]["config"]
-    assert config["plant"]["model"] == "commonroad_std" and config["vehicle"]["mass_kg"] == pytest.approx(1093.3, 0.01)
-    assert config["mpc"]["q_steer"] != 122.5  # the controller's weights for that car
+    assert config["plant"]["model"] == "commonroad_std" and config["mpc"]["q_steer"] != 122.5  # the car's weights
+    # Creating the job did no physics: the controller's model is fitted to the car when a runner claims the job,
+    # and stored with it (the job re-runs from what is stored).
+    assert "vehicle" not in config and "initial_rear_slip" not in config["plant"]
     done = _wait_status(url, r.json()["id"], {"finished"}, timeout_s=300)  # behind the module's other jobs
     assert done["n_done"] == 1
+    stored = done["spec"]["config"]
+    assert stored["vehicle"]["mass_kg"] == pytest.approx(1093.3, 0.01) and stored["vehicle"]["steer_offset_rad"] != 0
+    assert stored["plant"]["initial_rear_slip"] < 0 and stored["mpc"] == config["mpc"]
 
 
 def test_concurrent_reads_while_a_job_writes(server):

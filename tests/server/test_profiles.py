@@ -1,6 +1,7 @@
 """A calibrated car's profile reaches its new jobs: their stored config carries the profile's weights and the job
 records which profile it took; a job that sets its own weights keeps them."""
 
+from driftlab.core.tuning import TuningSpec
 from driftlab.db import profiles, storage
 from tests.server.conftest import in_process_client
 
@@ -37,7 +38,8 @@ def test_a_profile_brings_the_controllers_model_it_was_calibrated_with(tmp_path)
         job = client.post("/api/jobs", json={"iterations": 1, "config": CAR}).json()
         config = job["spec"]["config"]
         assert job["profile_id"] == profile_id and config["plant"]["model_drive_coupling"] is True
-        assert config["vehicle"]["rear_friction_circle"] is True and 0.0 < config["vehicle"]["rear_coupling"] < 1.0
+        model = TuningSpec.from_dict(job["spec"]).fitted().config.vehicle  # as the runner fits it, claiming the job
+        assert model.rear_friction_circle is True and 0.0 < model.rear_coupling < 1.0
 
 
 def test_a_profile_brings_the_steering_limit_its_weights_were_found_with(tmp_path):

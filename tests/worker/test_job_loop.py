@@ -197,3 +197,61 @@ def test_a_failed_seed_ends_its_evaluation_unless_the_job_is_deterministic(tmp_p
             assert len(e.seeds) == 4
         else:  # the first seed failed: the other three never ran
             assert len(e.seeds) == 1 and e.metrics["n_samples"] == 1 and e.J == pytest.approx(6.0)
+
+
+class RecordingExecutor(ShuffledExecutor):
+    """ShuffledExecutor that keeps every config document it was sent."""
+
+    def __init__(self) -> None:
+        super().__init__(0)
+        self.documents: list[dict] = []
+
+    def submit(self, theta, config_doc, seed=0) -> Future:
+        self.documents.append(config_doc)
+        return super().submit(theta, config_doc, seed)
+
+
+def test_a_runner_fits_a_cars_model_when_it_claims_the_job_and_stores_it_fitted(tmp_path):
+    """Creating a job does no physics (POST /api/jobs, `driftlab tune`): its stored config has no controller's model
+    yet. The runner that claims it fits the model to the car's drift, stores it, and sends every episode that."""
+    from driftlab.core.config import config_from_document, config_to_dict, fitted
+
+    factory = storage.open_database(f"sqlite:///{tmp_path / 'fit.db'}")
+    spec = TuningSpec.from_dict({"iterations": 3, "seed_points": 2, "robust_samples": 1, "confirm_samples": 0,
+                                 "config": {"plant.model": "commonroad_std", "scenario.sideslip_rad": 0.52}})
+    with storage.transaction(factory) as session:
+        job_id = storage.create_job(session, name="car", spec=spec.to_dict(), seed=0).id
+        assert "vehicle" not in storage.get_job(session, job_id=job_id).spec["config"]
+    claim_job(factory, job_id, "runner")
+    executor = RecordingExecutor()
+    assert run_job(factory, job_id, executor, runner="runner", workers=2) == "finished"
+    with storage.snapshot(factory) as session:
+        stored = storage.get_job(session, job_id=job_id).spec["config"]
+    expected = config_to_dict(fitted(spec.config))
+    assert stored == expected and stored["vehicle"]["steer_offset_rad"] != 0.0
+    assert len(executor.documents) == 3 and all(doc == expected for doc in executor.documents)
+    assert config_from_document(stored).to_fit == frozenset()  # read back: nothing left to fit
+
+
+def test_a_job_whose_car_cannot_be_fitted_fails_saying_why(tmp_path, monkeypatch):
+    import driftlab.core.commonroad.model_fit as model_fit
+    from driftlab.core.errors import ConfigError
+
+    def no_fit(*args):
+        raise ConfigError("no model friction in [0.3, 1.9] drifts at the car's 20.00 m/s",
+                          field="scenario.sideslip_rad")
+
+    monkeypatch.setattr(model_fit, "_fit", no_fit)
+    factory = storage.open_database(f"sqlite:///{tmp_path / 'nofit.db'}")
+    spec = TuningSpec.from_dict({"iterations": 3, "config": {"plant.model": "commonroad_std",
+                                                             "scenario.sideslip_rad": 0.5432}})  # not fitted before
+    with storage.transaction(factory) as session:
+        job_id = storage.create_job(session, name="car", spec=spec.to_dict(), seed=0).id
+    claim_job(factory, job_id, "runner")
+    executor = RecordingExecutor()
+    assert run_job(factory, job_id, executor, runner="runner", workers=2) == "failed"
+    with storage.snapshot(factory) as session:
+        job = storage.get_job(session, job_id=job_id)
+        assert "no model friction" in job.error and "needs a scenario.sideslip_rad in" in job.error
+        assert storage.evaluations(session, job_id=job_id) == [] and "vehicle" not in job.spec["config"]
+    assert executor.documents == []

@@ -58,11 +58,36 @@ def _fitted(vehicle_id: int, radius_m: float, sideslip_rad: float, model: Any, d
     try:
         return _fit(vehicle_id, radius_m, sideslip_rad, model, drive_coupling)
     except ConfigError as exc:
-        car, own = _windows(vehicle_id, radius_m, model)
-        message, window = f"{exc}. {windows_text(vehicle_id, radius_m, car, own)}", _overlap(car, own)
-        if window is not None and window[0] <= abs(sideslip_rad) <= window[1]:
-            raise ConfigError(message, field=exc.field) from None  # inside the window, but no fit: not its edge
-        raise OutsideDriftWindowError(message, field=exc.field, window=window) from None
+        raise _refusal(exc, vehicle_id, radius_m, sideslip_rad, model) from None
+
+
+def check_fittable(vehicle_id: int, radius_m: float, sideslip_rad: float, model: Any) -> None:
+    """Raise what :func:`fitted_model_vehicle` raises outside the car's window on this circle, without fitting: the
+    car's main drift there must countersteer both ways, and the model read off its tyres (its front grip raised as
+    far as a fit raises it) must have a drift there, the two windows :func:`windows_text` names. ~0.1-0.3 s the
+    first time (the car's drift family, cached), the fit itself 0.3-0.8 s. Inside the window a fit can still miss
+    the car's drift speed; it raises then."""
+    try:
+        _main_drift(vehicle_id, radius_m, sideslip_rad, False, model)
+        _main_drift(vehicle_id, radius_m, sideslip_rad, True, model)
+        widest = pack_params(widest_front_grip(commonroad_model_vehicle(model.car(vehicle_id))))
+        try:
+            drift_equilibrium(radius_m, -abs(sideslip_rad), widest)
+        except NoEquilibriumError as exc:
+            raise ConfigError(f"the controller's model of CommonRoad vehicle {vehicle_id} ({model.name}) has no "
+                              f"drift at radius {radius_m:g} m, sideslip {abs(sideslip_rad):g} rad: {exc}",
+                              field="scenario.sideslip_rad") from None
+    except ConfigError as exc:
+        raise _refusal(exc, vehicle_id, radius_m, sideslip_rad, model) from None
+
+
+def _refusal(exc: ConfigError, vehicle_id: int, radius_m: float, sideslip_rad: float, model: Any) -> ConfigError:
+    """Why a fit at this drift fails, with the window a job of this car needs on this circle."""
+    car, own = _windows(vehicle_id, radius_m, model)
+    message, window = f"{exc}. {windows_text(vehicle_id, radius_m, car, own)}", _overlap(car, own)
+    if window is not None and window[0] <= abs(sideslip_rad) <= window[1]:
+        return ConfigError(message, field=exc.field)  # inside the window, but no fit: not its edge
+    return OutsideDriftWindowError(message, field=exc.field, window=window)
 
 
 def _windows(vehicle_id: int, radius_m: float, model: Any) -> tuple[tuple[float, float] | None, ...]:

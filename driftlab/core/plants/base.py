@@ -25,6 +25,9 @@ class PlantType(ABC):
         name: its ``plant.model``.
         own_car: it brings its own tyres, loads and yaw inertia (a CommonRoad car): DriftLab's tyre and load
             settings stay off, and its mass scale carries its yaw inertia.
+        fits_model: the controller's model is fitted to the plant's own drift at each job's drift
+            (:meth:`model_vehicle` solves the plant's drift family): a config is fitted when it first runs, not
+            when it is parsed (driftlab.core.config.fitted), and :meth:`check_fit` tells before whether it can be.
         preset_name: the ``--plant`` preset that starts from it (None: reached only through ``plant.model``).
         default_sideslip_rad: the sideslip its preset drifts at, or None for the scenario's default.
         local_phase: new jobs start their seed points near the uncorrected model (TuningSpec.local_phase).
@@ -34,6 +37,7 @@ class PlantType(ABC):
 
     name: str = ""
     own_car: bool = False
+    fits_model: bool = False
     preset_name: str | None = None
     default_sideslip_rad: float | None = None
     local_phase: bool = False
@@ -54,6 +58,10 @@ class PlantType(ABC):
     def model_vehicle(self, config: PlantConfig, radius_m: float, sideslip_rad: float) -> VehicleParams:
         """The controller's vehicle for this plant driving (radius, sideslip)."""
         return VehicleParams()
+
+    def check_fit(self, config: PlantConfig, radius_m: float, sideslip_rad: float) -> None:  # noqa: B027
+        """Raise ConfigError (OutsideDriftWindowError, naming the window) where the controller's model cannot be
+        fitted at (radius, sideslip), without fitting it (a plant that :attr:`fits_model`)."""
 
     def started_in_drift(self, config: PlantConfig, radius_m: float, sideslip_rad: float) -> PlantConfig:
         """``config`` with its start settings for an episode that begins in the plant's own drift at (radius,

@@ -33,6 +33,7 @@ class CommonRoadPlantType(PlantType):
     """
 
     own_car = True
+    fits_model = True
     default_sideslip_rad = 0.5  # a CommonRoad car countersteers only from ~0.45 rad at 44 m (its drift family)
     # The paper's box assumes the steering feedback on the path error helps (k >= 0) and the model's drift speed is
     # within 0.3 m/s of the car's. The controller's model of a CommonRoad car is fitted to its drift at one point
@@ -84,6 +85,11 @@ class CommonRoadPlantType(PlantType):
 
         return fitted_model_vehicle(config.commonroad_vehicle, radius_m, sideslip_rad, self,
                                     drive_coupling=config.model_drive_coupling)
+
+    def check_fit(self, config: PlantConfig, radius_m: float, sideslip_rad: float) -> None:
+        from driftlab.core.commonroad.model_fit import check_fittable
+
+        check_fittable(config.commonroad_vehicle, radius_m, sideslip_rad, self)
 
     def started_in_drift(self, config: PlantConfig, radius_m: float, sideslip_rad: float) -> PlantConfig:
         """The rear wheel starts at the slip ratio of the car's own (left-hand) drift there: any other start is a

@@ -40,7 +40,7 @@ def main() -> None:
             car.append(took)
             ids.append((job["id"], time.perf_counter(), "vehicle" in job["spec"]["config"]))
         fitted_after = []
-        for job_id, posted, fitted_at_post in ids:
+        for job_id, posted, _ in ids:
             while "vehicle" not in httpx.get(f"{url}/api/jobs/{job_id}").json()["spec"]["config"]:
                 time.sleep(0.05)
             fitted_after.append(time.perf_counter() - posted)

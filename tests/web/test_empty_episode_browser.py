@@ -9,6 +9,7 @@ import pytest
 from playwright.sync_api import expect
 
 from tests.server_process import free_port, start_server, wait_released, wait_status
+from tests.web.chromium import click_until_shown
 from tests.web.test_view_browser import ConsoleLog
 
 pytestmark = pytest.mark.e2e  # real processes: servers, browsers, Dask, the CLI
@@ -47,8 +48,9 @@ def test_an_evaluation_with_no_step_is_shown_as_such(server, browser):
     assert page.get_by_text("evaluation id 1 ").count() == 0
     page.get_by_role("button", name="Play best").click()
     page.get_by_role("button", name="Play evaluation at index").click()
-    page.get_by_role("button", name="Follow live").click()
-    page.get_by_text("stopped before its first step").first.wait_for()
+    # Under load a click can land while the panel redraws: clicked again until the live evaluation is shown.
+    click_until_shown(page.get_by_role("button", name="Follow live"),
+                      page.get_by_text("stopped before its first step").first)
     server_log = Path(proc.log_path).read_text()
     assert "Traceback" not in server_log and "IndexError" not in server_log, server_log[-3000:]
     page.close()

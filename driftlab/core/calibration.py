@@ -22,8 +22,8 @@ from collections.abc import Callable, Sequence
 from dataclasses import dataclass, field, replace
 from typing import Any
 
-from driftlab.core.config import EpisodeConfig, Theta, apply_overrides, config_to_dict, fitted
-from driftlab.core.drivability import drivable_reason
+from driftlab.core.config import MODEL_FIT, EpisodeConfig, Theta, apply_overrides, config_to_dict, fitted
+from driftlab.core.drivability import drift_window, drivable_reason
 from driftlab.core.episode import failure_penalty
 from driftlab.core.mpc import MpcConfig
 from driftlab.core.optimizer import BayesianOptimizer
@@ -57,13 +57,41 @@ class CalibrationPoint:
         return f"{self.sideslip_rad:g} rad @ R {self.radius_m:g} m"
 
 
+# The default points' spacing across the window: a job's drift lies less than one step (driftlab.services.profiles:
+# 0.05 rad) from one of them, so a profile applies to every drift of the window on the scenario's circle.
+POINT_SPACING_RAD = 0.05
+# Where the window is scanned for the default points: the car's countersteer window (driftlab.core.commonroad.family
+# scans 0.2-0.8 rad); beyond 0.8 rad the failure limits (1.2 rad) leave a flick no room.
+WINDOW_SCAN_RAD = (0.2, 0.8)
+
+
 def default_points(config: EpisodeConfig) -> list[CalibrationPoint]:
-    """The scenario's drift, 0.05 rad either side of it, and its sideslip on circles 30/44 and 52/44 the size."""
+    """The scenario's drift and every POINT_SPACING_RAD either side of it across the car's drift window on its
+    circle (:func:`window_sideslips`), and its sideslip on circles 30/44 and 52/44 the size."""
     s = config.scenario
     beta, radius = s.sideslip_rad, s.left_radius_m
-    return [CalibrationPoint(round(beta - 0.05, 4), radius), CalibrationPoint(beta, radius),
-            CalibrationPoint(round(beta + 0.05, 4), radius), CalibrationPoint(beta, round(radius * 30 / 44, 2)),
-            CalibrationPoint(beta, round(radius * 52 / 44, 2))]
+    return [*(CalibrationPoint(b, radius) for b in window_sideslips(config)),
+            CalibrationPoint(beta, round(radius * 30 / 44, 2)), CalibrationPoint(beta, round(radius * 52 / 44, 2))]
+
+
+def window_sideslips(config: EpisodeConfig) -> list[float]:
+    """The scenario's sideslip and every POINT_SPACING_RAD either side of it inside the run of the drift window
+    (driftlab.core.drivability.drift_window, scanned over WINDOW_SCAN_RAD) that holds it, and the run's edge where
+    it lies half a spacing or more beyond the last of them: every sideslip of the run is then less than half a
+    spacing from one. Only the scenario's own where it is outside the window (split_drivable sets it aside)."""
+    beta, radius = config.scenario.sideslip_rad, config.scenario.left_radius_m
+    if config.plant.plant_type.fits_model:  # the window a job is checked against: where its model can be fitted
+        config = replace(config, to_fit=config.to_fit | {MODEL_FIT})
+    runs = drift_window(config, radius, *WINDOW_SCAN_RAD).ranges_rad
+    low, high = next(((lo, hi) for lo, hi in runs if lo - 1e-9 <= beta <= hi + 1e-9), (beta, beta))
+    below = math.floor((beta - low) / POINT_SPACING_RAD + 1e-9)
+    above = math.floor((high - beta) / POINT_SPACING_RAD + 1e-9)
+    sideslips = [round(beta + k * POINT_SPACING_RAD, 4) for k in range(-below, above + 1)]
+    if sideslips[0] - low >= POINT_SPACING_RAD / 2 - 1e-9:
+        sideslips.insert(0, round(low, 4))
+    if high - sideslips[-1] >= POINT_SPACING_RAD / 2 - 1e-9:
+        sideslips.append(round(high, 4))
+    return sideslips
 
 
 def point_config(base: EpisodeConfig, point: CalibrationPoint) -> EpisodeConfig:

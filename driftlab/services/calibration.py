@@ -177,13 +177,11 @@ def _calibrate_group(run: _Run, centre: EpisodeConfig, points: Sequence[Calibrat
     """The weights for ``points``, each candidate model searched and the better one kept: the profile's document."""
     request, candidates = run.request, []
     for change in _model_candidates(run.given, request.sets):
-        try:
-            base = fitted(apply_overrides(centre, change)) if change else centre
-        except ConfigError as exc:  # this model has no fit at the scenario's drift: the other candidates run
-            run.say(f"skipped the model with {change}: {exc}")
-            continue
+        # Fitted at each point, not at the scenario's drift: a model that has no fit there may fit the points.
+        base = apply_overrides(centre, change) if change else centre
         inside, outside = split_drivable(base, points)
-        if not inside:
+        if not inside:  # this model fits none of the points: the other candidates run
+            run.say(f"skipped the model with {change}: {'; '.join(reason for _, reason in outside)}")
             continue
         coupling, steer_limit_rad = base.plant.model_drive_coupling, base.mpc.steer_limit_rad
         run.say(f"calibrating {', '.join(p.label() for p in points)} with plant.model_drive_coupling="

@@ -19,6 +19,7 @@ from typing import Any
 
 from sqlalchemy.orm import Session
 
+from driftlab.core.calibration import POINT_SPACING_RAD
 from driftlab.core.config import apply_overrides, dotted_config
 from driftlab.core.mpc import MpcConfig
 from driftlab.core.tuning import TuningSpec
@@ -50,7 +51,7 @@ def known_weight_sets(session: Session, car: MpcConfig) -> list[tuple[str, MpcCo
 
 # How far apart two drifts are: 0.05 rad of sideslip counts as much as 20 % of the circle's radius (about the spacing
 # of the default calibration points, driftlab.core.calibration.default_points: 0.05 rad, 44 to 52 m).
-SIDESLIP_STEP_RAD = 0.05
+SIDESLIP_STEP_RAD = POINT_SPACING_RAD
 RADIUS_STEP = 0.2
 
 

@@ -2,6 +2,7 @@
 of a whole calibration are in tests/test_calibrate_cli.py."""
 
 import math
+from dataclasses import asdict
 
 import pytest
 
@@ -15,7 +16,7 @@ from driftlab.core.calibration import (
     split_drivable,
     weights_of,
 )
-from driftlab.core.config import EpisodeConfig
+from driftlab.core.config import EpisodeConfig, apply_overrides
 from driftlab.core.mpc import MpcConfig
 from driftlab.core.robust import RESCORE_SEED_BASE
 
@@ -31,11 +32,24 @@ def test_calibration_seeds_are_neither_tuning_nor_rescore_seeds():
     assert CALIBRATION_SEED_BASE > RESCORE_SEED_BASE + 10**6  # rescores draw 2^40 + j, tuning seed x 64 + j
 
 
-def test_the_default_points_surround_the_scenario():
+def test_the_default_points_tile_the_cars_window_on_its_circle():
+    """Every drift of the window a job of the BMW is checked against (0.44-0.80 rad at 44 m: both ways countersteer)
+    lies less than one step from a default point, so some profile of a default calibration applies to it."""
+    from driftlab.core.drivability import drivable_reason
+    from driftlab.services.profiles import drift_distance
+
     config = EpisodeConfig.preset("commonroad_std")
     points = default_points(config)
-    assert points == [CalibrationPoint(0.45, 44.0), CalibrationPoint(0.5, 44.0), CalibrationPoint(0.55, 44.0),
-                      CalibrationPoint(0.5, 30.0), CalibrationPoint(0.5, 52.0)]
+    assert points[-2:] == [CalibrationPoint(0.5, 30.0), CalibrationPoint(0.5, 52.0)]
+    on_circle = points[:-2]
+    assert CalibrationPoint(0.5, 44.0) in on_circle and all(p.radius_m == 44.0 for p in on_circle)
+    assert all(drivable_reason(apply_overrides(config, p.overrides())) is None for p in on_circle)
+    inside = [b / 100 for b in range(20, 81)
+              if drivable_reason(apply_overrides(config, {"scenario.sideslip_rad": b / 100})) is None]
+    assert inside[0] == 0.44 and inside[-1] == 0.8
+    for beta in inside:
+        assert min(drift_distance(beta, 44.0, asdict(p)) for p in on_circle) < 1.0, beta
+    assert [p.sideslip_rad for p in on_circle] == [0.45, 0.5, 0.55, 0.6, 0.65, 0.7, 0.75, 0.8]
 
 
 def test_points_outside_the_cars_window_are_set_aside_with_the_reason():

@@ -310,8 +310,8 @@ def apply_overrides(config: EpisodeConfig, overrides: dict[str, Any]) -> Episode
                               field=dotted)
         current = getattr(sections[section], name)
         changes.setdefault(section, {})[name] = _coerce(section, name, current, raw)
-    if MODEL_FIT in config.to_fit and set(changes.get("vehicle", ())) - {f.name for f in fields(VehicleParams)}:
-        config = fitted(config)  # some of the model's settings changed: a change to the model fitted to the car
+    if MODEL_FIT in config.to_fit and "vehicle" in changes:
+        config = fitted(config)  # the model's settings changed: a change to the model fitted to the car, as before
         sections = {f.name: getattr(config, f.name) for f in fields(config)}
     _switch_plant_model(sections, changes)
     updated = {s: replace(sections[s], **c) for s, c in changes.items()}

@@ -57,14 +57,17 @@ RADIUS_STEP = 0.2
 
 def drift_distance(sideslip_rad: float, radius_m: float, point: dict[str, Any]) -> float:
     """How far a calibrated point (``sideslip_rad``, ``radius_m``) lies from the drift (sideslip, radius)."""
-    return (abs(point["sideslip_rad"] - sideslip_rad) / SIDESLIP_STEP_RAD
-            + abs(point["radius_m"] - radius_m) / (RADIUS_STEP * radius_m))
+    # Rounded: 0.69 - 0.64 is a whole step, as 0.55 - 0.50 is (in floating point one is just under 0.05, one over).
+    return round(abs(point["sideslip_rad"] - sideslip_rad) / SIDESLIP_STEP_RAD
+                 + abs(point["radius_m"] - radius_m) / (RADIUS_STEP * radius_m), 9)
 
 
 def profile_for(candidates: list[Any], sideslip_rad: float, radius_m: float) -> Any | None:
     """Of a car's profiles (each with ``id`` and ``document``), the one whose weights drove the calibrated point
-    nearest this drift best: the nearest point first (a profile calibrated at the job's own drift wins), then the
-    share of its episodes completed there, then their mean |e|, then the newest. A calibration over several points
+    nearest this drift best: one that completed every episode of its point first (the VW Vanagon's weights that
+    completed 1 of 3 at its own 0.69 rad, 44 m complete none of 20 fresh seeds of a job there, those that completed
+    3 of 3 at 0.69 rad, 52 m complete 20 of 20), then the nearest point (a profile calibrated at the job's own drift
+    wins), then the share of its episodes completed there, then their mean |e|, then the newest. A calibration over several points
     finds one weight set for all of them; where a car needs other weights at another drift (the BMW at 0.45 rad
     does), a calibration at that point alone (the default of ``driftlab calibrate``) gives them, and the jobs there
     take them. A profile is taken only where it was calibrated less than one step from the job's drift
@@ -76,12 +79,12 @@ def profile_for(candidates: list[Any], sideslip_rad: float, radius_m: float) -> 
         record = profile.document.get("per_point") or []
         return min(record, key=lambda point: drift_distance(sideslip_rad, radius_m, point), default=None)
 
-    def rank(profile) -> tuple[float, float, float, int]:
+    def rank(profile) -> tuple[bool, float, float, float, int]:
         here = record_here(profile)
         if here is None:
-            return (float("inf"), 0.0, float("inf"), -profile.id)
+            return (True, float("inf"), 0.0, float("inf"), -profile.id)
         error = here.get("mean_abs_e_m")
-        return (round(drift_distance(sideslip_rad, radius_m, here), 9),
+        return (here["completed"] < here["episodes"], drift_distance(sideslip_rad, radius_m, here),
                 -here["completed"] / max(here["episodes"], 1), float("inf") if error is None else error,
                 -profile.id)
     usable = [p for p in candidates if (here := record_here(p)) is None

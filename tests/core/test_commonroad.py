@@ -128,6 +128,10 @@ def test_parsing_a_commonroad_config_does_no_physics_and_its_fit_is_what_parsing
     assert done.vehicle == fitted_model_vehicle(2, 41.0, 0.53) and done.vehicle != EpisodeConfig().vehicle
     assert done.plant.initial_rear_slip == pytest.approx(commonroad_drifts(2, 41.0, 0.53)[0].rear_slip, abs=1e-4)
     assert config_from_document(config_to_dict(done)) == done  # fitted, it is stored in full and parsed as is
+    # A model setting given on top of a config still to be fitted changes the fitted model (`--plant P --set
+    # vehicle.mass_kg=...`), not Table I's.
+    heavier = apply_overrides(parsed, {"vehicle.mass_kg": 1500.0})
+    assert heavier.vehicle == replace(done.vehicle, mass_kg=1500.0) and heavier.to_fit == frozenset()
     # One episode of the parsed config is the episode of the fitted one, bit for bit.
     short = {"scenario.max_time_s": 3.0}
     a, b = run_episode(Theta(), apply_overrides(parsed, short)), run_episode(Theta(), apply_overrides(done, short))

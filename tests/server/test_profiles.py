@@ -179,3 +179,17 @@ def test_a_profile_found_for_a_learned_theta_has_its_jobs_ask_that_theta_first(t
         assert start["initial_points"] == [{**learned, "k": k_low}]  # k -0.3 onto the box's face
         warm = client.post("/api/jobs", json={"iterations": 1, "config": CAR, "warm_start_from": [first["id"]]})
         assert warm.json()["spec"]["warm_start"]["from_profile"] == found  # both starts kept
+
+
+def test_weights_that_completed_every_episode_of_their_point_beat_nearer_ones_that_did_not():
+    from types import SimpleNamespace
+
+    from driftlab.services.profiles import profile_for
+
+    own = SimpleNamespace(id=3, document={"per_point": [_record(0.69, 44.0, 1, 0.9)]})
+    beside = SimpleNamespace(id=1, document={"per_point": [_record(0.69, 52.0, 4, 0.3)]})  # 0.91 steps away
+    further = SimpleNamespace(id=2, document={"per_point": [_record(0.64, 44.0, 4, 0.2)]})  # a whole step away
+    assert profile_for([own, beside, further], 0.69, 44.0) is beside
+    assert profile_for([own, further], 0.69, 44.0) is own  # the only one within a step
+    full_own = SimpleNamespace(id=4, document={"per_point": [_record(0.69, 44.0, 4, 0.5)]})
+    assert profile_for([own, beside, full_own], 0.69, 44.0) is full_own  # then the nearest

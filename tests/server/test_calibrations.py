@@ -93,3 +93,31 @@ def test_a_cancelled_calibration_stops_at_its_next_episode_and_keeps_what_it_sto
     with storage.snapshot(api.app.state.factory) as session:
         assert db_calibrations.next_claimable(session) is None  # no runner takes it up again
     assert api.post("/api/calibrations", json=CAR).status_code == 202  # and another may start
+
+
+def test_points_two_steps_out_search_only_the_model_the_nearest_calibrated_point_chose():
+    """The default points tile the car's window: its scenario's drift and neighbours search every candidate model,
+    the points further out the one the nearest calibrated point kept (a quarter of the episodes each)."""
+    from types import SimpleNamespace
+
+    from driftlab.core.calibration import CalibrationPoint
+    from driftlab.core.config import EpisodeConfig
+    from driftlab.services.calibration import _model_candidates, _models_for
+
+    given = EpisodeConfig.preset("commonroad_std")  # 0.5 rad, 44 m
+    run = SimpleNamespace(given=given, request=SimpleNamespace(sets={}))
+    every = _model_candidates(given, {})
+    assert len(every) == 4  # two rear models x two steering limits
+
+    def document(sideslip_rad, coupling, limit_rad, completed=3):
+        return {"points": [{"sideslip_rad": sideslip_rad, "radius_m": 44.0}], "completed": completed,
+                "plant": {"model_drive_coupling": coupling}, "mpc": {"steer_limit_rad": limit_rad}}
+
+    done = [document(0.5, False, 0.6), document(0.55, True, 1.066), document(0.45, False, 0.6)]
+    assert _models_for(run, [CalibrationPoint(0.55, 44.0)], done) == every  # one step out
+    assert _models_for(run, [CalibrationPoint(0.5, 30.0)], done) == every  # the other circles
+    assert _models_for(run, [CalibrationPoint(0.6, 44.0)], done) == [
+        {"plant.model_drive_coupling": True, "mpc.steer_limit_rad": 1.066}]  # 0.55's choice
+    assert _models_for(run, [CalibrationPoint(0.6, 44.0)], []) == every  # nothing calibrated yet
+    fixed = SimpleNamespace(given=given, request=SimpleNamespace(sets={"mpc.steer_limit_rad": 0.6}))
+    assert _models_for(fixed, [CalibrationPoint(0.6, 44.0)], done) == [{"plant.model_drive_coupling": True}]

@@ -68,9 +68,10 @@ def profile_for(candidates: list[Any], sideslip_rad: float, radius_m: float) -> 
     completed 1 of 3 at its own 0.69 rad, 44 m complete none of 20 fresh seeds of a job there, those that completed
     3 of 3 at 0.69 rad, 52 m complete 20 of 20), then the nearest point (a profile calibrated at the job's own drift
     wins), then the share of its episodes completed there, then their mean |e|, then the newest. A calibration
-    over several points finds one weight set for all of them; where a car needs other weights at another drift (the BMW at 0.45 rad
-    does), a calibration at that point alone (the default of ``driftlab calibrate``) gives them, and the jobs there
-    take them. A profile is taken only where it was calibrated less than one step from the job's drift
+    over several points finds one weight set for all of them; where a car needs other weights at another drift
+    (the BMW at 0.45 rad does), a calibration at that point alone (the default of ``driftlab calibrate``) gives
+    them, and the jobs there take them. A profile is taken only where it was calibrated less than one step from the
+    job's drift
     (:func:`drift_distance` < 1) and its weights completed some of their episodes there: weights do not carry over
     further (the BMW's, found at 0.50 rad, spin out every episode of a job at 0.55; the set shipped for the whole
     window completes them), so the car's default weights are the job's then. A profile stored without its record

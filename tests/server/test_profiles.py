@@ -43,7 +43,10 @@ def test_a_profile_brings_the_controllers_model_it_was_calibrated_with(tmp_path)
 
 
 def test_a_profile_brings_the_steering_limit_its_weights_were_found_with(tmp_path):
-    beyond = {**CAR, "scenario.sideslip_rad": 0.78}  # more than a step from every shipped profile's point
+    from driftlab.services.profiles import profile_for, shipped_profiles
+
+    beyond = {**CAR, "scenario.sideslip_rad": 0.7, "scenario.left_radius_m": 30.0, "scenario.right_radius_m": 30.0}
+    assert profile_for(shipped_profiles("commonroad_std", 2), 0.7, 30.0) is None  # a step from every shipped point
     with in_process_client(tmp_path / "limited.db") as client:
         job = client.post("/api/jobs", json={"iterations": 1, "config": beyond}).json()
         assert job["profile_id"] is None and job["spec"]["config"]["mpc"]["steer_limit_rad"] == 0.6  # the default

@@ -92,8 +92,9 @@ def add_calibrate_parser(sub, db_help: str, dask_help: str, int_in, plant_choice
     cal.add_argument("--plant", choices=plant_choices, required=True)
     cal.add_argument("--set", action="append", metavar="KEY=VALUE",
                      help="config override, e.g. plant.commonroad_vehicle=3, scenario.sideslip_rad=0.55")
-    cal.add_argument("--points", help="SIDESLIP@RADIUS,... (default: the scenario's sideslip and 0.05 rad either "
-                     "side of it on its radius, and its sideslip on circles 30/44 and 52/44 the size)")
+    cal.add_argument("--points", help="SIDESLIP@RADIUS,... (default: the scenario's sideslip and every 0.05 rad "
+                     "either side of it across the car's drift window on its circle, and its sideslip on circles "
+                     "30/44 and 52/44 the size)")
     cal.add_argument("--iterations", type=int_in(1, 5000), default=150, metavar="N",
                      help="weight sets tried (1..5000, default 150)")
     cal.add_argument("--seeds", type=int_in(1, 64), default=3, metavar="N",

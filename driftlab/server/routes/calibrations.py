@@ -48,8 +48,8 @@ class CalibrationCreate(BaseModel):
                                    "plant.commonroad_vehicle: 3, scenario.sideslip_rad: 0.55)")
     points: str | None = Field(default=None, max_length=400, pattern=POINTS_PATTERN,
                                description="SIDESLIP@RADIUS,... (default: the "
-                               "scenario's drift, 0.05 rad either side, its sideslip on circles 30/44 and 52/44 "
-                               "the size)")
+                               "scenario's drift and every 0.05 rad either side of it across the car's drift window "
+                               "on its circle, its sideslip on circles 30/44 and 52/44 the size)")
     iterations: int = Field(default=150, ge=LIMITS["iterations"][0], le=LIMITS["iterations"][1], strict=True)
     seeds: int = Field(default=3, ge=LIMITS["seeds"][0], le=LIMITS["seeds"][1], strict=True)
     seed: int = Field(default=0, ge=0, le=2**31 - 1, strict=True)

@@ -22,9 +22,10 @@ from collections.abc import Callable, Sequence
 from dataclasses import dataclass, field, replace
 from typing import Any
 
-from driftlab.core.config import MODEL_FIT, EpisodeConfig, Theta, apply_overrides, config_to_dict, fitted
+from driftlab.core.config import MODEL_FIT, EpisodeConfig, Theta, apply_overrides, config_to_dict
 from driftlab.core.drivability import drift_window, drivable_reason
 from driftlab.core.episode import failure_penalty
+from driftlab.core.errors import ConfigError
 from driftlab.core.mpc import MpcConfig
 from driftlab.core.optimizer import BayesianOptimizer
 from driftlab.core.statuses import EpisodeStatus
@@ -95,9 +96,10 @@ def window_sideslips(config: EpisodeConfig) -> list[float]:
 
 
 def point_config(base: EpisodeConfig, point: CalibrationPoint) -> EpisodeConfig:
-    """``base`` driving ``point``: the controller's model fitted there (its plant's catalog entry decides how; a
-    calibration is where a car's fits happen, before its episodes are sent out)."""
-    return fitted(apply_overrides(base, point.overrides()))
+    """``base`` driving ``point``, its controller's model to be fitted there (its plant's catalog entry decides how):
+    each worker fits it once, with the point's first episode (driftlab.core.config.fitted), not the calibration's
+    thread before any episode runs (an MB fit is seconds a point, and a server that stops waits for that thread)."""
+    return apply_overrides(base, point.overrides())
 
 
 def split_drivable(base: EpisodeConfig, points: Sequence[CalibrationPoint]
@@ -107,10 +109,10 @@ def split_drivable(base: EpisodeConfig, points: Sequence[CalibrationPoint]
     for point in points:
         try:
             config = point_config(base, point)
-        except Exception as exc:  # ConfigError: no model fits there
+        except ConfigError as exc:
             outside.append((point, str(exc)))
             continue
-        reason = drivable_reason(config)
+        reason = drivable_reason(config)  # where the model cannot be fitted, the reason names the window
         if reason is None:
             inside.append((point, config))
         else:

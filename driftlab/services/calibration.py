@@ -31,7 +31,6 @@ from driftlab.core.config import (
     Theta,
     apply_overrides,
     config_to_dict,
-    fitted,
     overrides_inside_window,
 )
 from driftlab.core.drivability import drift_window
@@ -254,7 +253,7 @@ def _learned_theta(run: _Run, point: CalibrationPoint, last: dict[str, Any]) -> 
     config = point_config(run.given, point)
     coupling = last["plant"].get("model_drive_coupling", False)
     if record["completed"] and coupling != config.plant.model_drive_coupling:  # the model those weights were for
-        config = fitted(apply_overrides(config, {"plant.model_drive_coupling": coupling}))
+        config = apply_overrides(config, {"plant.model_drive_coupling": coupling})
     config = replace(config, mpc=replace(config.mpc, **weights, **(limits_of(last) if record["completed"] else {})))
     run.stage.update(step="theta")
     theta, score = learn_theta(config, run.run_batch, iterations=request.iterations, seeds=request.seeds,

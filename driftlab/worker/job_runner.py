@@ -35,13 +35,17 @@ OPTIMIZER_PROCESSES_AT_START = 8
 
 class JobRunner:
     def __init__(self, factory: sessionmaker[Session], workers: int | None = 2, poll_s: float = 0.2,
-                 dask_address: str | None = None, max_trajectories_per_job: int = MAX_TRAJECTORIES_PER_JOB,
-                 optimizer_process: bool = False) -> None:
+                 busy_poll_s: float = 1.0, dask_address: str | None = None,
+                 max_trajectories_per_job: int = MAX_TRAJECTORIES_PER_JOB, optimizer_process: bool = False) -> None:
         self.factory = factory
         self.workers = workers
         self.dask_address = dask_address
         self.max_trajectories_per_job = max_trajectories_per_job
-        self.poll_s = poll_s
+        # How long the loop waits for a wake (a job ending, a request that queued work) before it looks in the
+        # database for work queued elsewhere (another server, the CLI, a runner that died): poll_s while idle,
+        # busy_poll_s while jobs run. A look is 4-5 transactions, ~6 ms of the server's CPU; at poll_s while a
+        # study ran it was a quarter of the server's work an evaluation (benchmarks/bench_concurrency.py).
+        self.poll_s, self.busy_poll_s = poll_s, max(poll_s, busy_poll_s)
         self.runner_id = lifecycle.new_runner_id("server")
         self._stop = threading.Event()
         self._wake = threading.Event()
@@ -194,7 +198,7 @@ class JobRunner:
                     continue
                 if not self.running_job_ids and self._run_next_study():
                     continue
-                self._wake.wait(self.poll_s)
+                self._wake.wait(self.busy_poll_s if self.running_job_ids else self.poll_s)
                 self._wake.clear()
         finally:  # each stops after its episodes in flight (should_stop)
             self._jobs.join(timeout_s=30)

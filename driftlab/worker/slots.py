@@ -73,11 +73,19 @@ class EpisodeSlots:
                 self._held[owner] -= 1
                 self._in_flight -= 1
                 if full:  # a job held back by the capacity (not by its own share) may go on
-                    self._wake_all()
+                    self._wake_those_with_room(but=owner)
 
     def _wake_all(self) -> None:
         for wake in self._wakes.values():
             wake.set()
+
+    def _wake_those_with_room(self, but: Hashable) -> None:
+        """Wakes the jobs that could start an episode now, other than ``but`` (its own episode's return wakes it).
+        While every job is at its share, which is most of the time under load, that is none: waking every job at
+        every episode's return made ~30 turns of each job's loop an evaluation at 8 jobs on 16 workers."""
+        for owner, wake in self._wakes.items():
+            if owner != but and self._room(owner):
+                wake.set()
 
     @property
     def in_flight(self) -> int:

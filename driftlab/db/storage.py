@@ -241,9 +241,10 @@ class StoredEvaluation:
     index: int
 
 
-# The tables, not the ORM classes: an INSERT of an ORM class takes the ORM's bulk path, a third of a store's work.
-_EVALUATIONS = cast(Table, Evaluation.__table__)
-_TRAJECTORIES = cast(Table, Trajectory.__table__)
+# The tables, not the ORM classes, and one row, not a list: an INSERT of an ORM class takes the ORM's bulk path, and
+# a list the executemany path, together half of a store's work.
+_INSERT_EVALUATION = insert(cast(Table, Evaluation.__table__)).returning(Evaluation.__table__.c.id)
+_INSERT_TRAJECTORY = insert(cast(Table, Trajectory.__table__))
 
 
 def add_evaluation(session: Session, *, job_id: int, theta: dict[str, float], J: float, status: str,
@@ -266,15 +267,16 @@ def add_evaluation(session: Session, *, job_id: int, theta: dict[str, float], J:
     keep = (max_trajectories is None or index < max_trajectories
             or count_trajectories(session, job_id=job_id) < max_trajectories
             or _beats_best(session, job_id=job_id, J=J, completed=status == EpisodeStatus.COMPLETED))
-    evaluation_id = session.execute(
-        insert(_EVALUATIONS).returning(_EVALUATIONS.c.id),
-        [{"job_id": job_id, "index": index, "theta": theta, "J": J, "status": status, "metrics": metrics,
-          "trigger_points": trigger_points, "wall_ms": wall_ms, "seeds": seeds, "trajectory_seed": trajectory_seed,
-          "enqueued": enqueued}]).scalar_one()
+    connection = session.connection()  # Core statements on the session's connection: the ORM adds nothing here
+    evaluation_id = connection.execute(
+        _INSERT_EVALUATION,
+        {"job_id": job_id, "index": index, "theta": theta, "J": J, "status": status, "metrics": metrics,
+         "trigger_points": trigger_points, "wall_ms": wall_ms, "seeds": seeds, "trajectory_seed": trajectory_seed,
+         "enqueued": enqueued}).scalar_one()
     if keep:
         packed = trajectory if isinstance(trajectory, PackedTrajectory) else PackedTrajectory.of(trajectory)
-        session.execute(insert(_TRAJECTORIES), [{"evaluation_id": evaluation_id, "columns": list(columns),
-                                              "rows": packed.rows, "data": packed.data}])
+        connection.execute(_INSERT_TRAJECTORY, {"evaluation_id": evaluation_id, "columns": list(columns),
+                                                "rows": packed.rows, "data": packed.data})
     return StoredEvaluation(evaluation_id, index)
 
 

@@ -136,22 +136,30 @@ class _Process:
         return self._connection
 
     def send(self, fn, *args) -> None:
-        """Start ``fn(*args)`` without waiting for it (its answer is read, and dropped, by the next :meth:`call`)."""
+        """Start ``fn(*args)`` without waiting for it (its answer is read by the next :meth:`call`, which raises
+        what it raised)."""
         with self._lock:
-            self._started().send((fn, args))
+            try:
+                self._started().send((fn, args))
+            except OSError as exc:
+                raise ProcessGone(f"the optimizer process ended: {exc!r}") from exc
             self._unanswered += 1
 
     def call(self, fn, *args) -> Any:
+        failed: Exception | None = None
         with self._lock:
             connection = self._started()
             try:
                 while self._unanswered:
-                    connection.recv()
+                    ok, value = connection.recv()
                     self._unanswered -= 1
+                    failed = failed or (None if ok else value)
                 connection.send((fn, args))
                 ok, value = connection.recv()
             except (EOFError, OSError) as exc:
                 raise ProcessGone(f"the optimizer process ended: {exc!r}") from exc
+        if failed is not None:
+            raise failed
         if not ok:
             raise value
         return value
@@ -271,8 +279,13 @@ class RemoteOptimizer:
         return self._call(_ask, self._key)
 
     def tell(self, theta: dict[str, float], value: float | None, stored_j: float) -> None:
-        self._call(_tell, self._key, theta, value, stored_j)
+        """Sent, not waited for: the job stores and asks meanwhile (the next ask is answered after this tell)."""
         self._told.append((theta, value, stored_j))
+        try:
+            self._process.send(_tell, self._key, theta, value, stored_j)
+        except ProcessGone:  # the restored optimizer is told it with the rest of the history
+            self._process.restart()
+            self.restore()
 
     def close(self) -> None:
         try:

@@ -11,6 +11,7 @@ from concurrent.futures import Future
 import numpy as np
 import pytest
 
+from driftlab.core.errors import ConfigError
 from driftlab.core.tuning import TuningSpec
 from driftlab.db import storage
 from driftlab.worker.executors import EpisodeOutcome
@@ -85,6 +86,21 @@ def test_the_optimizer_host_asks_what_the_optimizer_asks_on_the_jobs_thread(tmp_
         assert set(other.ask()) == set(first[0])  # the other job's process is untouched
         remote.close()
         other.close()
+    finally:
+        host.shutdown()
+
+
+def test_a_tell_its_optimizer_process_refuses_is_raised_at_the_jobs_next_call():
+    """A tell is sent without waiting for its answer (the job stores and asks meanwhile); what it raised in the
+    optimizer's process is not lost: the job's next call raises it."""
+    host = OptimizerHost()
+    try:
+        remote = host.open(TuningSpec(iterations=14, seed_points=4, seed=3), [])
+        remote.tell({"c_lr": 0.02}, 1.0, 1.0)  # the other names missing: the optimizer refuses it
+        with pytest.raises(ConfigError, match="theta is missing"):
+            remote.ask()
+        assert set(remote.ask()) == set(TuningSpec().bounds)  # raised once, then the process answers again
+        remote.close()
     finally:
         host.shutdown()
 

@@ -19,7 +19,7 @@ from __future__ import annotations
 
 import math
 from collections.abc import Sequence
-from dataclasses import asdict, dataclass
+from dataclasses import dataclass
 
 from driftlab.core.limits import MAX_ROBUST_SAMPLES
 from driftlab.core.statuses import EpisodeStatus
@@ -55,9 +55,11 @@ class SampleResult:
         return self.status == EpisodeStatus.COMPLETED
 
     def as_dict(self) -> dict:
-        out = asdict(self)
-        if out["negative_wheel_load_s"] is None:  # as stored before plants reported it
-            del out["negative_wheel_load_s"]
+        # Its fields by hand, not dataclasses.asdict (which deep-copies each value): a store writes 4-8 of these.
+        out = {"seed": self.seed, "status": self.status, "J": self.J, "completed_fraction": self.completed_fraction,
+               "mean_abs_e_m": self.mean_abs_e_m}
+        if self.negative_wheel_load_s is not None:  # left out as stored before plants reported it
+            out["negative_wheel_load_s"] = self.negative_wheel_load_s
         return out
 
 

@@ -1,5 +1,7 @@
 """Robust evaluation's aggregate and seeds."""
 
+import dataclasses
+
 import pytest
 
 from driftlab.core.episode import failure_penalty
@@ -68,3 +70,10 @@ def test_a_plants_validity_is_summed_over_the_samples_that_report_it():
     assert summarize(mb)["negative_wheel_load"] == {"episodes": 2, "of": 3, "mean_s": pytest.approx(0.15),
                                                     "max_s": 0.35}
     assert SampleResult(**mb[1].as_dict()) == mb[1]
+
+
+def test_a_sample_is_stored_with_every_field_and_without_a_wheel_load_it_did_not_report():
+    reported = SampleResult(3, "completed", -1.5, 1.0, 0.12, 0.25)
+    assert reported.as_dict() == dataclasses.asdict(reported)
+    silent = SampleResult(4, "spun_out", 7.0, 0.4)
+    assert silent.as_dict() == {k: v for k, v in dataclasses.asdict(silent).items() if k != "negative_wheel_load_s"}

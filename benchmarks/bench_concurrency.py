@@ -22,6 +22,7 @@ Run: OMP_NUM_THREADS=1 python benchmarks/bench_concurrency.py [--workers 1 2 4 8
 from __future__ import annotations
 
 import argparse
+import gc
 import os
 import statistics
 import tempfile
@@ -170,6 +171,7 @@ def started_runner(factory, executor, workers: int) -> JobRunner:
     runner.start(executor=_Lent(executor))
     if runner.optimizers is not None:
         runner.optimizers.wait_started()
+    gc.freeze()  # as the server does once it has started (driftlab.server.app's lifespan)
     return runner
 
 

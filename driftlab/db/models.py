@@ -119,7 +119,7 @@ class Trajectory(Base):
     evaluation_id: Mapped[int] = mapped_column(ForeignKey("evaluations.id"), primary_key=True)
     columns: Mapped[list[str]] = mapped_column(JSON)
     rows: Mapped[int] = mapped_column(Integer)
-    data: Mapped[bytes] = mapped_column(LargeBinary)  # zlib-compressed float64, row-major
+    data: Mapped[bytes] = mapped_column(LargeBinary)  # compressed float64 (driftlab.db.trajectory_bytes)
 
     evaluation: Mapped[Evaluation] = relationship(back_populates="trajectory")
 

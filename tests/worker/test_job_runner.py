@@ -120,6 +120,21 @@ def test_slots_split_the_capacity_fairly_and_a_job_that_leaves_frees_its_share()
     assert slots.try_take("d") and slots.try_take("b") and not slots.try_take("b") and not slots.try_take("d")
 
 
+def test_an_episodes_return_wakes_only_a_job_the_full_capacity_held_back():
+    slots = EpisodeSlots(4)
+    wakes = {owner: threading.Event() for owner in "abc"}
+    for owner in "ab":
+        slots.join(owner, wakes[owner])
+    assert all(slots.try_take(o) for o in "aabb")  # every job at its share, the capacity full
+    slots.give_back("a")
+    assert not wakes["b"].is_set()  # at its share: the freed slot is not one it may take
+    assert slots.try_take("a")
+    slots.join("c", wakes["c"])  # shares now 2, 1, 1: b holds one more than its share, c none
+    slots.give_back("b")
+    assert wakes["c"].is_set() and not wakes["a"].is_set()  # c could start one now; a is at its share
+    assert slots.try_take("c")
+
+
 def test_a_seeds_studys_jobs_run_at_once_sharing_the_workers_and_number_their_evaluations_once(factory):
     with storage.transaction(factory) as session:
         study = start_study(session, doc={"kind": "seeds", "seeds": [1, 2, 3], "spec": SPEC})

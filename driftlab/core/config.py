@@ -72,6 +72,12 @@ class FailureLimits:
         gripup_sideslip_rad: |beta| below this or of the wrong sign counts as gripping up ...
         gripup_time_s: ... for longer than this ...
         gripup_grace_s: ... counted from this long after a trigger (the flick crosses beta = 0).
+        max_invalid_s: time outside the plant's model (a plant that reports it: CommonRoad's MB, see
+            PlantConfig.wheel_liftoff) after which the episode ends as invalid, its J a failure's: a result
+            about a car its model does not describe is not a result about a car. A short tolerance, not zero: a
+            wheel touches zero load for a sample now and then in a flick.
+        invalid_ends_episode: the rule above applies (stored jobs of releases before it ran without it and keep
+            their results).
     """
 
     max_sideslip_rad: float = 1.2
@@ -81,12 +87,16 @@ class FailureLimits:
     gripup_sideslip_rad: float = 0.1
     gripup_time_s: float = 1.0
     gripup_grace_s: float = 2.5
+    max_invalid_s: float = 0.2
+    invalid_ends_episode: bool = True
 
     def __post_init__(self) -> None:
+        if not isinstance(self.invalid_ends_episode, bool):
+            raise ConfigError(f"failure.invalid_ends_episode must be true or false, got {self.invalid_ends_episode!r}")
         check_ranges(self, "failure", {
             "max_sideslip_rad": (0.2, 1.6), "max_yaw_rate_radps": (0.5, 10.0), "max_lateral_error_m": (0.5, 50.0),
             "min_speed_mps": (0.5, 30.0), "gripup_sideslip_rad": (0.0, 0.5), "gripup_time_s": (0.05, 10.0),
-            "gripup_grace_s": (0.0, 10.0)})
+            "gripup_grace_s": (0.0, 10.0), "max_invalid_s": (0.0, 300.0)})
 
 
 # What a plant that fits the controller's model to itself (PlantType.fits_model) fits when a config first runs:

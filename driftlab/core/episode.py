@@ -157,6 +157,8 @@ def run_episode(theta: Theta, config: EpisodeConfig, *, seed: int = 0) -> Episod
     plant = make_plant(variation.plant, config.vehicle)
     if hasattr(plant, "start_in_drift_of"):  # a multi-body car starts with its body rolled as in the drift
         plant.start_in_drift_of(scenario.left_radius_m, scenario.sideslip_rad)
+    if hasattr(plant, "end_invalid_after") and config.failure.invalid_ends_episode:
+        plant.end_invalid_after(config.failure.max_invalid_s)
     start = model.left
     offset = variation.start_offset
     state = plant.start_state(initial_plant_state(
@@ -188,6 +190,8 @@ def run_episode(theta: Theta, config: EpisodeConfig, *, seed: int = 0) -> Episod
         if loop.ints[I_PLANT_DUE]:
             loop.plant[:] = plant.step(loop.plant, float(loop.last_applied[0]), float(loop.last_applied[1]), dt)
             loop.ints[I_PLANT_DUE] = 0
+            if hasattr(plant, "ended_invalid") and plant.ended_invalid(loop):
+                break
     status = STATUSES[int(loop.ints[I_STATUS])]
     trajectory = loop.rows[:int(loop.ints[I_ROWS])].copy()
     triggers = [{"t_s": float(t), "x_m": float(x), "y_m": float(y), "phase": int(phase)}

@@ -103,6 +103,10 @@ class PlantConfig:
             coupling (VehicleParams.rear_coupling) matched to the car's yaw answer to a drive step: the car's rear
             slides further under more drive, the paper's model does not answer (driftlab.core.commonroad.model_fit).
             Off: the paper's independent rear forces (STD) or the whole circle (MB).
+        wheel_liftoff: MB's wheels may leave the road: a tyre whose spring would pull (a negative normal load)
+            carries no load and no force. The published model has no lift-off: its tyre pulls the road, and PAC2002's
+            forces change sign with the load, so in a ~1 g drift the unloaded inner front wheel pushes the car the
+            wrong way (docs/results.md, "Where MB is valid"). Off: the package's model as published, bit for bit.
 
     Per-episode variation, drawn from the episode's seed (:mod:`driftlab.core.variation`); a real car never
     drives the same episode twice. Spreads are half-widths of uniform draws, noise levels standard deviations
@@ -149,6 +153,7 @@ class PlantConfig:
     initial_rear_slip: float = -0.5
     locked_differential: bool = True
     model_drive_coupling: bool = False
+    wheel_liftoff: bool = False
 
     def __post_init__(self) -> None:
         check_ranges(self, "plant", PLANT_LIMITS)
@@ -156,9 +161,13 @@ class PlantConfig:
         if self.steer_lag_spread_s > self.steer_lag_s:
             raise ConfigError(f"plant.steer_lag_spread_s must be in [0, plant.steer_lag_s = {self.steer_lag_s}], "
                               f"got {self.steer_lag_spread_s!r}")
-        for name in ("friction_circle", "load_transfer", "locked_differential", "model_drive_coupling"):
+        for name in ("friction_circle", "load_transfer", "locked_differential", "model_drive_coupling",
+                     "wheel_liftoff"):
             if not isinstance(getattr(self, name), bool):
                 raise ConfigError(f"plant.{name} must be true or false, got {getattr(self, name)!r}")
+        if self.wheel_liftoff and not self.plant_type.wheel_loads:
+            raise ConfigError(f"plant.wheel_liftoff applies to a plant with wheel loads (CommonRoad's MB); "
+                              f"plant.model {self.model!r} has none: keep it false", field="plant.wheel_liftoff")
 
     @classmethod
     def nominal(cls) -> PlantConfig:

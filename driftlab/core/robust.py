@@ -47,8 +47,10 @@ class SampleResult:
     J: float
     completed_fraction: float
     mean_abs_e_m: float | None = None  # mean |lateral error| over the episode (as far as it got) [m]
-    # A plant that reports where it leaves its model's validity (MB): the time a tyre's normal load was negative [s].
+    # A plant that reports where it leaves its model's validity (MB): the time a wheel was off the road (a tyre's
+    # normal load below zero) and the time both wheels of one side were [s].
     negative_wheel_load_s: float | None = None
+    one_side_off_s: float | None = None
 
     @property
     def completed(self) -> bool:
@@ -60,6 +62,8 @@ class SampleResult:
                "mean_abs_e_m": self.mean_abs_e_m}
         if self.negative_wheel_load_s is not None:  # left out as stored before plants reported it
             out["negative_wheel_load_s"] = self.negative_wheel_load_s
+        if self.one_side_off_s is not None:
+            out["one_side_off_s"] = self.one_side_off_s
         return out
 
 
@@ -109,13 +113,17 @@ def summarize(samples: Sequence[SampleResult]) -> dict:
 
 
 def _validity(samples: Sequence[SampleResult]) -> dict:
-    """Where a plant that reports it (MB) left its model's validity: the episodes with any time at a negative
-    tyre load, and the mean and longest such time [s]."""
-    times = [s.negative_wheel_load_s for s in samples if s.negative_wheel_load_s is not None]
-    if not times:
-        return {}
-    return {"negative_wheel_load": {"episodes": sum(t > 0.0 for t in times), "of": len(times),
-                                    "mean_s": sum(times) / len(times), "max_s": max(times)}}
+    """Where a plant that reports it (MB) left its model's validity: the episodes with any time with a wheel off the
+    road (a negative tyre load) and with both wheels of one side off, and the mean and longest such time [s]. The
+    episodes that ended for it are counted apart in ``statuses`` (``invalid``)."""
+    out = {}
+    for key, times in (("negative_wheel_load", [s.negative_wheel_load_s for s in samples]),
+                       ("one_side_off", [s.one_side_off_s for s in samples])):
+        known = [t for t in times if t is not None]
+        if known:
+            out[key] = {"episodes": sum(t > 0.0 for t in known), "of": len(known),
+                        "mean_s": sum(known) / len(known), "max_s": max(known)}
+    return out
 
 
 def _mean(values: list[float]) -> float | None:

@@ -20,6 +20,9 @@ class EpisodeStatus(StrEnum):
     # Never run: theta's model corrections leave the controller's model without a drift to hold (the kernel never
     # returns it; stored jobs of earlier releases have such evaluations as "diverged").
     REFUSED = "refused"
+    # Ran, but outside the plant's model for longer than the failure limits allow (FailureLimits.max_invalid_s):
+    # CommonRoad's MB with a wheel pulling the road, or, with wheel lift-off, two wheels of one side in the air.
+    INVALID = "invalid"
 
 
 class StudyKind(StrEnum):

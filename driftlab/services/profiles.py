@@ -120,15 +120,24 @@ def shipped_profiles(plant_model: str, vehicle_id: int) -> list[ShippedProfile]:
             if document["plant_model"] == plant_model and document["vehicle_id"] == vehicle_id]
 
 
+def _same_model(profile: Any, wheel_liftoff: bool) -> bool:
+    """Whether a profile was calibrated on the plant's model as the job runs it: weights found on MB as published
+    (its tyres pull the road) are not weights for the car that lifts a wheel (PlantConfig.wheel_liftoff)."""
+    return bool(profile.document.get("plant", {}).get("wheel_liftoff", False)) == wheel_liftoff
+
+
 def car_profile_for(session: Session, plant_model: str, vehicle_id: int, sideslip_rad: float,
-                    radius_m: float) -> Any | None:
+                    radius_m: float, wheel_liftoff: bool = False) -> Any | None:
     """The stored profile a job of this car at this drift takes (:func:`profile_for`): the database's own first;
-    where none of them applies, a shipped one, copied into the database the first time a job takes it."""
-    stored = profiles.car_profiles(session, plant_model=plant_model, vehicle_id=vehicle_id)
+    where none of them applies, a shipped one, copied into the database the first time a job takes it. Only
+    profiles calibrated on the same model of the car (:func:`_same_model`) apply."""
+    stored = [p for p in profiles.car_profiles(session, plant_model=plant_model, vehicle_id=vehicle_id)
+              if _same_model(p, wheel_liftoff)]
     own = profile_for([p for p in stored if SHIPPED_KEY not in p.document], sideslip_rad, radius_m)
     if own is not None:
         return own
-    shipped = profile_for(shipped_profiles(plant_model, vehicle_id), sideslip_rad, radius_m)
+    shipped = profile_for([p for p in shipped_profiles(plant_model, vehicle_id) if _same_model(p, wheel_liftoff)],
+                          sideslip_rad, radius_m)
     if shipped is None:
         return None
     copied = next((p for p in stored if p.document.get(SHIPPED_KEY) == shipped.key), None)
@@ -143,7 +152,7 @@ def with_profile(session: Session, spec: TuningSpec, config_document: Any) -> tu
         return spec, None
     plant, scenario = spec.config.plant, spec.config.scenario
     profile = car_profile_for(session, plant.model, plant.commonroad_vehicle, scenario.sideslip_rad,
-                              scenario.left_radius_m)
+                              scenario.left_radius_m, plant.wheel_liftoff)
     if profile is None:
         return spec, None
     config = spec.config

@@ -235,8 +235,19 @@ def test_the_multibody_drift_family_is_found_at_every_sideslip_where_it_is_conti
     assert np.max(np.abs(f[[3, 5, 10, 15, 20]])) < 1e-6
 
 
+def _published(config: EpisodeConfig, **more) -> EpisodeConfig:
+    """MB as the package publishes it: no wheel lift-off."""
+    return apply_overrides(config, {"plant.wheel_liftoff": False, **more})
+
+
+def _published_mb_without_the_validity_rule(max_time_s: float) -> EpisodeConfig:
+    """The loop's mechanics past the first second: the published MB, its episodes not ended as invalid."""
+    return _published(EpisodeConfig.preset("commonroad_mb"),
+                      **{"failure.invalid_ends_episode": False, "scenario.max_time_s": max_time_s})
+
+
 def test_an_mb_episode_runs_in_the_same_loop_and_is_pure():
-    config = apply_overrides(EpisodeConfig.preset("commonroad_mb"), {"scenario.max_time_s": 5.0})
+    config = _published_mb_without_the_validity_rule(5.0)
     first, again = (run_episode(Theta(), config, seed=1) for _ in range(2))
     assert first.trajectory[-1, 0] > 4.9  # through the first flick's approach, not stopped early
     assert first.J == again.J and np.array_equal(first.trajectory, again.trajectory)
@@ -246,7 +257,7 @@ def test_an_mb_episode_runs_in_the_same_loop_and_is_pure():
 def test_mb_stepped_in_its_compiled_loop_is_mb_stepped_from_python_bit_for_bit(monkeypatch):
     from driftlab.core.commonroad.mb_plant import CommonRoadMbPlant
 
-    config = apply_overrides(EpisodeConfig.preset("commonroad_mb"), {"scenario.max_time_s": 4.0})
+    config = _published_mb_without_the_validity_rule(4.0)
     compiled = run_episode(Theta(), config, seed=2)
     monkeypatch.setattr(CommonRoadMbPlant, "run_loop", None)  # the kernel returns for each plant step
     from_python = run_episode(Theta(), config, seed=2)
@@ -260,7 +271,7 @@ def test_mbs_substep_integrates_a_control_step_as_a_fine_one_does(monkeypatch):
     wheel's speed, ~ -300 1/s) stays inside RK4's stability bound and the step's error is far below the noise."""
     from driftlab.core.commonroad import mb_plant as crp
 
-    config = apply_overrides(EpisodeConfig.preset("commonroad_mb"), {"scenario.max_time_s": 3.0})
+    config = _published_mb_without_the_validity_rule(3.0)
     steps = []
     record = crp.mb_recorded_step
 
@@ -291,7 +302,9 @@ def test_the_mb_model_answers_the_steering_as_the_car_does_and_std_keeps_its_rea
     read_off = _placed_at_drift(replace(fitted, front_grip_scale=1.0), 44.0, 0.5, drift, right)
     assert car > 3 * model_yaw_response(read_off, drift, steering)  # the mismatch the fit removes
     assert model_yaw_response(fitted, drift, steering) == pytest.approx(car, rel=1e-3)
-    assert 1.2 < fitted.front_grip_scale < 1.7
+    # The front axle's grip as the car answers: more than the tyres' read-off (the fit's whole point), less than
+    # the published model's pulling inner tyre gave it (1.2-1.7): with lift-off that wheel is in the air here.
+    assert 1.1 < fitted.front_grip_scale < 1.7
     # The fitted model still drifts where the car does.
     eq = drift_equilibrium(44.0, -0.5, pack_params(fitted))
     assert eq.speed_mps == pytest.approx(drift.speed_mps, abs=1e-6) and eq.steer_rad == pytest.approx(
@@ -319,12 +332,14 @@ def test_the_mb_model_answers_more_drive_with_more_yaw_rate_as_the_car_does():
 
 
 def test_an_mb_plant_starts_steady_in_its_own_drift():
-    """With no variation the episode's first steps hold MB's drift: every wheel at its own slip, the body rolled."""
+    """With no variation the episode's first steps hold MB's drift: every wheel at its own slip, the body rolled (the
+    published model's: with lift-off its inner front wheel, pulling here, lifts)."""
     from driftlab.core.commonroad.mb_equilibrium import mb_main_drift
     from driftlab.core.plant import DRIVE, SIDESLIP, SPEED, STEER, YAW_RATE, PlantConfig, make_plant
 
     drift = mb_main_drift(2, 44.0, 0.5)
-    plant = make_plant(PlantConfig.commonroad_mb(2), fitted_model_vehicle(2, 44.0, 0.5, "commonroad_mb"))
+    plant = make_plant(replace(PlantConfig.commonroad_mb(2), wheel_liftoff=False),
+                       fitted_model_vehicle(2, 44.0, 0.5, "commonroad_mb"))
     plant.start_in_drift_of(44.0, 0.5)
     loop = np.zeros(8)
     loop[SPEED], loop[SIDESLIP], loop[YAW_RATE] = drift.speed_mps, drift.sideslip_rad, drift.yaw_rate_radps
@@ -377,30 +392,84 @@ def test_a_model_with_matched_drive_coupling_answers_the_drive_as_the_car_does()
     assert model_yaw_response(matched, drift, steering, drive) == pytest.approx(car, abs=2e-4)
 
 
-def test_an_mb_episode_reports_where_a_wheel_load_went_below_zero():
-    """MB does not clamp a tyre's normal load at zero: the episode reports the time any load was negative and each
-    wheel's lowest load; its loads at the start sum to the car's weight."""
+def test_the_published_mbs_episode_ends_invalid_once_a_wheel_has_pulled_the_road_too_long():
+    """MB does not clamp a tyre's normal load at zero: in the BMW's 0.5 rad drift its inner front wheel pulls the
+    road within 0.2 s. The episode reports it (each wheel's lowest load; its loads at the start sum to the car's
+    weight) and ends as invalid once that lasted past failure.max_invalid_s, its J a failure's; without the rule
+    it runs on, as stored jobs of earlier releases ran."""
     from driftlab.core.commonroad.mb import mb_wheel_loads
     from driftlab.core.commonroad.parameters import package_parameters
+    from driftlab.core.episode import failure_penalty
     from driftlab.core.plant import make_plant
 
-    config = apply_overrides(EpisodeConfig.preset("commonroad_mb"), {"scenario.max_time_s": 2.0})
+    config = _published(EpisodeConfig.preset("commonroad_mb"), **{"scenario.max_time_s": 2.0})
     plant = make_plant(config.plant, config.vehicle)
     loop = np.zeros(8)
     loop[4] = 20.0
     state = plant.start_state(loop)
-    loads = mb_wheel_loads(state[8:8 + 29], plant.params)
-    mass = package_parameters(2).m
-    assert loads.sum() == pytest.approx(mass * 9.81, rel=0.02)
+    assert mb_wheel_loads(state[8:8 + 29], plant.params).sum() == pytest.approx(package_parameters(2).m * 9.81,
+                                                                                 rel=0.02)
     result = run_episode(Theta(), config, seed=0)
     validity = result.metrics.plant_validity
-    assert set(validity) == {"negative_wheel_load_s", "first_negative_wheel_load_s", "min_wheel_load_n"}
-    assert 0.0 <= validity["negative_wheel_load_s"] <= result.metrics.duration_s + 0.05
+    assert result.status == "invalid"
+    assert result.J == failure_penalty(result.metrics.completed_fraction)
+    limit_s, step_s = config.failure.max_invalid_s, config.mpc.dt_s
+    assert limit_s < validity["invalid_s"] <= limit_s + step_s + 1e-9
+    assert validity["invalid_s"] == validity["negative_wheel_load_s"]  # the published model: any wheel pulling
     lowest = validity["min_wheel_load_n"]
-    assert set(lowest) == {"lf", "rf", "lr", "rr"}
-    assert (validity["negative_wheel_load_s"] > 0) == (min(lowest.values()) < 0)
+    assert set(lowest) == {"lf", "rf", "lr", "rr"} and min(lowest.values()) < 0.0
+    assert result.metrics.duration_s == pytest.approx(validity["first_negative_wheel_load_s"] + validity["invalid_s"]
+                                                      - step_s, abs=step_s + 1e-9)
+    ruleless = run_episode(Theta(), apply_overrides(config, {"failure.invalid_ends_episode": False}), seed=0)
+    assert ruleless.status != "invalid" and ruleless.metrics.duration_s > result.metrics.duration_s
+    assert ruleless.metrics.plant_validity["negative_wheel_load_s"] > limit_s
     assert run_episode(Theta(), apply_overrides(EpisodeConfig.preset("commonroad_std"),
                                                 {"scenario.max_time_s": 1.0}), seed=0).metrics.plant_validity is None
+
+
+def test_a_lifted_wheel_carries_no_force_and_a_loaded_one_is_the_published_models():
+    """With wheel lift-off, a state whose four tyres are on the road has the published model's derivatives bit for
+    bit; where the inner front tyre's spring would pull (its wheel in the air), the published model's drift is no
+    drift any more: its pulling tyre was part of what held it."""
+    from driftlab.core.commonroad.mb import mb_derivatives, mb_wheel_loads, pack_mb
+    from driftlab.core.commonroad.mb_equilibrium import mb_steady_state
+
+    published, lifting = pack_mb(2), pack_mb(2, wheel_liftoff=True)
+    _, on_road, accel = mb_steady_state(2, 44.0, 0.8)
+    assert mb_wheel_loads(on_road, published).min() > 0.0
+    u = np.array([0.0, accel])
+    assert np.array_equal(mb_derivatives(on_road, u, lifting), mb_derivatives(on_road, u, published))
+    _, pulling, accel = mb_steady_state(2, 44.0, 0.5)
+    loads = mb_wheel_loads(pulling, published)
+    assert loads[1] < 0.0 < min(loads[0], loads[2], loads[3])  # the package's rf: the inner front in a left drift
+    u = np.array([0.0, accel])
+    steady, lifted = mb_derivatives(pulling, u, published), mb_derivatives(pulling, u, lifting)
+    body = [3, 5, 10]  # longitudinal, yaw and lateral accelerations
+    assert np.abs(steady[body]).max() < 1e-6  # the published model's drift: held by the pulling tyre
+    assert np.abs(lifted[body]).max() > 0.1  # without it the car is not in equilibrium there
+    assert lifted[24] == 0.0  # the undriven wheel in the air: nothing turns it
+
+
+def test_mb_lifts_its_wheels_by_default_and_the_published_model_is_one_setting_away():
+    mb = EpisodeConfig.preset("commonroad_mb")
+    assert mb.plant.wheel_liftoff and mb.failure.invalid_ends_episode
+    assert not _published(mb).plant.wheel_liftoff
+    assert not EpisodeConfig.preset("commonroad_std").plant.wheel_liftoff
+    with pytest.raises(ConfigError, match=r"plant\.wheel_liftoff applies to a plant with wheel loads"):
+        apply_overrides(EpisodeConfig(), {"plant.wheel_liftoff": True})
+
+
+def test_with_lift_off_an_episode_reports_time_off_the_road_and_on_two_wheels():
+    """MB's BMW reaches ~0.96 g in its 0.5 rad, 44 m drift, 94% of the lateral acceleration at which its steady
+    states' inner loads sum to zero: its inner front wheel lifts at once. The record keeps the time any wheel was off
+    the road apart from the time two wheels of one side were, which alone is outside the model with lift-off."""
+    result = run_episode(Theta(), apply_overrides(EpisodeConfig.preset("commonroad_mb"),
+                                                  {"scenario.max_time_s": 3.0}), seed=0)
+    validity = result.metrics.plant_validity
+    assert validity["wheel_liftoff"] is True
+    assert validity["negative_wheel_load_s"] >= validity["one_side_off_s"] == validity["invalid_s"]
+    assert validity["negative_wheel_load_s"] > 0.0
+    assert (result.status == "invalid") == (validity["invalid_s"] > 0.2)
 
 
 def test_sideslip_window_finds_a_runs_edges_to_the_grid():

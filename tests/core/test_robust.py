@@ -70,10 +70,17 @@ def test_a_plants_validity_is_summed_over_the_samples_that_report_it():
     assert summarize(mb)["negative_wheel_load"] == {"episodes": 2, "of": 3, "mean_s": pytest.approx(0.15),
                                                     "max_s": 0.35}
     assert SampleResult(**mb[1].as_dict()) == mb[1]
+    assert "one_side_off" not in summarize(mb)  # stored before lift-off: not reported
+    lifting = [SampleResult(0, "completed", -1.0, 1.0, 0.2, 0.3, 0.0), SampleResult(1, "invalid", 8.0, 0.1, 1.0, 0.4,
+                                                                                     0.25)]
+    summary = summarize(lifting)
+    assert summary["one_side_off"] == {"episodes": 1, "of": 2, "mean_s": pytest.approx(0.125), "max_s": 0.25}
+    assert summary["statuses"] == {"completed": 1, "invalid": 1} and summary["completed"] == 1
 
 
 def test_a_sample_is_stored_with_every_field_and_without_a_wheel_load_it_did_not_report():
-    reported = SampleResult(3, "completed", -1.5, 1.0, 0.12, 0.25)
+    reported = SampleResult(3, "completed", -1.5, 1.0, 0.12, 0.25, 0.0)
     assert reported.as_dict() == dataclasses.asdict(reported)
     silent = SampleResult(4, "spun_out", 7.0, 0.4)
-    assert silent.as_dict() == {k: v for k, v in dataclasses.asdict(silent).items() if k != "negative_wheel_load_s"}
+    assert silent.as_dict() == {k: v for k, v in dataclasses.asdict(silent).items()
+                                if k not in ("negative_wheel_load_s", "one_side_off_s")}

@@ -82,7 +82,7 @@ def test_schema_1_database_upgrades_and_its_results_still_reproduce(tmp_path):
     with storage.transaction(factory) as session:
         job = session.get(Job, 1)
         evaluation = session.get(Evaluation, 1)
-        assert session.get(Meta, "schema_version").value == "15"
+        assert session.get(Meta, "schema_version").value == "16"
         spec = TuningSpec.from_dict(job.spec)
         assert spec.robust_samples == 1 and spec.confirm_samples == 0 and not spec.config.plant.varies
         assert not spec.config.mpc.feedback_in_model and spec.config.mpc.estimator_hold_s == 0.0  # pinned by 0005
@@ -100,7 +100,7 @@ def test_schema_1_database_upgrades_and_its_results_still_reproduce(tmp_path):
 
 def test_a_new_database_is_created_at_the_head_revision(tmp_path):
     factory = storage.open_database(f"sqlite:///{tmp_path / 'new.db'}")
-    assert schema.current_revision(storage.engine_of(factory)) == schema.head_revision() == "0015"
+    assert schema.current_revision(storage.engine_of(factory)) == schema.head_revision() == "0016"
     with storage.transaction(factory) as session:
         job = storage.create_job(session, name="fresh", spec=TuningSpec().to_dict(), seed=0)
         assert job.runner_id is None and job.heartbeat_at is None
@@ -150,7 +150,7 @@ def test_revision_0006_adds_studies_to_a_database_with_jobs(tmp_path):
         assert [c.settings for c in studies.cells(session, study_id=study.id)] == [{"plant.mass_scale": 1.0},
                                                                                   {"plant.mass_scale": 1.1}]
         assert [j.name for j in studies.study_jobs(session, study_id=study.id)] == ["member"]
-        assert session.get(Meta, "schema_version").value == "15"
+        assert session.get(Meta, "schema_version").value == "16"
 
 
 def _insert_old_rows(connection, rows) -> None:
@@ -239,3 +239,48 @@ def test_revision_0010_keeps_stored_jobs_asking_what_they_asked(tmp_path):
         assert not TuningSpec.from_dict(session.get(Study, 2).spec["spec"]).local_phase
         fresh = TuningSpec.from_dict(storage.create_job(session, name="new", spec=TuningSpec().to_dict(), seed=0).spec)
         assert fresh.local_phase and fresh.optimizer_options["local_points"] == 11
+
+
+def test_revision_0016_keeps_stored_mb_jobs_on_the_model_they_ran_on(tmp_path):
+    """An MB job, seeds study, rescore and car profile stored before wheel lift-off keep the published model and
+    run without the validity rule (their results re-run bit for bit); a job of DriftLab's own plant is left as it
+    was stored; a new MB job lifts its wheels and ends an invalid episode."""
+    from alembic import command
+    from sqlalchemy import create_engine
+
+    from driftlab.db.models import CarProfile, Rescore, Study
+    from driftlab.db.models import Job as JobRow
+
+    url = f"sqlite:///{tmp_path / 'v15.db'}"
+    engine = create_engine(url)
+    mb_spec = TuningSpec(config=EpisodeConfig.preset("commonroad_mb")).to_dict()
+    del mb_spec["config"]["plant"]["wheel_liftoff"]  # as revision 15 stored it
+    for key in ("max_invalid_s", "invalid_ends_episode"):
+        del mb_spec["config"]["failure"][key]
+    default_spec = TuningSpec().to_dict()
+    del default_spec["config"]["plant"]["wheel_liftoff"]
+    with engine.connect() as connection, connection.begin():
+        command.upgrade(schema._config(connection), "0015")
+        _insert_old_rows(connection, [("jobs", mb_spec), ("jobs", default_spec),
+                                      ("studies", {"kind": "seeds", "spec": mb_spec})])
+        connection.exec_driver_sql(
+            "INSERT INTO rescores (id, job_id, evaluation_id, theta, config, seeds, samples, status, created_at, "
+            "updated_at) VALUES (1, 1, 1, '{}', ?, '[1]', '[]', 'finished', '2026-11-01', '2026-11-01')",
+            (json.dumps(mb_spec["config"]),))
+        connection.exec_driver_sql(
+            "INSERT INTO car_profiles (id, plant_model, vehicle_id, document, created_at) "
+            "VALUES (1, 'commonroad_mb', 2, ?, '2026-11-01')",
+            (json.dumps({"plant_model": "commonroad_mb", "plant": {"model": "commonroad_mb"}}),))
+    factory = storage.open_database(url)
+    with storage.transaction(factory) as session:
+        old = TuningSpec.from_dict(session.get(JobRow, 1).spec).config
+        assert not old.plant.wheel_liftoff and not old.failure.invalid_ends_episode
+        assert session.get(JobRow, 2).spec == default_spec  # DriftLab's plant: nothing to pin
+        seeds = TuningSpec.from_dict(session.get(Study, 3).spec["spec"]).config
+        assert not seeds.plant.wheel_liftoff and not seeds.failure.invalid_ends_episode
+        rescore = session.get(Rescore, 1).config
+        assert rescore["plant"]["wheel_liftoff"] is False and rescore["failure"]["invalid_ends_episode"] is False
+        assert session.get(CarProfile, 1).document["plant"]["wheel_liftoff"] is False
+        fresh = TuningSpec.from_dict(storage.create_job(session, name="new", spec=mb_spec | {
+            "config": TuningSpec(config=EpisodeConfig.preset("commonroad_mb")).to_dict()["config"]}, seed=0).spec)
+        assert fresh.config.plant.wheel_liftoff and fresh.config.failure.invalid_ends_episode

@@ -33,7 +33,9 @@ MB_KEYS = ("D_f", "D_r", "E_f", "E_r", "I_Phi_s", "I_uf", "I_ur", "I_xz_s", "I_y
 (MB_STEER_MIN, MB_STEER_MAX, MB_STEER_RATE_MIN, MB_STEER_RATE_MAX, MB_SPEED_MIN, MB_SPEED_MAX, MB_SPEED_SWITCH,
  MB_ACCEL_MAX) = range(len(MB_KEYS), len(MB_KEYS) + 8)
 MB_TYRE = len(MB_KEYS) + 8
-N_MB_PARAMS = MB_TYRE + len(TYRE_KEYS)
+# After the tyre: 1.0 when a wheel may lift off the road (PlantConfig.wheel_liftoff), 0.0 for the published model.
+MB_LIFTOFF = MB_TYRE + len(TYRE_KEYS)
+N_MB_PARAMS = MB_LIFTOFF + 1
 GRAVITY_MPS2 = 9.81
 
 
@@ -53,10 +55,12 @@ def _base_vector(car: int | ParameterSet) -> tuple[float, ...]:
 
 
 def pack_mb(car: int | ParameterSet, *, friction_scale: float = 1.0, mass_scale: float = 1.0,
-            steer_rate_radps: float | None = None) -> np.ndarray:
+            steer_rate_radps: float | None = None, wheel_liftoff: bool = False) -> np.ndarray:
     """MB's packed parameters, friction (PAC2002's p_dx1, p_dy1) and the sprung mass (with the total mass and the
-    sprung inertias) scaled, the steering rate limit replaced (``None``: the package's 0.4 rad/s)."""
+    sprung inertias) scaled, the steering rate limit replaced (``None``: the package's 0.4 rad/s); with
+    ``wheel_liftoff`` a tyre carries no load or force off the road (:func:`mb_derivatives_into`)."""
     v = np.array(_base_vector(car))
+    v[MB_LIFTOFF] = 1.0 if wheel_liftoff else 0.0
     v[MB_TYRE + TYRE_KEYS.index("p_dx1")] *= friction_scale
     v[MB_TYRE + TYRE_KEYS.index("p_dy1")] *= friction_scale
     sprung = v[M_S] * mass_scale
@@ -110,6 +114,18 @@ def mb_wheel_loads(x, p):
     return out
 
 
+@njit(cache=True)
+def _tyre_forces(kappa, alpha, gamma, f_z, t, liftoff):
+    """A tyre's combined-slip PAC2002 forces (longitudinal, lateral) [N]; none for a wheel in the air (with
+    ``liftoff``, its load is 0 there: PAC2002 would divide 0 by 0)."""
+    if liftoff and f_z <= 0.0:
+        return 0.0, 0.0
+    f0_x = formula_longitudinal(kappa, gamma, f_z, t)
+    f0_y, mu_y = formula_lateral(alpha, gamma, f_z, t)
+    return (formula_longitudinal_comb(kappa, alpha, f0_x, t),
+            formula_lateral_comb(kappa, alpha, gamma, mu_y, f_z, f0_y, t))
+
+
 @njit(cache=True, error_model="numpy")
 def mb_derivatives(x, u_init, p):
     """d/dt of the MB state under [steering velocity, longitudinal acceleration] (the package's
@@ -136,6 +152,13 @@ def mb_derivatives_into(x, u_init, p, f):
     f_z_rf = (x[16] + r_w * (math.cos(x[13]) - 1) + 0.5 * t_f * math.sin(x[13])) * p[K_ZT]
     f_z_lr = (x[21] + r_w * (math.cos(x[18]) - 1) - 0.5 * t_r * math.sin(x[18])) * p[K_ZT]
     f_z_rr = (x[21] + r_w * (math.cos(x[18]) - 1) + 0.5 * t_r * math.sin(x[18])) * p[K_ZT]
+    # The published model's tyre is a spring that also pulls (F_z = K_zt x deflection < 0 off the road) and
+    # PAC2002's forces change sign with F_z: a lifted wheel would push the car the wrong way. Lift-off: a tyre
+    # off the road carries no load and no force.
+    liftoff = p[MB_LIFTOFF] > 0.5
+    if liftoff:
+        f_z_lf, f_z_rf = max(f_z_lf, 0.0), max(f_z_rf, 0.0)
+        f_z_lr, f_z_rr = max(f_z_lr, 0.0), max(f_z_rr, 0.0)
     u_w_lf = (x[3] + 0.5 * t_f * x[5]) * math.cos(x[2]) + (x[10] + a * x[5]) * math.sin(x[2])
     u_w_rf = (x[3] - 0.5 * t_f * x[5]) * math.cos(x[2]) + (x[10] + a * x[5]) * math.sin(x[2])
     u_w_lr = x[3] + 0.5 * t_r * x[5]
@@ -173,22 +196,10 @@ def mb_derivatives_into(x, u_init, p, f):
     gamma_rf = x[6] - p[D_F] * z_srf - p[E_F] * z_srf ** 2
     gamma_lr = x[6] + p[D_R] * z_slr + p[E_R] * z_slr ** 2
     gamma_rr = x[6] - p[D_R] * z_srr - p[E_R] * z_srr ** 2
-    f0_x_lf = formula_longitudinal(s_lf, gamma_lf, f_z_lf, t)
-    f0_x_rf = formula_longitudinal(s_rf, gamma_rf, f_z_rf, t)
-    f0_x_lr = formula_longitudinal(s_lr, gamma_lr, f_z_lr, t)
-    f0_x_rr = formula_longitudinal(s_rr, gamma_rr, f_z_rr, t)
-    f0_y_lf, mu_y_lf = formula_lateral(alpha_lf, gamma_lf, f_z_lf, t)
-    f0_y_rf, mu_y_rf = formula_lateral(alpha_rf, gamma_rf, f_z_rf, t)
-    f0_y_lr, mu_y_lr = formula_lateral(alpha_lr, gamma_lr, f_z_lr, t)
-    f0_y_rr, mu_y_rr = formula_lateral(alpha_rr, gamma_rr, f_z_rr, t)
-    f_x_lf = formula_longitudinal_comb(s_lf, alpha_lf, f0_x_lf, t)
-    f_x_rf = formula_longitudinal_comb(s_rf, alpha_rf, f0_x_rf, t)
-    f_x_lr = formula_longitudinal_comb(s_lr, alpha_lr, f0_x_lr, t)
-    f_x_rr = formula_longitudinal_comb(s_rr, alpha_rr, f0_x_rr, t)
-    f_y_lf = formula_lateral_comb(s_lf, alpha_lf, gamma_lf, mu_y_lf, f_z_lf, f0_y_lf, t)
-    f_y_rf = formula_lateral_comb(s_rf, alpha_rf, gamma_rf, mu_y_rf, f_z_rf, f0_y_rf, t)
-    f_y_lr = formula_lateral_comb(s_lr, alpha_lr, gamma_lr, mu_y_lr, f_z_lr, f0_y_lr, t)
-    f_y_rr = formula_lateral_comb(s_rr, alpha_rr, gamma_rr, mu_y_rr, f_z_rr, f0_y_rr, t)
+    f_x_lf, f_y_lf = _tyre_forces(s_lf, alpha_lf, gamma_lf, f_z_lf, t, liftoff)
+    f_x_rf, f_y_rf = _tyre_forces(s_rf, alpha_rf, gamma_rf, f_z_rf, t, liftoff)
+    f_x_lr, f_y_lr = _tyre_forces(s_lr, alpha_lr, gamma_lr, f_z_lr, t, liftoff)
+    f_x_rr, f_y_rr = _tyre_forces(s_rr, alpha_rr, gamma_rr, f_z_rr, t, liftoff)
     delta_z_f = h_s - r_w + x[16] - x[11]
     delta_z_r = h_s - r_w + x[21] - x[11]
     delta_phi_f = x[6] - x[13]

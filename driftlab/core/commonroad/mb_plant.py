@@ -17,8 +17,9 @@ from typing import Any
 import numpy as np
 from numba import njit
 
-from driftlab.core.closed_loop import I_PLANT_DUE, NEEDS_PLANT, run_until_constrained
+from driftlab.core.closed_loop import DONE, I_PLANT_DUE, I_STATUS, INVALID, NEEDS_PLANT, run_until_constrained
 from driftlab.core.commonroad.mb import (
+    MB_LIFTOFF,
     N_MB,
     mb_acceleration_constraints,
     mb_derivatives_into,
@@ -113,9 +114,15 @@ def _mb_to_loop(z, p, out):
     out[DRIVE] = p[MB_MASS] * mb_acceleration_constraints(z[3], z[N_MB] / p[MB_MASS], p)
 
 
-# An MB episode's validity record: seconds with a tyre's normal load below zero (sampled each control step), when
-# that first was (NaN: never), seconds stepped.
-R_NEGATIVE_LOAD_S, R_FIRST_NEGATIVE_LOAD_S, R_ELAPSED_S = range(3)
+# An MB episode's validity record, sampled each control step: seconds with a wheel off the road (its tyre spring's
+# load below zero: with plant.wheel_liftoff the wheel is in the air, without it the published model's tyre pulls
+# the road), when that first was (NaN: never), seconds stepped, seconds with both wheels of one side off the road
+# (the car on two wheels: a rollover under way), seconds outside the model's validity (the published model: any
+# wheel pulling; with lift-off: two wheels of one side in the air, beyond what MB's linear roll springs describe),
+# and the limit on that time after which the episode ends as invalid (FailureLimits.max_invalid_s; inf: never).
+(R_NEGATIVE_LOAD_S, R_FIRST_NEGATIVE_LOAD_S, R_ELAPSED_S, R_SIDE_OFF_S, R_INVALID_S,
+ R_MAX_INVALID_S) = range(6)
+N_RECORD = 6
 
 
 @njit(cache=True, error_model="numpy")
@@ -128,11 +135,27 @@ def mb_recorded_step(state, steer_cmd, drive_cmd, duration_s, substep_s, p, act,
         if math.isnan(loads[i]) or loads[i] < lowest_load_n[i]:
             lowest_load_n[i] = loads[i]
     record[R_ELAPSED_S] += duration_s
-    if loads.min() < 0.0:
+    off = loads.min() < 0.0
+    if off:
         record[R_NEGATIVE_LOAD_S] += duration_s
         if math.isnan(record[R_FIRST_NEGATIVE_LOAD_S]):
             record[R_FIRST_NEGATIVE_LOAD_S] = record[R_ELAPSED_S]
+    # The package's order: lf, rf, lr, rr; one side is lf and lr, the other rf and rr.
+    one_side = (loads[0] < 0.0 and loads[2] < 0.0) or (loads[1] < 0.0 and loads[3] < 0.0)
+    if one_side:
+        record[R_SIDE_OFF_S] += duration_s
+    if one_side if p[MB_LIFTOFF] > 0.5 else off:
+        record[R_INVALID_S] += duration_s
     return new
+
+
+@njit(cache=True)
+def _ended_invalid(st, record):
+    """Ends the episode as invalid once its time outside the model exceeds the limit (True then)."""
+    if record[R_INVALID_S] > record[R_MAX_INVALID_S]:
+        st.ints[I_STATUS] = INVALID
+        return True
+    return False
 
 
 @njit(cache=True, error_model="numpy")
@@ -146,6 +169,8 @@ def run_mb_until_constrained(cfg, st, qa_left, qa_right, model_params, p, act, n
         st.plant[:] = mb_recorded_step(st.plant, st.last_applied[0], st.last_applied[1], cfg.dt_s, cfg.substep_s,
                                        p, act, lowest_load_n, record)
         st.ints[I_PLANT_DUE] = 0
+        if _ended_invalid(st, record):
+            return DONE
 
 
 class CommonRoadMbPlant:
@@ -156,12 +181,20 @@ class CommonRoadMbPlant:
     def __init__(self, config: PlantConfig) -> None:
         self.config = config
         self.car = config.plant_type.car(config.commonroad_vehicle)
-        self.params = pack_mb(self.car, friction_scale=config.friction_scale,
-                              mass_scale=config.mass_scale, steer_rate_radps=config.steer_rate_radps)
+        self.params = pack_mb(self.car, friction_scale=config.friction_scale, mass_scale=config.mass_scale,
+                              steer_rate_radps=config.steer_rate_radps, wheel_liftoff=config.wheel_liftoff)
         self.actuators = np.append(config.actuator_params(), 1.0 if config.locked_differential else 0.0)
         self.steady: np.ndarray | None = None
         self.min_wheel_load_n = np.full(4, np.inf)
-        self.record = np.array([0.0, np.nan, 0.0])  # R_* of mb_recorded_step
+        self.record = np.array([0.0, np.nan, 0.0, 0.0, 0.0, np.inf])  # R_* of mb_recorded_step
+
+    def end_invalid_after(self, seconds: float) -> None:
+        """End the episode as invalid once it has been outside the model's validity for longer than this."""
+        self.record[R_MAX_INVALID_S] = seconds
+
+    def ended_invalid(self, loop: Any) -> bool:
+        """After a step from Python: whether the episode ends invalid now (its status set)."""
+        return bool(_ended_invalid(loop, self.record))
 
     def start_in_drift_of(self, radius_m: float, sideslip_rad: float) -> None:
         """Start the suspension as it sits in the car's steady drift there (if one was found)."""
@@ -208,11 +241,16 @@ class CommonRoadMbPlant:
                                         self.actuators, noise, self.min_wheel_load_n, self.record)
 
     def validity(self) -> dict[str, object]:
-        """Where the episode left the model's validity: MB does not clamp a tyre's normal load at zero, so a lifted
-        wheel would push back; the time any load was negative and each wheel's lowest load (the package's names:
-        its "l" wheels sit at -y)."""
+        """Where the episode left the model's validity (:data:`R_INVALID_S`): the time any wheel was off the road
+        (``negative_wheel_load_s``: its tyre spring's load below zero; the published model does not clamp it, so its
+        tyre pulls the road), when that first was, the time both wheels of one side were (``one_side_off_s``), the
+        time outside the model (``invalid_s``), and each wheel's lowest load (the package's names: its "l" wheels
+        sit at -y)."""
         lowest = {name: float(v) for name, v in zip(("lf", "rf", "lr", "rr"), self.min_wheel_load_n, strict=True)}
         first_s = float(self.record[R_FIRST_NEGATIVE_LOAD_S])
         return {"negative_wheel_load_s": round(float(self.record[R_NEGATIVE_LOAD_S]), 6),
                 "first_negative_wheel_load_s": None if math.isnan(first_s) else round(first_s, 6),
+                "one_side_off_s": round(float(self.record[R_SIDE_OFF_S]), 6),
+                "invalid_s": round(float(self.record[R_INVALID_S]), 6),
+                "wheel_liftoff": bool(self.config.wheel_liftoff),
                 "min_wheel_load_n": lowest}

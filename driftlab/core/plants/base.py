@@ -33,10 +33,12 @@ class PlantType(ABC):
         local_phase: new jobs start their seed points near the uncorrected model (TuningSpec.local_phase).
         theta_bounds: where a new job's search box differs from the paper's (driftlab.core.tuning.DEFAULT_BOUNDS).
         not_drivable_hint: what to change, appended to the message when the controller's model cannot drift.
+        wheel_loads: it has a load on each wheel and may lift one (CommonRoad's MB): ``plant.wheel_liftoff`` applies.
     """
 
     name: str = ""
     own_car: bool = False
+    wheel_loads: bool = False
     fits_model: bool = False
     preset_name: str | None = None
     default_sideslip_rad: float | None = None

@@ -47,6 +47,7 @@ class CommonRoadPlantType(PlantType):
         self.name = name
         self.stepper = stepper
         self.multibody = multibody
+        self.wheel_loads = multibody
         self.substep_s = substep_s
         self.weights = weights
         self.preset_name = preset_name
@@ -56,9 +57,11 @@ class CommonRoadPlantType(PlantType):
 
     def preset(self, vehicle_id: int | None = None) -> PlantConfig:
         """Its own car and tyres, DriftLab's actuators (30 ms / 8 rad/s steering servo, 50 ms drive), the default
-        plant's per-episode variation."""
+        plant's per-episode variation; MB's wheels may lift off the road (PlantConfig.wheel_liftoff: in a ~1 g drift
+        the published model's inner front tyre pulls the road for most of the episode)."""
         return PlantConfig(model=self.name, commonroad_vehicle=2 if vehicle_id is None else vehicle_id,
-                           friction_scale=1.0, substep_s=self.substep_s, **DRIFTLAB_ONLY)
+                           friction_scale=1.0, substep_s=self.substep_s, wheel_liftoff=self.wheel_loads,
+                           **DRIFTLAB_ONLY)
 
     def check(self, config: PlantConfig) -> None:
         from driftlab.core.commonroad.parameters import check_vehicle

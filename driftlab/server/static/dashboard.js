@@ -332,7 +332,8 @@ async function pollRescore() {
     $("rescore-text").textContent = `rescore ${r.status}: ${r.done} / ${r.samples} episodes`;
   } else if (r.status === "finished") {
     const res = r.result;
-    $("rescore-text").textContent = `rescore: ${res.completed} / ${res.samples} completed, J mean ${fmt(res.J_mean)} ` +
+    const invalid = (res.statuses || {}).invalid ? ` (${res.statuses.invalid} outside the plant's model: invalid)` : "";
+    $("rescore-text").textContent = `rescore: ${res.completed} / ${res.samples} completed${invalid}, J mean ${fmt(res.J_mean)} ` +
       `± ${fmt(res.J_std)}, worst ${fmt(res.J_worst)} (stored J ${fmt(r.J_stored)})`;
     state.rescoring = false;
   } else if (r.status === "failed" || r.status === "cancelled") {

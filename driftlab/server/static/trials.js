@@ -25,6 +25,7 @@ function matches(t, e) {
   if (t.status === "completed" && !e.completed) return false;
   if (t.status === "failed" && e.completed) return false;
   if (t.status === "refused" && e.status !== "refused") return false;
+  if (t.status === "invalid" && e.status !== "invalid") return false;
   if (t.status === "enqueued" && !e.enqueued) return false;
   for (const [key, [lo, hi]] of Object.entries(t.brushes)) {
     const v = key === "J" ? (e.completed ? e.J : NaN) : e.theta[key];

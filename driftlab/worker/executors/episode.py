@@ -47,10 +47,11 @@ class EpisodeOutcome:
         """This episode as one sample of a robust evaluation."""
         error = self.metrics.get("mean_abs_e_m")
         validity = self.metrics.get("plant_validity") or {}
-        negative = validity.get("negative_wheel_load_s")
+        negative, one_side = validity.get("negative_wheel_load_s"), validity.get("one_side_off_s")
         return SampleResult(self.seed, self.status, float(self.J), float(self.metrics.get("completed_fraction", 0.0)),
                             float(error) if error is not None and math.isfinite(error) else None,
-                            None if negative is None else float(negative))
+                            None if negative is None else float(negative),
+                            None if one_side is None else float(one_side))
 
 
 class EpisodeExecutor(Protocol):

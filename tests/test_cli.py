@@ -187,7 +187,9 @@ def test_robust_evaluation_stores_each_seed_and_rescore_uses_fresh_ones(tmp_path
     rescored = _run("rescore", "--name", "robust", "--db", db, "--samples", "3")
     assert rescored.returncode == 0, rescored.stderr
     out = json.loads(rescored.stdout)
-    assert {"theta", "samples", "completed", "completion_rate", "J_mean", "J_std", "J_worst", "J_stored"} <= set(out)
+    assert {"theta", "samples", "completed", "completion_rate", "J_mean", "J_std", "J_worst", "J_stored",
+            "by_phase"} <= set(out)
+    assert out["by_phase"]["drift"]["episodes"] == out["completed"]
     assert out["theta"] == best["theta"] and out["J_stored"] == best["J"] and out["samples"] == 3
     assert min(out["seeds"]) >= 2**40
 

@@ -8,7 +8,7 @@ import numpy as np
 
 from driftlab.core.config import PAPER_THETA, Theta
 from driftlab.core.equilibrium import drift_equilibrium
-from driftlab.core.robust import aggregate, rescore_seeds, summarize
+from driftlab.core.robust import PHASE_GROUPS, aggregate, rescore_seeds, summarize
 from driftlab.core.statuses import EpisodeStatus
 from driftlab.core.track import FigureEight
 from driftlab.core.tuning import TuningSpec
@@ -82,8 +82,12 @@ def write_report(*, db_url: str, name: str, out_dir: str, baseline_samples: int 
              f"Theta at full precision. 'Tuning J': on the job's {spec.robust_samples} seeds (mean J over them, "
              f"an evaluation completes only if all do). 'Rescore': {rescore_samples} fresh seeds never used in "
              "tuning (J mean over all episodes, failures at their penalty).", "",
+             "Rescore's path and sideslip errors over its completed episodes: of the whole episode, of the sustained "
+             "drifts and of the flicks (each episode's mean over its steps in them, then the mean over the episodes; "
+             "the largest; the RMS).", "",
              "| theta | c_lr | c_rl | dV (m/s) | k (rad/m) | model mu x | model C x | tuning status | tuning J | "
-             "rescore completed | rescore J mean | rescore J worst |", "|---" * 12 + "|"]
+             "rescore completed | rescore J mean | rescore J worst | mean \\|e\\| all / drift / flick (m) | "
+             "max \\|e\\| drift / flick (m) | RMS beta error drift / flick (rad) |", "|---" * 15 + "|"]
     summaries = [summarize(results) for results in rescored]
     for (label, theta, status, value), summary in zip(table, summaries, strict=True):
         tuning = (status or "-", "-" if value is None else f"{value:.3f}")
@@ -91,7 +95,7 @@ def write_report(*, db_url: str, name: str, out_dir: str, baseline_samples: int 
         lines.append(f"| {label} | {theta['c_lr']!r} | {theta['c_rl']!r} | {theta['dV']!r} | {theta['k']!r} | "
                      f"{theta['model_mu_scale']!r} | {theta['model_c_scale']!r} | {tuning[0]} | {tuning[1]} | "
                      f"{summary['completed']}/{summary['samples']} | "
-                     f"{summary['J_mean']:.3f} | {summary['J_worst']:.3f} |")
+                     f"{summary['J_mean']:.3f} | {summary['J_worst']:.3f} | {phase_cells(summary)} |")
     lines += _verdict(summaries[0], summaries[1], len(evals), spec.seed_points)
     lines += ["", f"## The drift and the flicks, phase by phase (best evaluation, seed {shown.seed})", "",
               *phase_table(shown.metrics.get("phases", []))]
@@ -108,19 +112,31 @@ PHASE_NAMES = {"left_drift": "left drift", "inertia_left_to_right": "flick left 
 def phase_table(phases: list[dict]) -> list[str]:
     """Markdown rows of an episode's phases (driftlab.core.metrics.phase_segments): each drift and each flick with
     its path error, sideslip error, countersteer share, and a flick's sign-change and settle times and speed loss."""
-    def number(value, digits):
-        return "-" if value is None else f"{value:.{digits}f}"
-
     lines = ["| phase | from-to (s) | mean / max \\|e\\| (m) | RMS beta error (rad) | countersteer | "
              "sign change (s) | settled (s) | speed loss (m/s) |", "|---" * 8 + "|"]
     for p in phases:
         share = p.get("countersteer_share")  # None: stored before it was measured
-        flick = [number(p.get("flip_s"), 2), number(p.get("settle_s"), 2)] if "flip_s" in p else ["", ""]
+        flick = [_number(p.get("flip_s"), 2), _number(p.get("settle_s"), 2)] if "flip_s" in p else ["", ""]
         lines.append(f"| {PHASE_NAMES.get(p['phase'], p['phase'])} | {p['start_s']:.2f}-{p['end_s']:.2f} | "
-                     f"{p['mean_abs_e_m']:.2f} / {p['max_abs_e_m']:.2f} | {number(p.get('rms_beta_err_rad'), 3)} | "
+                     f"{p['mean_abs_e_m']:.2f} / {p['max_abs_e_m']:.2f} | {_number(p.get('rms_beta_err_rad'), 3)} | "
                      f"{'-' if share is None else f'{100 * share:.0f}%'} | {flick[0]} | {flick[1]} | "
                      f"{p['speed_loss_mps']:.2f} |")
     return lines
+
+
+def phase_cells(summary: dict) -> str:
+    """A rescore summary's (driftlab.core.robust.summarize) errors as three table cells: mean |e| of the whole
+    episode, the drifts and the flicks, their max |e|, their RMS sideslip error ("-" where no completed episode
+    drove the group, or a summary made before it was measured)."""
+    groups = [summary.get("by_phase", {}).get(group, {}) for group in PHASE_GROUPS]
+    means = [summary.get("mean_abs_e_m"), *(g.get("mean_abs_e_m") for g in groups)]
+    return " | ".join([" / ".join(_number(v, 2) for v in means),
+                       " / ".join(_number(g.get("max_abs_e_m"), 2) for g in groups),
+                       " / ".join(_number(g.get("rms_beta_err_rad"), 3) for g in groups)])
+
+
+def _number(value: float | None, digits: int) -> str:
+    return "-" if value is None else f"{value:.{digits}f}"
 
 
 def _verdict(learned: dict, untuned: dict, n_evaluations: int, seed_points: int = 20) -> list[str]:

@@ -253,7 +253,8 @@ class Rescore(BaseModel):
     J_stored: float | None = None
     status_stored: str | None = None
     result: dict[str, Any] | None = Field(default=None, description="samples, completed, completion_rate, J_mean, "
-                                          "J_std, J_worst, J_mean_completed, mean_abs_e_m, statuses, seeds")
+                                          "J_std, J_worst, J_mean_completed, mean_abs_e_m, by_phase (drift, flick: "
+                                          "mean_abs_e_m, max_abs_e_m, rms_beta_err_rad, episodes), statuses, seeds")
     error: str | None = None
 
 

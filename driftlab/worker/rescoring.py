@@ -78,7 +78,7 @@ def _finish(factory, rescore_id: int, runner: str) -> str:
         rescore = session.get(Rescore, rescore_id)
         order = {seed: i for i, seed in enumerate(rescore.seeds)}
         samples = sorted(rescore.samples, key=lambda s: order[s["seed"]])
-        result = {**summarize([SampleResult(**s) for s in samples]), "seeds": [s["seed"] for s in samples]}
+        result = {**summarize([SampleResult.from_dict(s) for s in samples]), "seeds": [s["seed"] for s in samples]}
         rescores.finish(session, rescore_id=rescore_id, runner=runner, status=RescoreStatus.FINISHED, result=result)
     return RescoreStatus.FINISHED
 

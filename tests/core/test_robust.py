@@ -1,11 +1,22 @@
 """Robust evaluation's aggregate and seeds."""
 
 import dataclasses
+import math
 
 import pytest
 
 from driftlab.core.episode import failure_penalty
-from driftlab.core.robust import RESCORE_SEED_BASE, SampleResult, aggregate, rescore_seeds, summarize, tuning_seeds
+from driftlab.core.robust import (
+    PHASE_GROUPS,
+    RESCORE_SEED_BASE,
+    PhaseError,
+    SampleResult,
+    aggregate,
+    phase_errors,
+    rescore_seeds,
+    summarize,
+    tuning_seeds,
+)
 from driftlab.core.tuning import TuningSpec
 
 
@@ -79,8 +90,61 @@ def test_a_plants_validity_is_summed_over_the_samples_that_report_it():
 
 
 def test_a_sample_is_stored_with_every_field_and_without_a_wheel_load_it_did_not_report():
-    reported = SampleResult(3, "completed", -1.5, 1.0, 0.12, 0.25, 0.0)
-    assert reported.as_dict() == dataclasses.asdict(reported)
+    reported = SampleResult(3, "completed", -1.5, 1.0, 0.12, 0.25, 0.0, drift=PhaseError(0.1, 0.3, 0.02),
+                            flick=PhaseError(0.2, 0.5, 0.07))
+    fields = dataclasses.asdict(reported)
+    assert reported.as_dict() == {**{k: v for k, v in fields.items() if k not in PHASE_GROUPS},
+                                  "by_phase": {group: fields[group] for group in PHASE_GROUPS}}
+    assert SampleResult.from_dict(reported.as_dict()) == reported
     silent = SampleResult(4, "spun_out", 7.0, 0.4)
     assert silent.as_dict() == {k: v for k, v in dataclasses.asdict(silent).items()
-                                if k not in ("negative_wheel_load_s", "one_side_off_s")}
+                                if k not in ("negative_wheel_load_s", "one_side_off_s", *PHASE_GROUPS)}
+
+
+def _phased(seed, status, drift, flick, value=-1.0):
+    return SampleResult(seed, status, value, 1.0 if status == "completed" else 0.5, 0.5,
+                        drift=None if drift is None else PhaseError(*drift),
+                        flick=None if flick is None else PhaseError(*flick))
+
+
+def test_by_phase_averages_the_completed_episodes_and_keeps_their_largest_error():
+    samples = [_phased(0, "completed", (0.2, 0.8, 0.03), (0.6, 1.5, 0.12)),
+               _phased(1, "completed", (0.4, 1.2, 0.04), (1.0, 1.9, 0.09)),
+               _phased(2, "completed", (0.3, 0.9, 0.00), None),  # a run that never flicked
+               _phased(3, "left_track", (5.0, 9.0, 0.9), (4.0, 8.0, 0.8), value=7.0)]  # ignored: it failed
+    by_phase = summarize(samples)["by_phase"]
+    assert by_phase["drift"] == {"mean_abs_e_m": pytest.approx(0.3), "max_abs_e_m": 1.2,
+                                 "rms_beta_err_rad": pytest.approx(math.sqrt((0.03**2 + 0.04**2) / 3)), "episodes": 3}
+    assert by_phase["flick"] == {"mean_abs_e_m": pytest.approx(0.8), "max_abs_e_m": 1.9,
+                                 "rms_beta_err_rad": pytest.approx(math.sqrt((0.12**2 + 0.09**2) / 2)), "episodes": 2}
+    assert summarize([_phased(0, "completed", None, None), samples[3]])["by_phase"] == {}
+
+
+def _segment(phase, steps, mean_abs_e_m, max_abs_e_m, rms_beta_err_rad):
+    """The fields of a phase segment (driftlab.core.metrics.phase_segments) that the groups read."""
+    return {"phase": phase, "steps": steps, "mean_abs_e_m": mean_abs_e_m, "max_abs_e_m": max_abs_e_m,
+            "rms_beta_err_rad": rms_beta_err_rad}
+
+
+def test_a_groups_errors_weigh_each_step_the_same():
+    segments = [_segment("left_drift", 300, 0.1, 0.4, 0.02), _segment("inertia_left_to_right", 50, 1.2, 2.0, 0.3),
+                _segment("right_drift", 100, 0.5, 1.9, 0.06), _segment("inertia_right_to_left", 150, 0.4, 0.9, 0.1)]
+    errors = phase_errors(segments)
+    assert errors["drift"].mean_abs_e_m == pytest.approx((300 * 0.1 + 100 * 0.5) / 400)  # 0.2, not 0.3 (by phase)
+    assert errors["drift"].max_abs_e_m == 1.9
+    assert errors["drift"].rms_beta_err_rad == pytest.approx(math.sqrt((300 * 0.02**2 + 100 * 0.06**2) / 400))
+    assert errors["flick"].mean_abs_e_m == pytest.approx((50 * 1.2 + 150 * 0.4) / 200)
+    assert errors["flick"].max_abs_e_m == 2.0
+    assert phase_errors(segments[:1]).keys() == {"drift"}  # stopped before its first flick
+    diverged = [{**segments[0], "mean_abs_e_m": math.nan}]
+    assert phase_errors(diverged) == {} and phase_errors([]) == {}
+
+
+def test_a_sample_stored_before_phases_were_measured_reads_and_summarizes():
+    old = {"seed": 7, "status": "completed", "J": -1.2, "completed_fraction": 1.0, "mean_abs_e_m": 0.3}
+    sample = SampleResult.from_dict(old)
+    assert sample.drift is None and sample.flick is None and sample.as_dict() == old
+    new = _phased(8, "completed", (0.2, 0.7, 0.05), (0.9, 1.4, 0.1))
+    out = summarize([sample, SampleResult.from_dict(new.as_dict())])
+    assert out["completed"] == 2 and out["mean_abs_e_m"] == pytest.approx(0.4)
+    assert out["by_phase"]["drift"]["episodes"] == 1 and out["by_phase"]["flick"]["max_abs_e_m"] == 1.4

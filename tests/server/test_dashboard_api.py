@@ -150,6 +150,11 @@ def test_rescore_is_queued_stored_and_reports_the_result(api):
     assert state["status"] == "finished" and state["done"] == 2, state
     assert state["result"]["samples"] == 2 and state["result"]["seeds"] == rescore_seeds(2)
     assert state["J_stored"] == -1.0
+    by_phase = state["result"]["by_phase"]  # the default theta completes both episodes, drifts and flicks
+    assert set(by_phase) == {"drift", "flick"}, by_phase
+    for group in by_phase.values():
+        assert set(group) == {"mean_abs_e_m", "max_abs_e_m", "rms_beta_err_rad", "episodes"} and group["episodes"] == 2
+        assert 0.0 < group["mean_abs_e_m"] < group["max_abs_e_m"] and group["rms_beta_err_rad"] > 0.0
     assert api.post(f"/api/jobs/{job_id}/rescore", json={"samples": 0}).json()["errors"][0]["field"] == "samples"
 
 
@@ -167,6 +172,23 @@ def test_a_stopped_rescore_resumes_with_the_seeds_still_missing(api):
     assert resumed.submitted == 2  # only the missing seeds ran again
     state = api.get(f"/api/jobs/{job_id}/rescore").json()
     assert state["done"] == 3 and state["result"]["seeds"] == rescore_seeds(3)
+
+
+def test_a_rescore_resumed_over_a_sample_an_earlier_release_stored_summarizes_it(api):
+    job_id = _with_a_best(api)
+    api.post(f"/api/jobs/{job_id}/rescore", json={"samples": 3})
+    with ThreadPoolExecutor(1) as pool:
+        executor = InThreadExecutor(pool)
+        assert _run_queued(api, executor, should_stop=lambda: executor.submitted >= 1) == "queued"
+        with storage.transaction(api.app.state.factory) as session:  # as stored before samples had phases
+            rescore = db_rescores.latest(session, job_id=job_id)
+            [first] = rescore.samples
+            assert "by_phase" in first
+            rescore.samples = [{k: v for k, v in first.items() if k != "by_phase"}]
+        assert _run_queued(api, InThreadExecutor(pool)) == "finished"
+    result = api.get(f"/api/jobs/{job_id}/rescore").json()["result"]
+    assert result["samples"] == 3 and result["completed"] == 3
+    assert result["by_phase"]["drift"]["episodes"] == 2 and result["by_phase"]["flick"]["episodes"] == 2
 
 
 def test_a_rescore_can_be_cancelled_and_then_started_again(api):

@@ -322,6 +322,14 @@ function wireActions() {
   }
 }
 
+// A finished rescore's mean |e|, then the drifts' and the flicks' (a result stored before by_phase shows the mean
+// alone): the episode's mean hides a drift far off its circle after a flick.
+function rescoreErrors(res) {
+  const groups = Object.entries(res.by_phase || {})
+    .map(([group, g]) => `${group} ${fmt(g.mean_abs_e_m)} (max ${fmt(g.max_abs_e_m)})`);
+  return `mean |e| ${fmt(res.mean_abs_e_m)} m` + (groups.length ? `; ${groups.join(", ")} m` : "");
+}
+
 async function pollRescore() {
   const r = await api("GET", `/api/jobs/${state.selected}/rescore`);
   const bar = $("rescore-progress");
@@ -333,8 +341,9 @@ async function pollRescore() {
   } else if (r.status === "finished") {
     const res = r.result;
     const invalid = (res.statuses || {}).invalid ? ` (${res.statuses.invalid} outside the plant's model: invalid)` : "";
-    $("rescore-text").textContent = `rescore: ${res.completed} / ${res.samples} completed${invalid}, J mean ${fmt(res.J_mean)} ` +
-      `± ${fmt(res.J_std)}, worst ${fmt(res.J_worst)} (stored J ${fmt(r.J_stored)})`;
+    $("rescore-text").textContent = `rescore: ${res.completed} / ${res.samples} completed${invalid}, ` +
+      `J mean ${fmt(res.J_mean)} ± ${fmt(res.J_std)}, worst ${fmt(res.J_worst)} (stored J ${fmt(r.J_stored)}); ` +
+      rescoreErrors(res);
     state.rescoring = false;
   } else if (r.status === "failed" || r.status === "cancelled") {
     $("rescore-text").textContent = `rescore ${r.status}${r.error ? `: ${r.error}` : ""} (${r.done} / ${r.samples} ` +

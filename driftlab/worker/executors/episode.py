@@ -12,7 +12,7 @@ from typing import Any, Protocol
 
 import numpy as np
 
-from driftlab.core.robust import SampleResult
+from driftlab.core.robust import SampleResult, phase_errors
 from driftlab.core.statuses import EpisodeStatus
 from driftlab.db.trajectory_bytes import PackedTrajectory
 
@@ -48,10 +48,12 @@ class EpisodeOutcome:
         error = self.metrics.get("mean_abs_e_m")
         validity = self.metrics.get("plant_validity") or {}
         negative, one_side = validity.get("negative_wheel_load_s"), validity.get("one_side_off_s")
+        by_phase = phase_errors(self.metrics.get("phases") or [])
         return SampleResult(self.seed, self.status, float(self.J), float(self.metrics.get("completed_fraction", 0.0)),
                             float(error) if error is not None and math.isfinite(error) else None,
                             None if negative is None else float(negative),
-                            None if one_side is None else float(one_side))
+                            None if one_side is None else float(one_side), drift=by_phase.get("drift"),
+                            flick=by_phase.get("flick"))
 
 
 class EpisodeExecutor(Protocol):

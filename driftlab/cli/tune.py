@@ -89,13 +89,18 @@ def open_tuning_job(factory, args: argparse.Namespace, runner: str) -> tuple[int
     with storage.transaction(factory) as session:
         job = storage.find_job(session, name=args.name) if args.name else None
         if job is None:
-            from driftlab.services.profiles import with_profile
+            from driftlab.services.profiles import gives_weights, uncalibrated_warning, with_profile
 
             spec = tuning_spec(args)
             name = args.name or storage.unique_job_name(session, "tune")
             profile_id = None
             if args.controller != "paper":
-                spec, profile_id = with_profile(session, spec, key_values(args.set or [], "--set"))
+                sets = key_values(args.set or [], "--set")
+                spec, profile_id = with_profile(session, spec, sets)
+                warning = None if profile_id is not None or gives_weights(sets) else uncalibrated_warning(session,
+                                                                                                           spec)
+                if warning:
+                    sys.stderr.write(f"warning: {warning}\n")
             if args.warm_start_from:
                 from driftlab.services.warm_start import with_warm_start
 

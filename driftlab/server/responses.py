@@ -112,6 +112,9 @@ class Job(BaseModel):
     stop_reason: str | None = Field(default=None, description="the stop rule that finished it, if one did")
     notes: str = Field(description="free text kept with the job (PATCH /api/jobs/{id} with notes)")
     created_at: Timestamp
+    warning: str | None = Field(default=None, description=(
+        "in the answer to the POST that created the job: its car has calibrated weights (driftlab calibrate), none "
+        "for its drift; names the nearest calibrated drift and the command that calibrates this one"))
 
 
 class EnqueuedTheta(BaseModel):

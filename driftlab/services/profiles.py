@@ -168,6 +168,38 @@ def with_profile(session: Session, spec: TuningSpec, config_document: Any) -> tu
     return spec, profile.id
 
 
+def _point_text(point: dict[str, Any]) -> str:
+    return f"{point['sideslip_rad']:g} rad, {point['radius_m']:g} m"
+
+
+def _record_text(record: dict[str, Any]) -> str:
+    verified = record.get("verified")
+    if verified:
+        return f"{verified['completed']} of {verified['seeds']} fresh seeds completed"
+    return f"{record['completed']} of {record['episodes']} of its calibration's episodes completed"
+
+
+def uncalibrated_warning(session: Session, spec: TuningSpec) -> str | None:
+    """What a job that took no profile (:func:`with_profile`) is told: its car has calibrated weights, but none for
+    its drift; the nearest calibrated drift, how its weights did there, and the command that calibrates the job's
+    own. None for a car no profile was ever found for (nothing nearer to name) and for a drift a profile applies to.
+    A drift where the car has no equilibrium at all is refused before this (driftlab.core.drivability)."""
+    plant, scenario = spec.config.plant, spec.config.scenario
+    candidates = [*(p for p in profiles.car_profiles(session, plant_model=plant.model,
+                                                     vehicle_id=plant.commonroad_vehicle)
+                    if _same_model(p, plant.wheel_liftoff) and SHIPPED_KEY not in p.document),
+                  *(p for p in shipped_profiles(plant.model, plant.commonroad_vehicle)
+                    if _same_model(p, plant.wheel_liftoff))]
+    records = [record for p in candidates for record in p.document.get("per_point") or [] if record["completed"]]
+    if not records:
+        return None
+    nearest = min(records, key=lambda r: drift_distance(scenario.sideslip_rad, scenario.left_radius_m, r))
+    here = {"sideslip_rad": scenario.sideslip_rad, "radius_m": scenario.left_radius_m}
+    return (f"no calibrated weights for {_point_text(here)}: the job drives the car's default weights; the nearest "
+            f"calibrated drift is {_point_text(nearest)} ({_record_text(nearest)}); `driftlab calibrate --plant "
+            f"{plant.model} --points {scenario.sideslip_rad:g}@{scenario.left_radius_m:g}` calibrates this one")
+
+
 # The MPC settings a profile carries besides its weights (driftlab.core.calibration searches only the weights).
 PROFILE_LIMITS = ("steer_limit_rad",)
 

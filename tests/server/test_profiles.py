@@ -196,3 +196,25 @@ def test_weights_that_completed_every_episode_of_their_point_beat_nearer_ones_th
     assert profile_for([own, further], 0.69, 44.0) is own  # the only one within a step
     full_own = SimpleNamespace(id=4, document={"per_point": [_record(0.69, 44.0, 4, 0.5)]})
     assert profile_for([own, beside, full_own], 0.69, 44.0) is full_own  # then the nearest
+
+
+def test_a_job_beyond_its_cars_calibrated_drifts_is_told_the_nearest_and_how_to_calibrate_its_own(tmp_path):
+    """0.7 rad on 30 m circles lies a step from every shipped BMW point: the job is accepted with the car's default
+    weights and a warning naming the nearest calibrated drift (and how it did there); a job at a calibrated drift,
+    or one that sets its own weights, is told nothing."""
+    from driftlab.services.profiles import drift_distance, shipped_profiles
+
+    beyond = {**CAR, "scenario.sideslip_rad": 0.7, "scenario.left_radius_m": 30.0, "scenario.right_radius_m": 30.0}
+    with in_process_client(tmp_path / "warned.db") as client:
+        job = client.post("/api/jobs", json={"iterations": 1, "config": beyond})
+        assert job.status_code == 201, job.text
+        warning = job.json()["warning"]
+        records = [r for p in shipped_profiles("commonroad_std", 2) for r in p.document["per_point"] if r["completed"]]
+        nearest = min(records, key=lambda r: drift_distance(0.7, 30.0, r))
+        assert job.json()["profile_id"] is None and warning.startswith("no calibrated weights for 0.7 rad, 30 m")
+        assert f"nearest calibrated drift is {nearest['sideslip_rad']:g} rad, {nearest['radius_m']:g} m" in warning
+        assert "driftlab calibrate --plant commonroad_std --points 0.7@30" in warning
+        assert client.get(f"/api/jobs/{job.json()['id']}").json()["warning"] is None  # said once, where it was made
+        assert client.post("/api/jobs", json={"iterations": 1, "config": CAR}).json()["warning"] is None
+        own = client.post("/api/jobs", json={"iterations": 1, "config": {**beyond, "mpc.q_sideslip": 300.0}})
+        assert own.json()["warning"] is None

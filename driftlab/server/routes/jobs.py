@@ -28,7 +28,7 @@ from driftlab.server.schemas import (
 )
 from driftlab.server.serialize import evaluation_dict, evaluations_csv, job_dict
 from driftlab.services.enqueue import enqueue_thetas, waiting_document
-from driftlab.services.profiles import with_profile
+from driftlab.services.profiles import gives_weights, uncalibrated_warning, with_profile
 from driftlab.services.warm_start import with_warm_start
 
 router = APIRouter(prefix="/api/jobs", tags=["jobs"])
@@ -53,12 +53,14 @@ def create_job(body: JobCreate, db: Factory, request: Request) -> dict[str, Any]
         quotas.check_queue(settings, session, 1)
         name = body.name or storage.unique_job_name(session, "job")
         spec, profile_id = with_profile(session, spec, doc.get("config"))
+        warning = None if profile_id is not None or gives_weights(doc.get("config")) else uncalibrated_warning(
+            session, spec)
         if body.warm_start_from:
             spec = with_warm_start(session, spec, body.warm_start_from)
         out = job_dict(session, storage.create_job(session, name=name, spec=spec.to_dict(), seed=spec.seed,
                                                    profile_id=profile_id))
     wake_runner(request)
-    return out
+    return {**out, "warning": warning}
 
 
 @router.get("", response_model=list[Job], responses=errors(422, 503))

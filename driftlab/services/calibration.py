@@ -35,7 +35,7 @@ from driftlab.core.config import (
     overrides_inside_window,
 )
 from driftlab.core.drivability import drift_window
-from driftlab.core.errors import ConfigError
+from driftlab.core.errors import ConfigError, OutsideDriftWindowError
 from driftlab.core.limits import check_int
 from driftlab.db import profiles, storage
 from driftlab.services.profiles import drift_distance, known_weight_sets, limits_of
@@ -93,7 +93,15 @@ class CalibrationRequest:
                               "rounds 1)", field="rounds")
         Theta.from_mapping(self.theta)
         # A car that cannot drift at its preset's sideslip is calibrated around the middle of its window.
-        config = overrides_inside_window(EpisodeConfig.preset(self.plant), self.sets)
+        try:
+            config = overrides_inside_window(EpisodeConfig.preset(self.plant), self.sets)
+        except OutsideDriftWindowError as exc:
+            if not self.points:
+                raise ConfigError(f"{exc}; --points SIDESLIP@RADIUS calibrates it where it drifts",
+                                  field=exc.field) from None
+            # The points given are checked one by one (split_drivable): the scenario's own drift need not exist
+            # (a car with no drift on the scenario's circle is calibrated on the circles where it has one).
+            config = apply_overrides(EpisodeConfig.preset(self.plant), self.sets)
         for point in parse_points(self.points) or []:  # in the scenario's ranges (ScenarioConfig checks them)
             try:
                 replace(config.scenario, sideslip_rad=point.sideslip_rad, left_radius_m=point.radius_m,
@@ -190,7 +198,9 @@ class _Run:
     on_event: Event
     known: list[tuple[str, Any]]
     stage: dict[str, Any] = field(default_factory=dict)
-    unfitted: dict[str, None] = field(default_factory=dict)  # why a candidate had no fit at a point, once each
+    # Why a candidate model had no fit at a point (by its plant section, which holds the model's settings): a later
+    # round or steering limit of the same model is not sent to the workers there again.
+    unfitted: dict[tuple[Any, CalibrationPoint], str] = field(default_factory=dict)
 
     def say(self, message: str) -> None:
         self.on_event({"message": message})
@@ -211,7 +221,15 @@ def _search_candidate(run: _Run, base: EpisodeConfig, inside: list[tuple[Calibra
     (driftlab.core.calibration.point_config): where a point has no fit of this model, the first batch raises; that
     point is set aside for this model (into ``outside``, one line saying why) and the others searched again."""
     request = run.request
+    unfit = [(p, run.unfitted[base.plant, p]) for p, _ in inside if (base.plant, p) in run.unfitted]
     while inside:
+        for point, reason in unfit:
+            run.say(f"skipped the model with {_model_text(base)} at {point.label()}: {reason}")
+            run.unfitted[base.plant, point] = reason
+        outside.extend(unfit)
+        inside[:] = [(p, c) for p, c in inside if all(p != q for q, _ in unfit)]
+        if not inside:
+            break
         run.say(f"calibrating {', '.join(p.label() for p, _ in inside)} with {_model_text(base)}")
         run.stage.update(step="weights", model_drive_coupling=base.plant.model_drive_coupling,
                          steer_limit_rad=base.mpc.steer_limit_rad)
@@ -229,11 +247,6 @@ def _search_candidate(run: _Run, base: EpisodeConfig, inside: list[tuple[Calibra
             unfit = unfittable(inside)  # which point's fit failed: found only after a failure
             if not unfit:
                 raise
-        for point, reason in unfit:
-            run.say(f"skipped the model with {_model_text(base)} at {point.label()}: {reason}")
-            run.unfitted[f"{point.label()}: {reason}"] = None
-        outside.extend(unfit)
-        inside[:] = [(p, c) for p, c in inside if all(p != q for q, _ in unfit)]
     return None
 
 
@@ -269,7 +282,7 @@ def _calibrate_group(run: _Run, centre: EpisodeConfig, points: Sequence[Calibrat
     base, calibration, inside, outside = min(candidates, key=lambda c: (c[1].best.score, -c[1].best.completed))
     best, start = calibration.best, calibration.tried[0]
     radii = sorted({p.radius_m for p, _ in inside})
-    window = [drift_window(config, config.scenario.left_radius_m, 0.2, 1.0).as_dict()
+    window = [drift_window(config, config.scenario.left_radius_m).as_dict()
               for config in (next(c for p, c in inside if p.radius_m == r) for r in radii)]
     return {
         "plant_model": base.plant.model, "vehicle_id": base.plant.commonroad_vehicle,
@@ -354,8 +367,9 @@ def run_calibration(request: CalibrationRequest, factory: sessionmaker[Session],
             mine.append(_store(factory, run, document))
             documents.append(mine[-1])
     if not documents:
+        reasons = dict.fromkeys(f"{point.label()}: {reason}" for (_, point), reason in run.unfitted.items())
         raise ConfigError("points: no candidate model of the controller can be fitted at any of the points ("
-                          f"{'; '.join(run.unfitted) or 'none was drivable'})", field="points")
+                          f"{'; '.join(reasons) or 'none was drivable'})", field="points")
     return documents
 
 

@@ -40,6 +40,21 @@ def test_a_circle_without_a_drift_says_the_engine_is_short_and_where_the_car_dri
     assert drift_window(kept, 44.0, 0.55, 0.65).ranges_rad == [(0.55, 0.65)]
 
 
+def test_a_circle_without_a_drift_whatever_the_drive_says_the_tyres():
+    """A BMW whose rear tyres grip 2.5 times as hard along the road has no countersteer drift on 44 m even with the
+    engine's cap lifted: the tyres, not the engine."""
+    from driftlab.core.commonroad.window import drive_shortfall, no_drift_reason
+
+    if plant_type("grippy_rear_test") is None:
+        register_plant("grippy_rear_test", CommonRoadVariant({"tire.p_dx1": 2.5}))
+    entry = plant_type("grippy_rear_test")
+    assert drive_shortfall(entry, 2, 44.0) is None
+    reason = no_drift_reason(entry, 2, 44.0)
+    assert reason.startswith("grippy_rear_test (CommonRoad's BMW 320i, scaled) has no steady drift"), reason
+    assert "even with unlimited drive: its tyres hold no countersteer equilibrium there" in reason
+    assert "engine" not in reason
+
+
 def test_the_window_of_a_circle_is_where_both_its_drifts_exist(light_bmw):
     """On 40 m the light car's left-hand drift countersteers from 0.51 rad, its right-hand one from 0.60: a job is
     refused below 0.60 (both circles of the 8), and the window says so."""

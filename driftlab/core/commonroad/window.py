@@ -119,7 +119,7 @@ def no_drift_reason(plant_type: Any, vehicle_id: int, radius_m: float) -> str:
                 f"scanned) because holding one needs more rear drive than CommonRoad's engine gives at drift speed: "
                 f"{shortfall.text()}")
     return (f"{name} has no steady drift with countersteer both ways on a {radius_m:g} m circle at any sideslip "
-            f"{scanned}, even with unlimited drive: its tyres cannot hold one")
+            f"{scanned}, even with unlimited drive: its tyres hold no countersteer equilibrium there")
 
 
 def elsewhere_text(plant_type: Any, vehicle_id: int, radius_m: float, radii_m: tuple[float, ...]) -> str:

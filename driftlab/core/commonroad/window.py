@@ -113,6 +113,9 @@ def no_drift_reason(plant_type: Any, vehicle_id: int, radius_m: float) -> str:
         model = "at no sideslip" if window.model is None else f"only at {range_text(window.model)}"
         return (f"{name} drifts with countersteer both ways on a {radius_m:g} m circle at {range_text(window.car)}, "
                 f"but the controller's model of it (the paper's tyre on its mass and geometry) drifts {model}")
+    if plant_type.multibody:  # its drifts are not solved without the engine's cap: the cause is not known
+        return (f"{name} has no steady drift with countersteer both ways on a {radius_m:g} m circle at any sideslip "
+                f"{scanned}")
     shortfall = drive_shortfall(plant_type, vehicle_id, radius_m)
     if shortfall is not None:
         return (f"{name} has no steady drift with countersteer both ways on a {radius_m:g} m circle ({scanned} "

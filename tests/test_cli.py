@@ -38,7 +38,8 @@ def test_the_window_of_a_car_that_cannot_drift_at_the_presets_sideslip_is_printe
     # 0.5 rad, which a job is refused for, naming the window; the window itself is still printed.
     from driftlab.cli import main
 
-    assert main(["equilibrium", "--plant", "commonroad_std", "--set", "plant.commonroad_vehicle=3", "--window"]) == 0
+    assert main(["equilibrium", "--plant", "commonroad_std", "--set", "plant.commonroad_vehicle=3", "--window",
+                 "--radius", "44"]) == 0
     (window,) = json.loads(capsys.readouterr().out)["window"]
     (low, high), = window["sideslip_ranges_rad"]
     assert window["radius_m"] == 44.0 and 0.5 < low <= 0.6 < 0.62 < high

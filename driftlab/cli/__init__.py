@@ -45,14 +45,16 @@ def build_parser() -> argparse.ArgumentParser:
     parser = Parser(prog="driftlab", description="Learning-based inertia drift (Zhou et al. 2025).")
     sub = parser.add_subparsers(dest="command", required=True, parser_class=Parser)
     eq = sub.add_parser("equilibrium", help="drift equilibrium of the model (and a plant) at radius and beta")
-    eq.add_argument("--radius", type=float, default=44.0, help="path radius R [m]")
+    eq.add_argument("--radius", type=float, action="append", metavar="R",
+                    help="path radius R [m] (default 44; with --window, repeat it for several circles)")
     eq.add_argument("--beta", type=float, default=-0.4, help="sideslip [rad]; < 0 left-hand drift")
     eq.add_argument("--plant", choices=PLANT_CHOICES, help="also solve this plant's own equilibrium (for a CommonRoad "
                     "plant its drift family: every steady drift, and whether the main one countersteers)")
     eq.add_argument("--set", action="append", metavar="KEY=VALUE", help="config override, e.g. plant.cg_height_m=0.3")
     eq.add_argument("--window", action="store_true", help="instead: the drift window, the sideslips at which the "
-                    "plant (default: DriftLab's) and the controller's model both drift a circle of --radius (and of "
-                    "the scenario's radii), as the drivability check decides")
+                    "plant (default: DriftLab's) and the controller's model both drift both circles of an 8 of each "
+                    "--radius (default: the scenario's and the circles a calibration tiles, 30/44 and 52/44 its "
+                    "size), as the drivability check decides; one line a radius, and why where there is none")
     eq.set_defaults(func=cmd_equilibrium)
     ep = sub.add_parser("episode", help="run one 30 s figure-8 episode and print its metrics as JSON")
     ep.add_argument("--theta", help="c_lr=..,c_rl=..,dV=..,k=..,model_mu_scale=..,model_c_scale=.. (any subset; "

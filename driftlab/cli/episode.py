@@ -10,24 +10,29 @@ from typing import Any
 
 from driftlab.cli.options import PLOT_SUFFIXES, check_output_file, episode_config, finite, key_values
 from driftlab.core.config import Theta, config_to_dict, fitted
-from driftlab.core.drivability import check_drivable, drift_window
+from driftlab.core.drivability import check_drivable, drift_window, tiled_radii
 from driftlab.core.equilibrium import drift_equilibrium
 from driftlab.core.errors import ConfigError, NoEquilibriumError
 from driftlab.core.vehicle import pack_params
+
+DEFAULT_RADIUS_M = 44.0
 
 
 def cmd_equilibrium(args: argparse.Namespace) -> int:
     if args.window:
         return _print_window(args)
+    if args.radius and len(args.radius) > 1:
+        raise ConfigError("--radius: one radius for an equilibrium (several only with --window)")
+    radius_m = args.radius[0] if args.radius else DEFAULT_RADIUS_M
     config = fitted(episode_config(args))
     try:
-        eq = drift_equilibrium(args.radius, args.beta, pack_params(config.vehicle))
+        eq = drift_equilibrium(radius_m, args.beta, pack_params(config.vehicle))
     except NoEquilibriumError as exc:
         sys.stderr.write(f"driftlab: error: {exc}\n")
         return 2
     out: dict[str, Any] = eq.as_dict()
     if args.plant:
-        plant = config.plant.plant_type.equilibrium_summary(config.plant, config.vehicle, args.radius, args.beta)
+        plant = config.plant.plant_type.equilibrium_summary(config.plant, config.vehicle, radius_m, args.beta)
         if plant is not None and "V" in plant:
             # The drive the car applies: a CommonRoad car's through its wheel (drive_n), DriftLab's its Fxr.
             plant["mismatch"] = {"dV": plant["V"] - eq.speed_mps, "ddelta": plant["delta"] - eq.steer_rad,
@@ -39,12 +44,18 @@ def cmd_equilibrium(args: argparse.Namespace) -> int:
 
 
 def _print_window(args: argparse.Namespace) -> int:
-    """The drift window at --radius and the scenario's radii (it does not depend on the scenario's sideslip; a car's
-    controller's model is fitted inside its window where the preset's sideslip is outside it)."""
-    config = episode_config(args, inside_window=True)
+    """The drift window on each --radius (default: the scenario's circles and those a calibration tiles), one JSON
+    line a radius; a radius without a drift is a line with the reason, not an error. It does not depend on the
+    scenario's sideslip: a car whose model is fitted at each drift is checked as a job there would be
+    (driftlab.core.drivability.drift_window)."""
+    config = episode_config(args)
     scenario = config.scenario
-    radii = sorted({args.radius, scenario.left_radius_m, scenario.right_radius_m})
-    print(json.dumps({"window": [drift_window(config, radius).as_dict() for radius in radii]}))
+    if args.radius:
+        radii = sorted(set(args.radius))
+    else:
+        radii = sorted({*tiled_radii(scenario.left_radius_m), *tiled_radii(scenario.right_radius_m)})
+    lines = [json.dumps(drift_window(config, radius).as_dict()) for radius in radii]
+    print('{"window": [\n' + ",\n".join(lines) + "\n]}")
     return 0
 
 

@@ -9,7 +9,7 @@ controller's own model (it has nothing to linearize about).
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from functools import lru_cache
 
 import numpy as np
@@ -81,11 +81,13 @@ def _fit_reason(plant: PlantConfig, radius_m: float, sideslip_rad: float) -> str
 
 @dataclass(frozen=True)
 class DriftWindow:
-    """The sideslips [rad] at which a configuration drifts a circle of one radius (plant and model both have a
-    countersteer drift there), scanned on a grid."""
+    """The sideslips [rad] at which a job of a configuration drifts both circles of an 8 of one radius (plant and
+    model both have a countersteer drift there, left- and right-hand), scanned on a grid; where there are none, why
+    (``reason``, one sentence)."""
 
     radius_m: float
     sideslips_rad: tuple[float, ...]
+    reason: str | None = None
 
     @property
     def ranges_rad(self) -> list[tuple[float, float]]:
@@ -99,16 +101,41 @@ class DriftWindow:
         return runs
 
     def as_dict(self) -> dict:
-        return {"radius_m": self.radius_m, "sideslip_ranges_rad": [list(r) for r in self.ranges_rad]}
+        reason = {} if self.reason is None else {"reason": self.reason}
+        return {"radius_m": self.radius_m, "sideslip_ranges_rad": [list(r) for r in self.ranges_rad], **reason}
 
 
 WINDOW_STEP_RAD = 0.01
+# Where every window is scanned (`driftlab equilibrium --window`, the calibration's points, a profile's window, the
+# view): CommonRoad's drift families are scanned over it (driftlab.core.commonroad.family); beyond 0.8 rad the
+# failure limits (1.2 rad) leave a flick no room.
+WINDOW_SCAN_RAD = (0.2, 0.8)
+# The circles a calibration tiles besides the scenario's (driftlab.core.calibration.default_points), as a share of
+# its radius: the paper's 44 m and circles of 30 m and 52 m.
+TILED_RADIUS_SHARES = (30 / 44, 52 / 44)
 
 
-def drift_window(config: EpisodeConfig, radius_m: float, low_rad: float = 0.05, high_rad: float = 1.0) -> DriftWindow:
-    """Where ``config`` (its plant and controller's model) drifts a circle of ``radius_m``: the sideslips of a
-    WINDOW_STEP_RAD grid over [low, high] that the drivability check accepts (the same decision, per radius)."""
+def tiled_radii(radius_m: float) -> tuple[float, ...]:
+    """The circle of ``radius_m`` and those a calibration tiles beside it, smallest first."""
+    return tuple(sorted({float(radius_m), *(round(radius_m * share, 2) for share in TILED_RADIUS_SHARES)}))
+
+
+def drift_window(config: EpisodeConfig, radius_m: float, low_rad: float = WINDOW_SCAN_RAD[0],
+                 high_rad: float = WINDOW_SCAN_RAD[1]) -> DriftWindow:
+    """Where a job of ``config``'s car (its plant and controller's model) drifts both circles of an 8 of
+    ``radius_m``: the sideslips of a WINDOW_STEP_RAD grid over [low, high] that the drivability check accepts, the
+    decision a job's config gets there. A plant that fits its model at each drift (PlantType.fits_model) is checked
+    as a job is, with the model still to be fitted, so that a fit made at another drift does not decide; its check
+    reads both the left- and the right-hand drift (a CommonRoad car's PAC2002 tyres are not symmetric). The one
+    scan `driftlab equilibrium --window`, the calibration's points and the view all read. Where the grid has no
+    sideslip, ``reason`` says why (PlantType.window_reason)."""
+    entry = config.plant.plant_type
+    if entry.fits_model:
+        config = replace(config, to_fit=config.to_fit | {MODEL_FIT})
     grid = np.round(np.arange(low_rad, high_rad + 1e-9, WINDOW_STEP_RAD), 4)
     model = _checked_model(config)
     ok = tuple(float(b) for b in grid if _reason(model, config.plant, radius_m, radius_m, float(b)) is None)
-    return DriftWindow(float(radius_m), ok)
+    s = config.scenario  # the other circles named where this one has no drift: those a calibration of it tiles
+    elsewhere = tuple(sorted({*tiled_radii(s.left_radius_m), *tiled_radii(s.right_radius_m)}))
+    reason = None if ok else entry.window_reason(config.plant, model, float(radius_m), low_rad, high_rad, elsewhere)
+    return DriftWindow(float(radius_m), ok, reason)

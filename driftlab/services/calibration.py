@@ -25,6 +25,7 @@ from driftlab.core.calibration import (
     learn_theta,
     point_config,
     split_drivable,
+    unfittable,
 )
 from driftlab.core.config import (
     EpisodeConfig,
@@ -34,7 +35,7 @@ from driftlab.core.config import (
     overrides_inside_window,
 )
 from driftlab.core.drivability import drift_window
-from driftlab.core.errors import ConfigError
+from driftlab.core.errors import ConfigError, OutsideDriftWindowError
 from driftlab.core.limits import check_int
 from driftlab.db import profiles, storage
 from driftlab.services.profiles import drift_distance, known_weight_sets, limits_of
@@ -92,7 +93,15 @@ class CalibrationRequest:
                               "rounds 1)", field="rounds")
         Theta.from_mapping(self.theta)
         # A car that cannot drift at its preset's sideslip is calibrated around the middle of its window.
-        config = overrides_inside_window(EpisodeConfig.preset(self.plant), self.sets)
+        try:
+            config = overrides_inside_window(EpisodeConfig.preset(self.plant), self.sets)
+        except OutsideDriftWindowError as exc:
+            if not self.points:
+                raise ConfigError(f"{exc}; --points SIDESLIP@RADIUS calibrates it where it drifts",
+                                  field=exc.field) from None
+            # The points given are checked one by one (split_drivable): the scenario's own drift need not exist
+            # (a car with no drift on the scenario's circle is calibrated on the circles where it has one).
+            config = apply_overrides(EpisodeConfig.preset(self.plant), self.sets)
         for point in parse_points(self.points) or []:  # in the scenario's ranges (ScenarioConfig checks them)
             try:
                 replace(config.scenario, sideslip_rad=point.sideslip_rad, left_radius_m=point.radius_m,
@@ -130,19 +139,22 @@ ALL_MODELS_WITHIN_STEPS = 2.0
 
 
 def _models_for(run: _Run, group: Sequence[CalibrationPoint], documents: list[dict[str, Any]]
-                ) -> list[dict[str, Any]]:
-    """The candidate models a group searches (:data:`ALL_MODELS_WITHIN_STEPS`)."""
+                ) -> tuple[list[dict[str, Any]], list[dict[str, Any]]]:
+    """The candidate models a group searches (:data:`ALL_MODELS_WITHIN_STEPS`), and those it searches where none of
+    them can be fitted at its points (the nearest point's model may have no fit further out)."""
     models = _model_candidates(run.given, run.request.sets)
     scenario = run.given.scenario
     if len(group) != 1 or len(models) == 1 or not documents or drift_distance(
             scenario.sideslip_rad, scenario.left_radius_m, asdict(group[0])) < ALL_MODELS_WITHIN_STEPS:
-        return models
+        return models, []
     point = asdict(group[0])
     nearest = min(documents, key=lambda d: (drift_distance(point["sideslip_rad"], point["radius_m"],
                                                            d["points"][0]), -d["completed"]))
     chosen = {"plant.model_drive_coupling": nearest["plant"]["model_drive_coupling"],
               "mpc.steer_limit_rad": nearest["mpc"]["steer_limit_rad"]}
-    return [{k: v for k, v in chosen.items() if k not in run.request.sets}]
+    first = {k: v for k, v in chosen.items() if k not in run.request.sets}
+    return [first], [model for model in models if apply_overrides(run.given, model) != apply_overrides(
+        run.given, first)]
 
 
 def _summary(result, points) -> dict[str, Any]:
@@ -186,6 +198,9 @@ class _Run:
     on_event: Event
     known: list[tuple[str, Any]]
     stage: dict[str, Any] = field(default_factory=dict)
+    # Why a candidate model had no fit at a point (by its plant section, which holds the model's settings): a later
+    # round or steering limit of the same model is not sent to the workers there again.
+    unfitted: dict[tuple[Any, CalibrationPoint], str] = field(default_factory=dict)
 
     def say(self, message: str) -> None:
         self.on_event({"message": message})
@@ -194,39 +209,80 @@ class _Run:
         self.on_event({"progress": {**self.stage, **values}})
 
 
-def _calibrate_group(run: _Run, centre: EpisodeConfig, points: Sequence[CalibrationPoint], theta: Theta,
-                     models: list[dict[str, Any]]) -> dict[str, Any]:
-    """The weights for ``points``, each candidate model (``models``, :func:`_model_candidates`) searched and the
-    better one kept: the profile's document."""
-    request, candidates = run.request, []
-    for change in models:
-        # Fitted at each point, not at the scenario's drift: a model that has no fit there may fit the points.
-        base = apply_overrides(centre, change) if change else centre
-        inside, outside = split_drivable(base, points)
-        if not inside:  # this model fits none of the points: the other candidates run
-            run.say(f"skipped the model with {change}: {'; '.join(reason for _, reason in outside)}")
-            continue
-        coupling, steer_limit_rad = base.plant.model_drive_coupling, base.mpc.steer_limit_rad
-        run.say(f"calibrating {', '.join(p.label() for p in points)} with plant.model_drive_coupling="
-                f"{str(coupling).lower()}, mpc.steer_limit_rad={steer_limit_rad:g}")
-        run.stage.update(step="weights", model_drive_coupling=coupling, steer_limit_rad=steer_limit_rad)
+def _model_text(config: EpisodeConfig) -> str:
+    return (f"plant.model_drive_coupling={str(config.plant.model_drive_coupling).lower()}, "
+            f"mpc.steer_limit_rad={config.mpc.steer_limit_rad:g}")
+
+
+def _search_candidate(run: _Run, base: EpisodeConfig, inside: list[tuple[CalibrationPoint, EpisodeConfig]],
+                      outside: list[tuple[CalibrationPoint, str]], theta: Theta):
+    """The weights searched for one candidate model at the points ``inside`` (the calibration, or None where the
+    model cannot be fitted at any of them). The workers fit each point's model with its first episode
+    (driftlab.core.calibration.point_config): where a point has no fit of this model, the first batch raises; that
+    point is set aside for this model (into ``outside``, one line saying why) and the others searched again."""
+    request = run.request
+    unfit = [(p, run.unfitted[base.plant, p]) for p, _ in inside if (base.plant, p) in run.unfitted]
+    while inside:
+        for point, reason in unfit:
+            run.say(f"skipped the model with {_model_text(base)} at {point.label()}: {reason}")
+            run.unfitted[base.plant, point] = reason
+        outside.extend(unfit)
+        inside[:] = [(p, c) for p, c in inside if all(p != q for q, _ in unfit)]
+        if not inside:
+            break
+        run.say(f"calibrating {', '.join(p.label() for p, _ in inside)} with {_model_text(base)}")
+        run.stage.update(step="weights", model_drive_coupling=base.plant.model_drive_coupling,
+                         steer_limit_rad=base.mpc.steer_limit_rad)
 
         def progress(calibration) -> None:
             best, last = calibration.best, calibration.tried[-1]
             run.progress(tried=len(calibration.tried), of=request.iterations, best_score=best.score,
                          best_completed=best.completed, last_score=last.score, last_completed=last.completed,
                          episodes=len(last.episodes))
-        calibration = calibrate(base, inside, run.run_batch, iterations=request.iterations, seeds=request.seeds,
-                                seed=request.seed, known=[mpc for _, mpc in run.known], theta=theta,
-                                on_progress=progress)
-        candidates.append((base, calibration, inside, outside))
+        try:
+            return calibrate(base, inside, run.run_batch, iterations=request.iterations, seeds=request.seeds,
+                             seed=request.seed, known=[mpc for _, mpc in run.known], theta=theta,
+                             on_progress=progress)
+        except ConfigError:
+            unfit = unfittable(inside)  # which point's fit failed: found only after a failure
+            if not unfit:
+                raise
+    return None
+
+
+def _calibrate_group(run: _Run, centre: EpisodeConfig, points: Sequence[CalibrationPoint], theta: Theta,
+                     models: list[dict[str, Any]], others: Sequence[dict[str, Any]] = ()) -> dict[str, Any] | None:
+    """The weights for ``points``, each candidate model (``models``, :func:`_model_candidates`) searched and the
+    better one kept: the profile's document. Where none of ``models`` can be fitted at the points, ``others`` are
+    tried; None where no candidate can."""
+    candidates, unfit_models = [], []
+    for stage in (models, others):
+        if candidates:
+            break
+        if stage is others and stage:
+            run.say(f"the nearest calibrated point's model has no fit at {', '.join(p.label() for p in points)}: "
+                    "the other candidates")
+        for change in stage:
+            # Fitted at each point, not at the scenario's drift: a model that has no fit there may fit the points.
+            base = apply_overrides(centre, change) if change else centre
+            inside, outside = split_drivable(base, points)
+            if not inside:  # this model fits none of the points: the other candidates run
+                run.say(f"skipped the model with {change}: {'; '.join(reason for _, reason in outside)}")
+                continue
+            calibration = _search_candidate(run, base, inside, outside, theta)
+            if calibration is None:
+                unfit_models.append({"model_drive_coupling": base.plant.model_drive_coupling,
+                                     "steer_limit_rad": base.mpc.steer_limit_rad,
+                                     "skipped": [{**asdict(p), "reason": reason} for p, reason in outside]})
+                continue
+            candidates.append((base, calibration, inside, outside))
     if not candidates:
-        raise ConfigError(f"points: no candidate model drifts at {', '.join(p.label() for p in points)}",
-                          field="points")
+        return None
+    request = run.request
     base, calibration, inside, outside = min(candidates, key=lambda c: (c[1].best.score, -c[1].best.completed))
     best, start = calibration.best, calibration.tried[0]
     radii = sorted({p.radius_m for p, _ in inside})
-    window = [drift_window(config, config.scenario.left_radius_m, 0.2, 1.0).as_dict()
+    window = [drift_window(config, config.scenario.left_radius_m).as_dict()
               for config in (next(c for p, c in inside if p.radius_m == r) for r in radii)]
     return {
         "plant_model": base.plant.model, "vehicle_id": base.plant.commonroad_vehicle,
@@ -235,6 +291,7 @@ def _calibrate_group(run: _Run, centre: EpisodeConfig, points: Sequence[Calibrat
         "candidates": [{"model_drive_coupling": b.plant.model_drive_coupling,
                         "steer_limit_rad": b.mpc.steer_limit_rad, **_summary(c.best, c.points)}
                        for b, c, _, _ in candidates],
+        "unfitted_candidates": unfit_models,
         "known": [{"from": label, **_summary(result, calibration.points)}
                   for (label, _), result in zip(run.known, calibration.known_results(), strict=True) if result],
         "points": [asdict(p) for p in calibration.points],
@@ -286,24 +343,33 @@ def run_calibration(request: CalibrationRequest, factory: sessionmaker[Session],
         run.say(f"after the car's own weights, {len(run.known)} weight sets known to drive other cars or drifts: "
                 f"{'; '.join(label for label, _ in run.known)}")
         theta, centre, rounds = Theta.from_mapping(request.theta), given, request.rounds
+        mine: list[dict[str, Any]] = []  # this group's rounds
         for round_number in range(1, MAX_ROUNDS + 1):
             if round_number > rounds:
-                if not _needs_a_learned_theta(request, documents[-1]):
+                if not _needs_a_learned_theta(request, mine[-1]):
                     break
                 rounds = round_number
-                run.say(f"no weight set completed {group[0].label()} with {documents[-1]['theta']} theta: one "
+                run.say(f"no weight set completed {group[0].label()} with {mine[-1]['theta']} theta: one "
                         "more round learns the theta a job would learn there")
             run.stage = {"group": number, "groups": len(groups), "round": round_number, "rounds": rounds,
                          "points": [p.label() for p in group]}
             started = time.perf_counter()
             if round_number > 1:
-                theta = _learned_theta(run, group[0], documents[-1])
-                centre = _round_centre(given, documents[-1])
-            document = _calibrate_group(run, centre, group, theta, _models_for(run, group, documents))
+                theta = _learned_theta(run, group[0], mine[-1])
+                centre = _round_centre(given, mine[-1])
+            document = _calibrate_group(run, centre, group, theta, *_models_for(run, group, documents))
+            if document is None:  # no candidate model can be fitted at these points: the other groups run
+                run.say(f"skipped {', '.join(p.label() for p in group)}: no candidate model can be fitted there")
+                break
             document["skipped"] += [{**asdict(p), "reason": reason} for p, reason in outside]
             document["round"] = round_number
             document["wall_s"] = round(time.perf_counter() - started, 1)
-            documents.append(_store(factory, run, document))
+            mine.append(_store(factory, run, document))
+            documents.append(mine[-1])
+    if not documents:
+        reasons = dict.fromkeys(f"{point.label()}: {reason}" for (_, point), reason in run.unfitted.items())
+        raise ConfigError("points: no candidate model of the controller can be fitted at any of the points ("
+                          f"{'; '.join(reasons) or 'none was drivable'})", field="points")
     return documents
 
 

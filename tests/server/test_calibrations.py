@@ -114,10 +114,12 @@ def test_points_two_steps_out_search_only_the_model_the_nearest_calibrated_point
                 "plant": {"model_drive_coupling": coupling}, "mpc": {"steer_limit_rad": limit_rad}}
 
     done = [document(0.5, False, 0.6), document(0.55, True, 1.066), document(0.45, False, 0.6)]
-    assert _models_for(run, [CalibrationPoint(0.55, 44.0)], done) == every  # one step out
-    assert _models_for(run, [CalibrationPoint(0.5, 30.0)], done) == every  # the other circles
-    assert _models_for(run, [CalibrationPoint(0.6, 44.0)], done) == [
-        {"plant.model_drive_coupling": True, "mpc.steer_limit_rad": 1.066}]  # 0.55's choice
-    assert _models_for(run, [CalibrationPoint(0.6, 44.0)], []) == every  # nothing calibrated yet
+    assert _models_for(run, [CalibrationPoint(0.55, 44.0)], done) == (every, [])  # one step out
+    assert _models_for(run, [CalibrationPoint(0.5, 30.0)], done) == (every, [])  # the other circles
+    chosen, others = _models_for(run, [CalibrationPoint(0.6, 44.0)], done)
+    assert chosen == [{"plant.model_drive_coupling": True, "mpc.steer_limit_rad": 1.066}]  # 0.55's choice
+    # ... and the other three, where 0.55's model has no fit at 0.6 rad
+    assert others == [{}, {"plant.model_drive_coupling": True}, {"mpc.steer_limit_rad": 1.066}]
+    assert _models_for(run, [CalibrationPoint(0.6, 44.0)], []) == (every, [])  # nothing calibrated yet
     fixed = SimpleNamespace(given=given, request=SimpleNamespace(sets={"mpc.steer_limit_rad": 0.6}))
-    assert _models_for(fixed, [CalibrationPoint(0.6, 44.0)], done) == [{"plant.model_drive_coupling": True}]
+    assert _models_for(fixed, [CalibrationPoint(0.6, 44.0)], done) == ([{"plant.model_drive_coupling": True}], [{}])

@@ -24,6 +24,7 @@ import numpy as np
 from scipy.optimize import root
 
 from driftlab.core.commonroad.parameters import (
+    CR_ACCEL_MAX,
     CR_CG_TO_FRONT,
     CR_MASS,
     CR_STEER_MAX,
@@ -155,6 +156,23 @@ def frozen_front_wheel_drifts(car: int | ParameterSet, radius_m: float, sideslip
     """The steady states that the package's frozen backward-turning front wheel holds (module docstring), fastest
     first: what a solver that does not check the wheel's sign reports as low-speed, high-wheelspin drifts."""
     return _family(car, radius_m, sideslip_rad, friction_scale, mass_scale, right)[1]
+
+
+@lru_cache(maxsize=256)
+def unlimited_drive_drifts(car: int | ParameterSet, radius_m: float, sideslip_rad: float,
+                           right: bool = False) -> tuple[PlantDrift, ...]:
+    """:func:`commonroad_drifts` with no cap on the drive (the package's a_max v_switch / V lifted): the drifts the
+    car's tyres can hold, whatever its engine gives. Where the car has none that countersteers but these do, its
+    engine is what it lacks (driftlab.core.commonroad.window)."""
+    cp = pack_commonroad(car)
+    cp[CR_ACCEL_MAX] = math.inf  # acceleration_constraints then passes any drive (and braking: none in a drift)
+    return tuple(plant_drifts(radius_m, abs(sideslip_rad) if right else -abs(sideslip_rad), cp)[0])
+
+
+def drive_cap_mps2(car: int | ParameterSet, speed_mps: float) -> float:
+    """The most acceleration input STD applies at ``speed_mps`` (the package's own rule: a_max, and a_max v_switch
+    / V above v_switch); in a steady drift the rear tyres' drive force is the mass times it."""
+    return float(acceleration_constraints(speed_mps, math.inf, pack_commonroad(car)))
 
 
 def describe_family(drifts: tuple[PlantDrift, ...], frozen: tuple[PlantDrift, ...] = ()) -> str | None:

@@ -18,8 +18,9 @@ from typing import Any
 
 from scipy.optimize import brentq
 
-from driftlab.core.commonroad.family import countersteer_window, describe_family, drift_family, sideslip_window
+from driftlab.core.commonroad.family import describe_family, drift_family, sideslip_window
 from driftlab.core.commonroad.parameters import commonroad_model_vehicle
+from driftlab.core.commonroad.window import CircleWindow, circle_window, elsewhere_text, no_drift_reason, range_text
 from driftlab.core.equilibrium import drift_equilibrium
 from driftlab.core.errors import ConfigError, NoEquilibriumError, OutsideDriftWindowError
 from driftlab.core.vehicle import VehicleParams, pack_params
@@ -58,13 +59,14 @@ def _fitted(vehicle_id: int, radius_m: float, sideslip_rad: float, model: Any, d
     try:
         return _fit(vehicle_id, radius_m, sideslip_rad, model, drive_coupling)
     except ConfigError as exc:
-        raise _refusal(exc, vehicle_id, radius_m, sideslip_rad, model) from None
+        raise _refusal(exc, vehicle_id, radius_m, sideslip_rad, model, drive_coupling) from None
 
 
 def check_fittable(vehicle_id: int, radius_m: float, sideslip_rad: float, model: Any) -> None:
     """Raise what :func:`fitted_model_vehicle` raises outside the car's window on this circle, without fitting: the
     car's main drift there must countersteer both ways, and the model read off its tyres (its front grip raised as
-    far as a fit raises it) must have a drift there, the two windows :func:`windows_text` names. ~0.1-0.3 s the
+    far as a fit raises it) must have a drift there, the two windows of
+    driftlab.core.commonroad.window.circle_window. ~0.1-0.3 s the
     first time (the car's drift family, cached), the fit itself 0.3-0.8 s. Inside the window a fit can still miss
     the car's drift speed; it raises then."""
     try:
@@ -74,49 +76,42 @@ def check_fittable(vehicle_id: int, radius_m: float, sideslip_rad: float, model:
         try:
             drift_equilibrium(radius_m, -abs(sideslip_rad), widest)
         except NoEquilibriumError as exc:
-            raise ConfigError(f"the controller's model of CommonRoad vehicle {vehicle_id} ({model.name}) has no "
+            raise ConfigError(f"the controller's model of {model.car_name(vehicle_id)} has no "
                               f"drift at radius {radius_m:g} m, sideslip {abs(sideslip_rad):g} rad: {exc}",
                               field="scenario.sideslip_rad") from None
     except ConfigError as exc:
         raise _refusal(exc, vehicle_id, radius_m, sideslip_rad, model) from None
 
 
-def _refusal(exc: ConfigError, vehicle_id: int, radius_m: float, sideslip_rad: float, model: Any) -> ConfigError:
-    """Why a fit at this drift fails, with the window a job of this car needs on this circle."""
-    car, own = _windows(vehicle_id, radius_m, model)
-    message, window = f"{exc}. {windows_text(vehicle_id, radius_m, car, own)}", _overlap(car, own)
-    if window is not None and window[0] <= abs(sideslip_rad) <= window[1]:
-        return ConfigError(message, field=exc.field)  # inside the window, but no fit: not its edge
-    return OutsideDriftWindowError(message, field=exc.field, window=window)
+def _refusal(exc: ConfigError, vehicle_id: int, radius_m: float, sideslip_rad: float, model: Any,
+             drive_coupling: bool | None = None) -> ConfigError:
+    """Why a fit at this drift fails, with where a job of this car can drift instead: the sideslips of this circle
+    (never a range that holds the refused one), or, where it has none, why not and which other circles it drifts."""
+    from driftlab.core.drivability import tiled_radii
+
+    window, beta = circle_window(model, vehicle_id, radius_m), abs(sideslip_rad)
+    job = window.job
+    if job is not None and job[0] <= beta <= job[1]:  # inside the window, but this model has no fit: not its edge
+        other = (" (plant.model_drive_coupling=false places the paper's rear model instead)" if drive_coupling
+                 else "")
+        return ConfigError(f"{exc}: {beta:g} rad is inside the sideslips {model.car_name(vehicle_id)} drifts at on "
+                           f"a {radius_m:g} m circle, but this controller's model of it cannot be placed at its drift "
+                           f"there{other}", field=exc.field)
+    if job is None:
+        elsewhere = elsewhere_text(model, vehicle_id, radius_m, tiled_radii(radius_m))
+        message = f"{exc}. {no_drift_reason(model, vehicle_id, radius_m)}" + (f"; {elsewhere}" if elsewhere else "")
+    else:
+        message = f"{exc}. {windows_text(model, vehicle_id, window)}"
+    return OutsideDriftWindowError(message, field=exc.field, window=job)
 
 
-def _windows(vehicle_id: int, radius_m: float, model: Any) -> tuple[tuple[float, float] | None, ...]:
-    """The sideslips at which the car's own main drift countersteers both ways (driftlab.core.commonroad.family),
-    and those at which the controller's model of it (the paper's tyre with the car's mass, geometry and tyre shape,
-    its front grip raised where needed) has a countersteer drift."""
-    car = _overlap(countersteer_window(model, vehicle_id, radius_m),
-                   countersteer_window(model, vehicle_id, radius_m, right=True))
-    return car, model_window(widest_front_grip(commonroad_model_vehicle(model.car(vehicle_id))), radius_m)
-
-
-def windows_text(vehicle_id: int, radius_m: float, car: tuple[float, float] | None,
-                 own: tuple[float, float] | None) -> str:
-    """Where a job of this car on a circle of ``radius_m`` can drift (:func:`_windows`): a job needs both."""
-    return (f"On a {radius_m:g} m circle (sideslips 0.20-0.80 rad scanned) CommonRoad vehicle {vehicle_id} drifts with "
-            f"countersteer both ways at {_range_text(car)}, the controller's model of it at {_range_text(own)}: a "
-            f"job of this car needs a scenario.sideslip_rad in {_range_text(_overlap(car, own))}")
-
-
-def _overlap(a: tuple[float, float] | None, b: tuple[float, float] | None) -> tuple[float, float] | None:
-    if a is None or b is None or max(a[0], b[0]) > min(a[1], b[1]):
-        return None
-    return max(a[0], b[0]), min(a[1], b[1])
-
-
-def _range_text(window: tuple[float, float] | None) -> str:
-    if window is None:
-        return "no sideslip"
-    return f"{window[0]:.2f} rad" if window[0] == window[1] else f"{window[0]:.2f}-{window[1]:.2f} rad"
+def windows_text(model: Any, vehicle_id: int, window: CircleWindow) -> str:
+    """Where a job of this car on the window's circle can drift (:func:`circle_window`): a job needs both."""
+    assert window.car is not None and window.model is not None and window.job is not None
+    return (f"On a {window.radius_m:g} m circle (sideslips 0.20-0.80 rad scanned) {model.car_name(vehicle_id)} drifts "
+            f"with countersteer both ways at {range_text(window.car)}, the controller's model of it at "
+            f"{range_text(window.model)}: a job of this car on this circle needs a scenario.sideslip_rad in "
+            f"{range_text(window.job)}")
 
 
 @lru_cache(maxsize=64)
@@ -248,7 +243,7 @@ def _main_drift(vehicle_id: int, radius_m: float, sideslip_rad: float, right: bo
     why = describe_family(family)
     if why is not None:
         side = "right" if right else "left"
-        raise ConfigError(f"the controller's model cannot be fitted to CommonRoad vehicle {vehicle_id} ({model.name}) "
-                          f"at radius {radius_m:g} m, sideslip {abs(sideslip_rad):g} rad ({side}-hand drift): {why}",
+        raise ConfigError(f"the controller's model cannot be fitted to {model.car_name(vehicle_id)} at radius "
+                          f"{radius_m:g} m, sideslip {abs(sideslip_rad):g} rad ({side}-hand drift): {why}",
                           field="scenario.sideslip_rad")
     return family[0]

@@ -95,6 +95,14 @@ class PlantType(ABC):
         """The plant's own drift at (radius, beta) as `driftlab equilibrium --plant` prints it (None: unknown)."""
         return None
 
+    def window_reason(self, config: PlantConfig, vehicle: VehicleParams | None, radius_m: float, low_rad: float,
+                      high_rad: float, elsewhere_radii_m: tuple[float, ...] = ()) -> str:
+        """Why a job of this plant (its controller's model ``vehicle``; None: fitted at each drift) drifts no
+        sideslip of [low, high] on a circle of ``radius_m``: one sentence (naming, where the plant knows, which of
+        ``elsewhere_radii_m`` it drifts)."""
+        return (f"neither circle of {radius_m:g} m has a sideslip in {low_rad:.2f}-{high_rad:.2f} rad at which both "
+                f"the plant and the controller's model have a countersteer drift equilibrium")
+
 
 def model_reason(vehicle: VehicleParams, radius_m: float, sideslip_rad: float, circle: str) -> str | None:
     """Why the controller's model has no countersteer drift equilibrium on this circle, or None."""

@@ -79,6 +79,12 @@ class CommonRoadPlantType(PlantType):
         """The parameter set this plant drives for ``plant.commonroad_vehicle`` (the package's, as published)."""
         return vehicle_id
 
+    def car_name(self, vehicle_id: int) -> str:
+        """The car as messages name it: "CommonRoad vehicle 3 (VW Vanagon)"."""
+        from driftlab.core.commonroad.parameters import VEHICLE_NAMES
+
+        return f"CommonRoad vehicle {vehicle_id} ({VEHICLE_NAMES.get(vehicle_id, '?')})"
+
     def build(self, config: PlantConfig, model_vehicle: VehicleParams) -> Any:
         module_name, _, attribute = self.stepper.partition(":")
         return getattr(importlib.import_module(module_name), attribute)(config)
@@ -153,6 +159,16 @@ class CommonRoadPlantType(PlantType):
                 f"{abs(sideslip_rad):g} rad): {why}; try another scenario.sideslip_rad (`driftlab equilibrium "
                 f"--plant {config.model}` prints where the car countersteers)")
 
+    def window_reason(self, config: PlantConfig, vehicle: VehicleParams | None, radius_m: float, low_rad: float,
+                      high_rad: float, elsewhere_radii_m: tuple[float, ...] = ()) -> str:
+        """Its tyres, its engine or the controller's model (driftlab.core.commonroad.window), and which of the
+        other circles it drifts."""
+        from driftlab.core.commonroad.window import elsewhere_text, no_drift_reason
+
+        vehicle_id = config.commonroad_vehicle
+        elsewhere = elsewhere_text(self, vehicle_id, radius_m, elsewhere_radii_m)
+        return no_drift_reason(self, vehicle_id, radius_m) + (f"; {elsewhere}" if elsewhere else "")
+
     def equilibrium_summary(self, config: PlantConfig, vehicle: VehicleParams, radius_m: float,
                             beta_rad: float) -> dict[str, Any] | None:
         from driftlab.core.commonroad.family import family_summary
@@ -203,6 +219,12 @@ class CommonRoadVariant(CommonRoadPlantType):
 
     def car(self, vehicle_id: int) -> ParameterSet:
         return ParameterSet(vehicle_id, self.scales)
+
+    def car_name(self, vehicle_id: int) -> str:
+        """By its registered name: "light_bmw (CommonRoad's BMW 320i, scaled)"."""
+        from driftlab.core.commonroad.parameters import VEHICLE_NAMES
+
+        return f"{self.name} (CommonRoad's {VEHICLE_NAMES.get(vehicle_id, f'vehicle {vehicle_id}')}, scaled)"
 
     def check(self, config: PlantConfig) -> None:
         super().check(config)

@@ -273,6 +273,46 @@ def calibrate(base: EpisodeConfig, points: Sequence[tuple[CalibrationPoint, Epis
     return calibration
 
 
+# Fresh seeds the chosen weights are checked on at their points (a block neither the search's seeds nor any job's or
+# rescore's reach): the 3 seeds a search scores on say which set is best, not how often it completes; the profiles'
+# window is the drifts where they complete at least VERIFIED_SHARE of these.
+VERIFY_SEED_BASE = CALIBRATION_SEED_BASE + 2**32
+VERIFY_SEEDS = 10
+VERIFIED_SHARE = 0.9
+
+
+def verify(points: Sequence[tuple[CalibrationPoint, EpisodeConfig]], weights: dict[str, float], run_batch: RunBatch,
+           *, theta: Theta | None = None, seeds: int = VERIFY_SEEDS) -> list[dict[str, Any]]:
+    """Each point's record of ``weights`` driving ``theta`` on ``seeds`` fresh seeds: how many episodes completed,
+    how many ended outside the plant's model (``invalid``), and the completed ones' mean |e| [m]."""
+    seed_list = [VERIFY_SEED_BASE + j for j in range(seeds)]
+    theta_values = (theta or Theta()).as_dict()
+    batch = []
+    for _, config in points:
+        document = config_to_dict(config)
+        batch += [(theta_values, {**document, "mpc": {**document["mpc"], **weights}}, s) for s in seed_list]
+    outcomes = run_batch(batch)
+    records = []
+    for i in range(len(points)):
+        mine = [EpisodeScore(i, s, *outcome) for s, outcome in zip(seed_list, outcomes[i * seeds:(i + 1) * seeds],
+                                                                    strict=True)]
+        errors = [e.mean_abs_e_m for e in mine if e.completed and e.mean_abs_e_m is not None]
+        records.append({"seeds": seeds, "completed": sum(e.completed for e in mine),
+                        "invalid": sum(e.status == EpisodeStatus.INVALID for e in mine),
+                        "mean_abs_e_m": sum(errors) / len(errors) if errors else None})
+    return records
+
+
+def verified_completes(record: dict[str, Any]) -> bool:
+    """Whether a profile's record at a point (``per_point``) says its weights drive the car there: completing at
+    least VERIFIED_SHARE of the fresh seeds they were checked on (a record of a release before that check: of the
+    search's own episodes)."""
+    checked = record.get("verified")
+    if checked is None:
+        return bool(record["episodes"]) and record["completed"] >= VERIFIED_SHARE * record["episodes"]
+    return checked["completed"] >= VERIFIED_SHARE * checked["seeds"]
+
+
 def learn_theta(config: EpisodeConfig, run_batch: RunBatch, *, iterations: int, seeds: int = 3, seed: int = 0,
                 on_progress: Callable[[int, float | None], None] | None = None) -> tuple[Theta, float]:
     """The theta a job of the job default would learn at ``config``'s drift with its weights (its bounds, start and

@@ -18,6 +18,7 @@ from typing import Any
 from sqlalchemy.orm import Session, sessionmaker
 
 from driftlab.core.calibration import (
+    VERIFY_SEEDS,
     CalibrationPoint,
     RunBatch,
     calibrate,
@@ -26,6 +27,7 @@ from driftlab.core.calibration import (
     point_config,
     split_drivable,
     unfittable,
+    verify,
 )
 from driftlab.core.config import (
     EpisodeConfig,
@@ -38,7 +40,7 @@ from driftlab.core.drivability import drift_window
 from driftlab.core.errors import ConfigError, OutsideDriftWindowError
 from driftlab.core.limits import check_int
 from driftlab.db import profiles, storage
-from driftlab.services.profiles import drift_distance, known_weight_sets, limits_of
+from driftlab.services.profiles import calibrated_window, drift_distance, known_weight_sets, limits_of, window_text
 
 Event = Callable[[dict[str, Any]], None]
 LIMITS = {"iterations": (1, 5000), "seeds": (1, 64), "rounds": (1, 5)}
@@ -281,13 +283,23 @@ def _calibrate_group(run: _Run, centre: EpisodeConfig, points: Sequence[Calibrat
     request = run.request
     base, calibration, inside, outside = min(candidates, key=lambda c: (c[1].best.score, -c[1].best.completed))
     best, start = calibration.best, calibration.tried[0]
+    run.stage.update(step="verify")
+    checked = verify(inside, best.weights, run.run_batch, theta=theta)
+    run.say(f"checked on {VERIFY_SEEDS} fresh seeds: " + "; ".join(
+        f"{p.label()} {record['completed']}/{record['seeds']} completed"
+        + (f" ({record['invalid']} invalid)" if record["invalid"] else "")
+        + ("" if record["mean_abs_e_m"] is None else f", mean |e| {record['mean_abs_e_m']:.2f} m")
+        for (p, _), record in zip(inside, checked, strict=True)))
     radii = sorted({p.radius_m for p, _ in inside})
     window = [drift_window(config, config.scenario.left_radius_m).as_dict()
               for config in (next(c for p, c in inside if p.radius_m == r) for r in radii)]
+    summary = _summary(best, calibration.points)
+    for record, verified in zip(summary["per_point"], checked, strict=True):
+        record["verified"] = verified
     return {
         "plant_model": base.plant.model, "vehicle_id": base.plant.commonroad_vehicle,
         "plant": config_to_dict(base)["plant"], "mpc": {**config_to_dict(base)["mpc"], **best.weights},
-        **_summary(best, calibration.points), "start": _summary(start, calibration.points),
+        **summary, "start": _summary(start, calibration.points),
         "candidates": [{"model_drive_coupling": b.plant.model_drive_coupling,
                         "steer_limit_rad": b.mpc.steer_limit_rad, **_summary(c.best, c.points)}
                        for b, c, _, _ in candidates],
@@ -370,6 +382,7 @@ def run_calibration(request: CalibrationRequest, factory: sessionmaker[Session],
         reasons = dict.fromkeys(f"{point.label()}: {reason}" for (_, point), reason in run.unfitted.items())
         raise ConfigError("points: no candidate model of the controller can be fitted at any of the points ("
                           f"{'; '.join(reasons) or 'none was drivable'})", field="points")
+    run.say(window_text(calibrated_window(documents)))
     return documents
 
 

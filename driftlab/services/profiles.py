@@ -19,7 +19,7 @@ from typing import Any
 
 from sqlalchemy.orm import Session
 
-from driftlab.core.calibration import POINT_SPACING_RAD
+from driftlab.core.calibration import POINT_SPACING_RAD, VERIFIED_SHARE, verified_completes
 from driftlab.core.config import apply_overrides, dotted_config
 from driftlab.core.mpc import MpcConfig
 from driftlab.core.tuning import TuningSpec
@@ -62,6 +62,45 @@ def drift_distance(sideslip_rad: float, radius_m: float, point: dict[str, Any]) 
                  + abs(point["radius_m"] - radius_m) / (RADIUS_STEP * radius_m), 9)
 
 
+def _tally(record: dict[str, Any]) -> tuple[int, int]:
+    """(completed, episodes) of a profile's record at a point: of the fresh seeds its weights were checked on, or, for
+    a profile of a release before that check, of its search's own episodes."""
+    checked = record.get("verified")
+    return (checked["completed"], checked["seeds"]) if checked else (record["completed"], record["episodes"])
+
+
+def calibrated_window(documents: list[dict[str, Any]]) -> dict[float, list[tuple[float, float]]]:
+    """Where a calibration's profiles drive the car, per radius [m]: the sideslip ranges [rad] of its points whose
+    weights complete at least VERIFIED_SHARE of their fresh seeds (the best of a point's rounds); neighbouring points
+    (one POINT_SPACING_RAD apart) join a range. A radius whose points all fall short has no range."""
+    best: dict[tuple[float, float], bool] = {}
+    for document in documents:
+        for record in document.get("per_point") or []:
+            key = (record["radius_m"], record["sideslip_rad"])
+            best[key] = best.get(key, False) or verified_completes(record)
+    window: dict[float, list[tuple[float, float]]] = {}
+    for radius_m in sorted({r for r, _ in best}):
+        ranges: list[tuple[float, float]] = []
+        for sideslip_rad in sorted(b for r, b in best if r == radius_m):
+            if not best[(radius_m, sideslip_rad)]:
+                continue
+            if ranges and sideslip_rad - ranges[-1][1] <= 1.5 * POINT_SPACING_RAD:
+                ranges[-1] = (ranges[-1][0], sideslip_rad)
+            else:
+                ranges.append((sideslip_rad, sideslip_rad))
+        window[radius_m] = ranges
+    return window
+
+
+def window_text(window: dict[float, list[tuple[float, float]]]) -> str:
+    """The calibrated window as a calibration prints it, one clause per radius."""
+    def ranges_text(ranges: list[tuple[float, float]]) -> str:
+        return ", ".join(f"{lo:g}" if lo == hi else f"{lo:g}-{hi:g}" for lo, hi in ranges) + " rad" if ranges \
+            else "none"
+    return (f"calibrated window (the drifts whose weights complete at least {VERIFIED_SHARE:.0%} of their fresh "
+            "seeds): " + "; ".join(f"R {radius_m:g} m: {ranges_text(ranges)}" for radius_m, ranges in window.items()))
+
+
 def profile_for(candidates: list[Any], sideslip_rad: float, radius_m: float) -> Any | None:
     """Of a car's profiles (each with ``id`` and ``document``), the one whose weights drove the calibrated point
     nearest this drift best: one that completed every episode of its point first (the VW Vanagon's weights that
@@ -84,12 +123,12 @@ def profile_for(candidates: list[Any], sideslip_rad: float, radius_m: float) -> 
         here = record_here(profile)
         if here is None:
             return (True, float("inf"), 0.0, float("inf"), -profile.id)
-        error = here.get("mean_abs_e_m")
-        return (here["completed"] < here["episodes"], drift_distance(sideslip_rad, radius_m, here),
-                -here["completed"] / max(here["episodes"], 1), float("inf") if error is None else error,
-                -profile.id)
+        completed, episodes = _tally(here)
+        error = (here.get("verified") or here).get("mean_abs_e_m")
+        return (completed < episodes, drift_distance(sideslip_rad, radius_m, here), -completed / max(episodes, 1),
+                float("inf") if error is None else error, -profile.id)
     usable = [p for p in candidates if (here := record_here(p)) is None
-              or (here["completed"] > 0 and drift_distance(sideslip_rad, radius_m, here) < 1.0)]
+              or (_tally(here)[0] > 0 and drift_distance(sideslip_rad, radius_m, here) < 1.0)]
     return min(usable, key=rank, default=None)
 
 
@@ -190,7 +229,7 @@ def uncalibrated_warning(session: Session, spec: TuningSpec) -> str | None:
                     if _same_model(p, plant.wheel_liftoff) and SHIPPED_KEY not in p.document),
                   *(p for p in shipped_profiles(plant.model, plant.commonroad_vehicle)
                     if _same_model(p, plant.wheel_liftoff))]
-    records = [record for p in candidates for record in p.document.get("per_point") or [] if record["completed"]]
+    records = [record for p in candidates for record in p.document.get("per_point") or [] if _tally(record)[0]]
     if not records:
         return None
     nearest = min(records, key=lambda r: drift_distance(scenario.sideslip_rad, scenario.left_radius_m, r))

@@ -6,6 +6,7 @@ from concurrent.futures import ThreadPoolExecutor
 
 import pytest
 
+from driftlab.core.calibration import VERIFY_SEEDS
 from driftlab.db import calibrations as db_calibrations
 from driftlab.db import storage
 from driftlab.worker.calibrating import run_stored_calibration
@@ -47,8 +48,8 @@ def test_a_calibration_runs_reports_its_progress_and_its_profile_drives_the_next
         executor = InThreadExecutor(pool)
         assert _run_queued(api, executor) == "finished"
     # Two weight sets on one point and seed for each steering limit: the controller's 0.6 rad and the car's whole
-    # 1.066 rad (the model was chosen).
-    assert executor.submitted == 4
+    # 1.066 rad (the model was chosen); then the chosen weights on VERIFY_SEEDS fresh seeds.
+    assert executor.submitted == 4 + VERIFY_SEEDS
     state = api.get(f"/api/calibrations/{queued.json()['id']}").json()
     assert state["status"] == "finished" and state["error"] is None, state
     assert state["progress"]["tried"] == 2 and state["progress"]["of"] == 2 and state["progress"]["step"] == "weights"
@@ -59,11 +60,15 @@ def test_a_calibration_runs_reports_its_progress_and_its_profile_drives_the_next
     document = api.get(f"/api/profiles/{profile_id}")
     assert document.status_code == 200 and "attachment" in document.headers["content-disposition"]
     assert document.json()["per_point"][0]["episodes"] == 1 and document.json()["iterations"] == 2
+    verified = document.json()["per_point"][0]["verified"]
+    assert verified["seeds"] == VERIFY_SEEDS and 0 <= verified["completed"] <= VERIFY_SEEDS
+    assert any(m.startswith(f"checked on {VERIFY_SEEDS} fresh seeds: 0.5 rad @ R 44 m") for m in state["messages"])
+    assert state["messages"][-1].startswith("calibrated window") and "R 44 m: " in state["messages"][-1]
     candidates = document.json()["candidates"]
     assert sorted(c["steer_limit_rad"] for c in candidates) == [0.6, 1.066]
     assert document.json()["mpc"]["steer_limit_rad"] == min(
         candidates, key=lambda c: (c["score"], -c["completed"]))["steer_limit_rad"]
-    if document.json()["per_point"][0]["completed"]:  # its weights drove the point: a job there takes them
+    if verified["completed"]:  # its weights drove the point's fresh seeds: a job there takes them
         job = api.post("/api/jobs", json={"iterations": 1, "config": {"plant.model": "commonroad_std",
                                                                           "scenario.sideslip_rad": 0.5}}).json()
         assert job["profile_id"] == profile_id

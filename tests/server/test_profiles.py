@@ -218,3 +218,36 @@ def test_a_job_beyond_its_cars_calibrated_drifts_is_told_the_nearest_and_how_to_
         assert client.post("/api/jobs", json={"iterations": 1, "config": CAR}).json()["warning"] is None
         own = client.post("/api/jobs", json={"iterations": 1, "config": {**beyond, "mpc.q_sideslip": 300.0}})
         assert own.json()["warning"] is None
+
+
+def _checked(sideslip_rad, radius_m, completed, seeds=10, search=(3, 3)):
+    return {"sideslip_rad": sideslip_rad, "radius_m": radius_m, "completed": search[0], "episodes": search[1],
+            "mean_abs_e_m": 0.3, "verified": {"seeds": seeds, "completed": completed, "invalid": 0,
+                                              "mean_abs_e_m": 0.3}}
+
+
+def test_the_calibrated_window_is_where_the_weights_complete_their_fresh_seeds():
+    """Per radius, the points whose weights complete at least 9 of 10 fresh seeds (the best of a point's rounds),
+    neighbours joined: a point whose search completed 3 of 3 but whose weights complete 8 of 10 fresh seeds is
+    outside; a radius with no such point is printed as none."""
+    from driftlab.services.profiles import calibrated_window, window_text
+
+    documents = [{"per_point": [_checked(0.45, 44.0, 10)]}, {"per_point": [_checked(0.5, 44.0, 9)]},
+                 {"per_point": [_checked(0.55, 44.0, 8)]}, {"per_point": [_checked(0.6, 44.0, 4)]},
+                 {"per_point": [_checked(0.6, 44.0, 10)]},  # a later round at 0.6 rad did it
+                 {"per_point": [_checked(0.5, 52.0, 6)]}]
+    window = calibrated_window(documents)
+    assert window == {44.0: [(0.45, 0.5), (0.6, 0.6)], 52.0: []}
+    assert window_text(window).endswith("R 44 m: 0.45-0.5, 0.6 rad; R 52 m: none")
+    old = [{"per_point": [{"sideslip_rad": 0.5, "radius_m": 30.0, "completed": 3, "episodes": 3}]}]
+    assert calibrated_window(old) == {30.0: [(0.5, 0.5)]}  # stored before the check: its search's episodes
+
+
+def test_a_job_takes_the_profile_whose_weights_completed_their_fresh_seeds_over_a_luckier_search():
+    from driftlab.services.profiles import ShippedProfile, profile_for
+
+    lucky = ShippedProfile(1, "a", {"per_point": [_checked(0.5, 44.0, 6, search=(3, 3))]})
+    steady = ShippedProfile(2, "b", {"per_point": [_checked(0.5, 44.0, 10, search=(2, 3))]})
+    assert profile_for([steady, lucky], 0.5, 44.0) is steady
+    nothing = ShippedProfile(3, "c", {"per_point": [_checked(0.5, 44.0, 0, search=(3, 3))]})
+    assert profile_for([nothing], 0.5, 44.0) is None

@@ -31,3 +31,11 @@ def test_the_rescore_columns_show_the_drifts_and_the_flicks_beside_the_episodes_
     assert phase_cells(summary) == "0.92 / 0.81 / 1.23 | 1.85 / 2.50 | 0.041 / 0.200"
     # A summary before by_phase existed, or one whose episodes all failed.
     assert phase_cells({"mean_abs_e_m": None}) == "- / - / - | - / - | - / -"
+
+
+def test_the_rescore_column_counts_episodes_outside_the_plants_model_apart():
+    from driftlab.reports.job import completed_cell
+
+    assert completed_cell({"completed": 17, "samples": 20, "statuses": {"completed": 17, "invalid": 3}}) == \
+        "17/20 (3 invalid)"
+    assert completed_cell({"completed": 20, "samples": 20, "statuses": {"completed": 20}}) == "20/20"

@@ -94,7 +94,7 @@ def write_report(*, db_url: str, name: str, out_dir: str, baseline_samples: int 
         theta = Theta.filled(theta)
         lines.append(f"| {label} | {theta['c_lr']!r} | {theta['c_rl']!r} | {theta['dV']!r} | {theta['k']!r} | "
                      f"{theta['model_mu_scale']!r} | {theta['model_c_scale']!r} | {tuning[0]} | {tuning[1]} | "
-                     f"{summary['completed']}/{summary['samples']} | "
+                     f"{completed_cell(summary)} | "
                      f"{summary['J_mean']:.3f} | {summary['J_worst']:.3f} | {phase_cells(summary)} |")
     lines += _verdict(summaries[0], summaries[1], len(evals), spec.seed_points)
     lines += ["", f"## The drift and the flicks, phase by phase (best evaluation, seed {shown.seed})", "",
@@ -122,6 +122,13 @@ def phase_table(phases: list[dict]) -> list[str]:
                      f"{'-' if share is None else f'{100 * share:.0f}%'} | {flick[0]} | {flick[1]} | "
                      f"{p['speed_loss_mps']:.2f} |")
     return lines
+
+
+def completed_cell(summary: dict) -> str:
+    """Completed of all, and how many ended outside the plant's model (``invalid``: MB with a wheel pulling the road
+    or two wheels of one side in the air), which are failures like the others but no fault of the controller."""
+    invalid = summary.get("statuses", {}).get(EpisodeStatus.INVALID, 0)
+    return f"{summary['completed']}/{summary['samples']}" + (f" ({invalid} invalid)" if invalid else "")
 
 
 def phase_cells(summary: dict) -> str:

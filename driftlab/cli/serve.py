@@ -30,8 +30,9 @@ def cmd_serve(args: argparse.Namespace) -> int:
     app = create_app(db_url(args.db), workers=workers, settings=settings)
     shown_host = "localhost" if args.host == "0.0.0.0" else args.host
     login = "?token=<DRIFTLAB_TOKEN>" if settings.token else ""
-    print(f"DriftLab: the 3D view on http://{shown_host}:{args.port}/viser/{login}, the API docs on "
-          f"http://{shown_host}:{args.port}/docs", flush=True)
+    base = f"http://{shown_host}:{args.port}"
+    print(f"DriftLab: the dashboard on {base}/dashboard/{login}, the 3D view on {base}/viser/{login}, the API docs on "
+          f"{base}/docs", flush=True)
     # uvicorn's keep-alive (5 s) equal to a client pool's idle expiry (httpx: 5 s) races it: a request sent on a
     # connection the server is closing is lost. Idle connections are closed by the header deadline instead.
     server = uvicorn.Server(uvicorn.Config(app, log_level="info", http=with_header_deadline(settings.header_timeout_s),

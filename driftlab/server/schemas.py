@@ -83,6 +83,15 @@ class StopCreate(BaseModel):
         description="finish once the best J has not fallen by more than no_improvement_by in this many evaluations")
     no_improvement_by: StrictNumber = Field(default=0.0, ge=NO_IMPROVEMENT_BY[0], le=NO_IMPROVEMENT_BY[1])
 
+    @model_validator(mode="after")
+    def _can_fire(self) -> StopCreate:
+        # "by" alone is a rule with no window: it could never finish the job (a stored job keeps what it has).
+        if "no_improvement_by" in self.model_fields_set and self.no_improvement_evaluations is None:
+            raise ValueError("stop.no_improvement_evaluations: give it with stop.no_improvement_by (the "
+                             f"evaluations, {NO_IMPROVEMENT_EVALUATIONS[0]}-{NO_IMPROVEMENT_EVALUATIONS[1]}, over "
+                             "which the best J must fall by more than that); alone the rule can never fire")
+        return self
+
 
 class JobCreate(BaseModel):
     model_config = ConfigDict(extra="forbid")

@@ -6,6 +6,7 @@ import socket
 import subprocess
 import sys
 import time
+from pathlib import Path
 
 import httpx
 import psutil
@@ -140,6 +141,24 @@ def test_the_view_websocket_needs_the_token_when_one_is_set(token_server):
     assert wrong.status_code == 303 and "set-cookie" not in wrong.headers
     with _ws(url, origin=url, additional_headers={"cookie": f"driftlab_token={cookie}"}) as socket:
         assert socket.recv(timeout=10)
+
+
+def test_a_websocket_opened_with_the_token_in_its_address_leaves_no_line_holding_it(token_server):
+    """A script may put the token in the websocket's address: uvicorn logs websocket lines through its error log,
+    not the access log, and every line the server writes is redacted."""
+    proc, url = token_server
+    ws_url = url.replace("http://", "ws://") + f"/viser?token={TOKEN}"
+    with connect(ws_url, origin=url, subprotocols=[SUBPROTOCOL], open_timeout=30) as socket:
+        assert socket.recv(timeout=10)  # accepted: the token in the address is a credential like the cookie
+
+    def logged() -> str:
+        return Path(proc.log_path).read_text()
+    deadline = time.monotonic() + 10
+    while "WebSocket /viser" not in logged() and time.monotonic() < deadline:
+        time.sleep(0.1)
+    text = logged()
+    assert '"WebSocket /viser?token=[redacted]" [accepted]' in text
+    assert TOKEN not in text
 
 
 def test_a_malformed_token_is_a_401_never_a_500(token_server):

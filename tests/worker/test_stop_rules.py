@@ -82,3 +82,7 @@ def test_stop_rules_at_the_api_name_their_field(tmp_path):
         assert job["stop_reason"] is None and job["run_s"] == 0.0
         cold = api.post("/api/jobs", json={"iterations": 3}).json()
         assert "stop" not in cold["spec"]  # a job without rules stores the document it always did
+        jobs_before = len(api.get("/api/jobs").json())
+        alone = api.post("/api/jobs", json={"iterations": 3, "stop": {"no_improvement_by": 0.01}})
+        assert alone.status_code == 422 and "stop.no_improvement_evaluations" in alone.json()["detail"], alone.text
+        assert len(api.get("/api/jobs").json()) == jobs_before  # nothing stored

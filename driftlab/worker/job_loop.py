@@ -284,10 +284,11 @@ def _run(factory: sessionmaker[Session], job_id: int, executor: EpisodeExecutor,
         while True:
             # A stop rule (driftlab.core.stopping) asks nothing more; what was asked completes and is stored. The
             # no-improvement window counts this run's evaluations (from the best before it): a job resumed or given
-            # a larger budget runs at least that many more.
+            # a larger budget runs at least that many more; and only those after the space-filling design (its
+            # warm-up, as Optuna's and W&B's early stops have one): the design explores, it is not meant to improve.
             if spec.stop.any and stop_reason is None:
                 stop_reason = spec.stop.reason(ran_before_s + time.perf_counter() - started,
-                                               curve[max(n_at_start - 1, 0):])
+                                               curve[max(n_at_start - 1, spec.seed_points - 1, 0):])
             if n_done >= lease.iterations and not episodes and not waiting:
                 lease.renew_if_due(force=True)  # a budget raised at the last moment still counts
                 if n_done >= lease.iterations or not lease.held:

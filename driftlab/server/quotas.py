@@ -54,3 +54,27 @@ def check_study(settings: Settings, session: Session, study: Study) -> None:
     if episodes > settings.max_episodes_per_study:
         raise HTTPException(422, f"{field}: this study runs up to {episodes} episodes, over the limit of "
                                  f"{settings.max_episodes_per_study} a study (DRIFTLAB_MAX_EPISODES_PER_STUDY)")
+
+
+# The most points a calibration's default tiling gives (driftlab.core.calibration.default_points: every 0.05 rad of
+# the 0.2-0.8 rad scan on the scenario's circle, and one point on each of two other circles), and the candidate
+# models a point may search (two rear models x two steering limits, driftlab.services.calibration).
+DEFAULT_POINTS_AT_MOST = 15
+CANDIDATES_AT_MOST = 4
+
+
+def calibration_episodes(*, points: int | None, iterations: int, seeds: int, rounds: int) -> int:
+    """The most episodes a calibration may run: each point's rounds, each round searching every candidate model's
+    weights (and, after the first, a theta: fewer episodes than a candidate's search)."""
+    return (points or DEFAULT_POINTS_AT_MOST) * rounds * iterations * seeds * CANDIDATES_AT_MOST
+
+
+def check_calibration(settings: Settings, *, points: int | None, iterations: int, seeds: int, rounds: int) -> None:
+    """A calibration counts against the limit of a study: it is many searches of a job's size."""
+    episodes = calibration_episodes(points=points, iterations=iterations, seeds=seeds, rounds=rounds)
+    if episodes > settings.max_episodes_per_study:
+        shown = f"{points} points" if points else f"up to {DEFAULT_POINTS_AT_MOST} points (the default tiling)"
+        raise HTTPException(422, f"iterations: {shown} x {rounds} rounds x {iterations} iterations x {seeds} seeds x "
+                                 f"up to {CANDIDATES_AT_MOST} candidate models = {episodes} episodes exceed the limit "
+                                 f"of {settings.max_episodes_per_study} (DRIFTLAB_MAX_EPISODES_PER_STUDY)")
+

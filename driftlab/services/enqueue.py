@@ -25,8 +25,16 @@ def enqueue_thetas(session: Session, *, job_id: int, thetas: list[Any], field: s
         raise lifecycle.TransitionError(f"job {job_id} is finished; raise its budget first (PATCH /api/jobs/{job_id} "
                                         "with iterations, or driftlab tune --iterations N)")
     spec = TuningSpec.from_dict(job.spec)
-    return enqueued.enqueue(session, job_id=job_id,
-                            thetas=[spec.picked_theta(theta, f"{field}.{n}") for n, theta in enumerate(thetas)])
+    picked = [spec.picked_theta(theta, f"{field}.{n}") for n, theta in enumerate(thetas)]
+    # The queue is bounded by what the job will evaluate: a theta beyond its budget would wait for ever.
+    left = spec.iterations - storage.count_evaluations(session, job_id=job_id)
+    waiting = len(enqueued.waiting(session, job_id=job_id))
+    if waiting + len(picked) > left:
+        raise lifecycle.TransitionError(
+            f"{field}: job {job_id} has {left} evaluations left and {waiting} thetas waiting: at most "
+            f"{max(left - waiting, 0)} more (raise its budget first: PATCH /api/jobs/{job_id} with iterations, or "
+            "driftlab tune --iterations N)")
+    return enqueued.enqueue(session, job_id=job_id, thetas=picked)
 
 
 def waiting_document(session: Session, *, job_id: int, added: list[EnqueuedTheta] = ()) -> dict[str, Any]:

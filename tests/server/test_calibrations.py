@@ -32,7 +32,11 @@ def _run_queued(api, executor):
                                                 ({"points": "0.5/44"}, "points"), ({"points": "0@0"}, "points"),
                                                 ({"plant": "nope"}, "plant"), ({"theta": {"k": False}}, "k"),
                                                 ({"theta": {"nope": 1.0}}, "nope"),
-                                                ({"config": {"plant.mass_scale": "1.1"}}, "plant.mass_scale")])
+                                                ({"config": {"plant.mass_scale": "1.1"}}, "plant.mass_scale"),
+                                                ({"iterations": 5000, "seeds": 64, "rounds": 3},
+                                                 "DRIFTLAB_MAX_EPISODES_PER_STUDY"),
+                                                ({"points": "0.5@44,0.55@44", "iterations": 5000, "seeds": 64},
+                                                 "2 points x 1 rounds")])
 def test_a_bad_calibration_request_names_its_field_and_stores_nothing(api, change, field):
     r = api.post("/api/calibrations", json={**CAR, **change})
     assert r.status_code == 422 and field in r.text, r.text

@@ -42,3 +42,18 @@ def test_the_api_enqueues_inside_the_jobs_box_and_names_what_it_refuses(tmp_path
         assert api.post(url, json={"thetas": [{"k": "0.05"}]}).status_code == 422  # numbers are strict
         assert api.post("/api/jobs/999/enqueue", json={"thetas": [{"k": 0.05}]}).status_code == 404
         assert len(api.get(url).json()["waiting"]) == 2  # nothing refused was stored
+
+
+def test_the_queue_holds_no_more_than_the_job_will_evaluate(tmp_path):
+    """Sixty requests of 100 thetas each once left 6,002 waiting on a 50-evaluation job: a theta past the budget
+    would wait for ever. What is left of the budget bounds the queue; a refusal stores nothing."""
+    with in_process_client(tmp_path / "bounded.db") as api:
+        job = api.post("/api/jobs", json={"iterations": 5}).json()
+        url = f"/api/jobs/{job['id']}/enqueue"
+        assert api.post(url, json={"thetas": [{"k": 0.01 * n} for n in range(4)]}).status_code == 202
+        over = api.post(url, json={"thetas": [{"k": 0.06}, {"k": 0.07}]})
+        assert over.status_code == 409 and "5 evaluations left and 4 thetas waiting: at most 1 more" in over.text
+        assert len(api.get(url).json()["waiting"]) == 4
+        assert api.post(url, json={"thetas": [{"k": 0.06}]}).status_code == 202  # the last one fits
+        assert api.patch(f"/api/jobs/{job['id']}", json={"iterations": 7}).status_code == 200
+        assert api.post(url, json={"thetas": [{"k": 0.07}, {"k": 0.08}]}).status_code == 202  # a larger budget

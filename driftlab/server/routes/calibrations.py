@@ -11,6 +11,7 @@ from sqlalchemy.orm import Session, sessionmaker
 
 from driftlab.core.config import PLANT_PRESETS, dotted_config
 from driftlab.core.plants import installed_names
+from driftlab.server import quotas
 from driftlab.server.responses import Calibration, ProfileSummary, errors
 from driftlab.server.routes.deps import factory, require_token, wake_runner
 from driftlab.server.schemas import check_document_types
@@ -66,6 +67,8 @@ def start_calibration(body: CalibrationCreate, db: Factory, request: Request) ->
     its share of the workers; every profile it finds is stored as it is found, and the jobs of that car take it.
     Follow it with GET, stop it with DELETE. 409 while another calibration is queued or running."""
     check_document_types({"config": body.config})
+    quotas.check_calibration(request.app.state.settings, points=len(body.points.split(",")) if body.points else None,
+                             iterations=body.iterations, seeds=body.seeds, rounds=body.rounds)
     calibration = CalibrationRequest(plant=body.plant, sets=dotted_config(body.config), points=body.points,
                                      iterations=body.iterations, seeds=body.seeds, seed=body.seed,
                                      rounds=body.rounds, one_set=body.one_set,

@@ -303,16 +303,6 @@ def verify(points: Sequence[tuple[CalibrationPoint, EpisodeConfig]], weights: di
     return records
 
 
-def verified_completes(record: dict[str, Any]) -> bool:
-    """Whether a profile's record at a point (``per_point``) says its weights drive the car there: completing at
-    least VERIFIED_SHARE of the fresh seeds they were checked on (a record of a release before that check: of the
-    search's own episodes)."""
-    checked = record.get("verified")
-    if checked is None:
-        return bool(record["episodes"]) and record["completed"] >= VERIFIED_SHARE * record["episodes"]
-    return checked["completed"] >= VERIFIED_SHARE * checked["seeds"]
-
-
 def learn_theta(config: EpisodeConfig, run_batch: RunBatch, *, iterations: int, seeds: int = 3, seed: int = 0,
                 on_progress: Callable[[int, float | None], None] | None = None) -> tuple[Theta, float]:
     """The theta a job of the job default would learn at ``config``'s drift with its weights (its bounds, start and

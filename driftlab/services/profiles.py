@@ -19,7 +19,7 @@ from typing import Any
 
 from sqlalchemy.orm import Session
 
-from driftlab.core.calibration import POINT_SPACING_RAD, VERIFIED_SHARE, verified_completes
+from driftlab.core.calibration import POINT_SPACING_RAD, VERIFIED_SHARE
 from driftlab.core.config import apply_overrides, dotted_config
 from driftlab.core.mpc import MpcConfig
 from driftlab.core.tuning import TuningSpec
@@ -69,25 +69,53 @@ def _tally(record: dict[str, Any]) -> tuple[int, int]:
     return (checked["completed"], checked["seeds"]) if checked else (record["completed"], record["episodes"])
 
 
+def checked_drifts(document: dict[str, Any]) -> list[dict[str, Any]]:
+    """Every drift a profile's weights were checked at, as {sideslip_rad, radius_m, completed, episodes,
+    mean_abs_e_m}: each calibrated point (its fresh seeds, or its search's episodes for a profile stored before that
+    check) and the drifts half a step either side of it (``verified_around``)."""
+    out = []
+    for record in document.get("per_point") or []:
+        completed, episodes = _tally(record)
+        error = (record.get("verified") or record).get("mean_abs_e_m")
+        out.append({"sideslip_rad": record["sideslip_rad"], "radius_m": record["radius_m"], "completed": completed,
+                    "episodes": episodes, "mean_abs_e_m": error})
+        out += [{"sideslip_rad": near["sideslip_rad"], "radius_m": near["radius_m"], "completed": near["completed"],
+                 "episodes": near["seeds"], "mean_abs_e_m": near.get("mean_abs_e_m")}
+                for near in record.get("verified_around") or []]
+    return out
+
+
+def _drives(drift: dict[str, Any]) -> bool:
+    return bool(drift["episodes"]) and drift["completed"] >= VERIFIED_SHARE * drift["episodes"]
+
+
 def calibrated_window(documents: list[dict[str, Any]]) -> dict[float, list[tuple[float, float]]]:
-    """Where a calibration's profiles drive the car, per radius [m]: the sideslip ranges [rad] of its points whose
-    weights complete at least VERIFIED_SHARE of their fresh seeds (the best of a point's rounds); neighbouring points
-    (one POINT_SPACING_RAD apart) join a range. A radius whose points all fall short has no range."""
-    best: dict[tuple[float, float], bool] = {}
+    """Where a calibration's profiles drive the car, per radius [m]: the sideslip ranges [rad] over which the drifts
+    their weights were checked at (:func:`checked_drifts`: each point and half a step either side) complete at
+    least VERIFIED_SHARE of their fresh seeds (by the best profile there). Neighbouring checked drifts join a range
+    (half a step apart; a whole step for profiles stored before the drifts around a point were checked). A radius
+    none of whose drifts passes has no range."""
+    passed: dict[tuple[float, float], bool] = {}
+    around: set[float] = set()
     for document in documents:
         for record in document.get("per_point") or []:
-            key = (record["radius_m"], record["sideslip_rad"])
-            best[key] = best.get(key, False) or verified_completes(record)
+            if record.get("verified_around") is not None:
+                around.add(record["radius_m"])
+        for drift in checked_drifts(document):
+            key = (drift["radius_m"], round(drift["sideslip_rad"], 4))
+            passed[key] = passed.get(key, False) or _drives(drift)
     window: dict[float, list[tuple[float, float]]] = {}
-    for radius_m in sorted({r for r, _ in best}):
+    for radius_m in sorted({r for r, _ in passed}):
+        joins_rad = 1.5 * POINT_SPACING_RAD * (0.5 if radius_m in around else 1.0)
         ranges: list[tuple[float, float]] = []
-        for sideslip_rad in sorted(b for r, b in best if r == radius_m):
-            if not best[(radius_m, sideslip_rad)]:
-                continue
-            if ranges and sideslip_rad - ranges[-1][1] <= 1.5 * POINT_SPACING_RAD:
-                ranges[-1] = (ranges[-1][0], sideslip_rad)
-            else:
-                ranges.append((sideslip_rad, sideslip_rad))
+        last: float | None = None
+        for sideslip_rad in sorted(b for r, b in passed if r == radius_m):
+            if passed[(radius_m, sideslip_rad)]:
+                if ranges and last is not None and ranges[-1][1] == last and sideslip_rad - last <= joins_rad:
+                    ranges[-1] = (ranges[-1][0], sideslip_rad)
+                else:
+                    ranges.append((sideslip_rad, sideslip_rad))
+            last = sideslip_rad
         window[radius_m] = ranges
     return window
 
@@ -116,19 +144,18 @@ def profile_for(candidates: list[Any], sideslip_rad: float, radius_m: float) -> 
     window completes them), so the car's default weights are the job's then. A profile stored without its record
     (none of this release's) applies anywhere, the newest first."""
     def record_here(profile) -> dict[str, Any] | None:
-        record = profile.document.get("per_point") or []
-        return min(record, key=lambda point: drift_distance(sideslip_rad, radius_m, point), default=None)
+        drifts = checked_drifts(profile.document)
+        return min(drifts, key=lambda drift: drift_distance(sideslip_rad, radius_m, drift), default=None)
 
     def rank(profile) -> tuple[bool, float, float, float, int]:
         here = record_here(profile)
         if here is None:
             return (True, float("inf"), 0.0, float("inf"), -profile.id)
-        completed, episodes = _tally(here)
-        error = (here.get("verified") or here).get("mean_abs_e_m")
+        completed, episodes, error = here["completed"], here["episodes"], here["mean_abs_e_m"]
         return (completed < episodes, drift_distance(sideslip_rad, radius_m, here), -completed / max(episodes, 1),
                 float("inf") if error is None else error, -profile.id)
     usable = [p for p in candidates if (here := record_here(p)) is None
-              or (_tally(here)[0] > 0 and drift_distance(sideslip_rad, radius_m, here) < 1.0)]
+              or (here["completed"] > 0 and drift_distance(sideslip_rad, radius_m, here) < 1.0)]
     return min(usable, key=rank, default=None)
 
 
@@ -211,11 +238,8 @@ def _point_text(point: dict[str, Any]) -> str:
     return f"{point['sideslip_rad']:g} rad, {point['radius_m']:g} m"
 
 
-def _record_text(record: dict[str, Any]) -> str:
-    verified = record.get("verified")
-    if verified:
-        return f"{verified['completed']} of {verified['seeds']} fresh seeds completed"
-    return f"{record['completed']} of {record['episodes']} of its calibration's episodes completed"
+def _record_text(drift: dict[str, Any]) -> str:
+    return f"{drift['completed']} of {drift['episodes']} episodes completed"
 
 
 def uncalibrated_warning(session: Session, spec: TuningSpec) -> str | None:
@@ -229,7 +253,7 @@ def uncalibrated_warning(session: Session, spec: TuningSpec) -> str | None:
                     if _same_model(p, plant.wheel_liftoff) and SHIPPED_KEY not in p.document),
                   *(p for p in shipped_profiles(plant.model, plant.commonroad_vehicle)
                     if _same_model(p, plant.wheel_liftoff))]
-    records = [record for p in candidates for record in p.document.get("per_point") or [] if _tally(record)[0]]
+    records = [drift for p in candidates for drift in checked_drifts(p.document) if drift["completed"]]
     if not records:
         return None
     nearest = min(records, key=lambda r: drift_distance(scenario.sideslip_rad, scenario.left_radius_m, r))

@@ -52,8 +52,9 @@ def test_a_calibration_runs_reports_its_progress_and_its_profile_drives_the_next
         executor = InThreadExecutor(pool)
         assert _run_queued(api, executor) == "finished"
     # Two weight sets on one point and seed for each steering limit: the controller's 0.6 rad and the car's whole
-    # 1.066 rad (the model was chosen); then the chosen weights on VERIFY_SEEDS fresh seeds.
-    assert executor.submitted == 4 + VERIFY_SEEDS
+    # 1.066 rad (the model was chosen); then the chosen weights on VERIFY_SEEDS fresh seeds at the point and half a
+    # step either side of it.
+    assert executor.submitted == 4 + 3 * VERIFY_SEEDS
     state = api.get(f"/api/calibrations/{queued.json()['id']}").json()
     assert state["status"] == "finished" and state["error"] is None, state
     assert state["progress"]["tried"] == 2 and state["progress"]["of"] == 2 and state["progress"]["step"] == "weights"
@@ -66,7 +67,9 @@ def test_a_calibration_runs_reports_its_progress_and_its_profile_drives_the_next
     assert document.json()["per_point"][0]["episodes"] == 1 and document.json()["iterations"] == 2
     verified = document.json()["per_point"][0]["verified"]
     assert verified["seeds"] == VERIFY_SEEDS and 0 <= verified["completed"] <= VERIFY_SEEDS
-    assert any(m.startswith(f"checked on {VERIFY_SEEDS} fresh seeds: 0.5 rad @ R 44 m") for m in state["messages"])
+    around = document.json()["per_point"][0]["verified_around"]
+    assert [a["sideslip_rad"] for a in around] == [0.475, 0.525] and all(a["seeds"] == VERIFY_SEEDS for a in around)
+    assert any(m.startswith(f"checked on {VERIFY_SEEDS} fresh seeds: 0.475 rad @ R 44 m") for m in state["messages"])
     assert state["messages"][-1].startswith("calibrated window") and "R 44 m: " in state["messages"][-1]
     candidates = document.json()["candidates"]
     assert sorted(c["steer_limit_rad"] for c in candidates) == [0.6, 1.066]

@@ -251,3 +251,24 @@ def test_a_job_takes_the_profile_whose_weights_completed_their_fresh_seeds_over_
     assert profile_for([steady, lucky], 0.5, 44.0) is steady
     nothing = ShippedProfile(3, "c", {"per_point": [_checked(0.5, 44.0, 0, search=(3, 3))]})
     assert profile_for([nothing], 0.5, 44.0) is None
+
+
+def _around(sideslip_rad, radius_m, completed, seeds=10):
+    return {"sideslip_rad": sideslip_rad, "radius_m": radius_m, "seeds": seeds, "completed": completed,
+            "invalid": 0, "mean_abs_e_m": 0.3}
+
+
+def test_weights_are_checked_between_points_and_a_job_there_takes_the_ones_that_held():
+    """The VW Vanagon's weights found at 0.64 rad, 44 m complete 10 of 10 there and 4 of 10 at 0.62; those found at
+    0.59 complete 10 of 10 at 0.59, 0.62 and 0.64. A job at 0.62 takes the 0.59 profile (its check half a step from
+    0.64 is what says so), and the window runs through 0.615 only because some profile held there."""
+    from driftlab.services.profiles import ShippedProfile, calibrated_window, profile_for
+
+    at_064 = {"per_point": [{**_checked(0.64, 44.0, 10), "verified_around": [_around(0.615, 44.0, 4),
+                                                                             _around(0.665, 44.0, 0)]}]}
+    at_059 = {"per_point": [{**_checked(0.59, 44.0, 10), "verified_around": [_around(0.565, 44.0, 10),
+                                                                             _around(0.615, 44.0, 10)]}]}
+    assert profile_for([ShippedProfile(2, "b", at_064), ShippedProfile(1, "a", at_059)], 0.62, 44.0).id == 1
+    assert profile_for([ShippedProfile(2, "b", at_064), ShippedProfile(1, "a", at_059)], 0.64, 44.0).id == 2
+    assert calibrated_window([at_064, at_059]) == {44.0: [(0.565, 0.64)]}
+    assert calibrated_window([at_064]) == {44.0: [(0.64, 0.64)]}  # alone its neighbours fall short: a point

@@ -18,8 +18,6 @@ from typing import Any
 from sqlalchemy.orm import Session, sessionmaker
 
 from driftlab.core.calibration import (
-    POINT_SPACING_RAD,
-    VERIFY_SEEDS,
     CalibrationPoint,
     RunBatch,
     calibrate,
@@ -28,7 +26,6 @@ from driftlab.core.calibration import (
     point_config,
     split_drivable,
     unfittable,
-    verify,
 )
 from driftlab.core.config import (
     EpisodeConfig,
@@ -41,6 +38,7 @@ from driftlab.core.drivability import drift_window
 from driftlab.core.errors import ConfigError, OutsideDriftWindowError
 from driftlab.core.limits import check_int
 from driftlab.db import profiles, storage
+from driftlab.services.calibration_checks import checked_around
 from driftlab.services.profiles import calibrated_window, drift_distance, known_weight_sets, limits_of, window_text
 
 Event = Callable[[dict[str, Any]], None]
@@ -284,7 +282,8 @@ def _calibrate_group(run: _Run, centre: EpisodeConfig, points: Sequence[Calibrat
     request = run.request
     base, calibration, inside, outside = min(candidates, key=lambda c: (c[1].best.score, -c[1].best.completed))
     best, start = calibration.best, calibration.tried[0]
-    checked, around = _verified(run, base, inside, best.weights, theta)
+    run.stage.update(step="verify")
+    checked, around = checked_around(base, inside, best.weights, theta, run.run_batch, run.say)
     radii = sorted({p.radius_m for p, _ in inside})
     window = [drift_window(config, config.scenario.left_radius_m).as_dict()
               for config in (next(c for p, c in inside if p.radius_m == r) for r in radii)]
@@ -306,39 +305,6 @@ def _calibrate_group(run: _Run, centre: EpisodeConfig, points: Sequence[Calibrat
         "window": window, "seeds": calibration.seeds, "iterations": request.iterations,
         "theta": "untuned" if theta == Theta() else theta.as_dict(),
         "command": request.command, "driftlab_version": version("driftlab")}
-
-
-def _record_text(point: CalibrationPoint, record: dict[str, Any]) -> str:
-    return (f"{point.label()} {record['completed']}/{record['seeds']} completed"
-            + (f" ({record['invalid']} invalid)" if record["invalid"] else "")
-            + ("" if record["mean_abs_e_m"] is None else f", mean |e| {record['mean_abs_e_m']:.2f} m"))
-
-
-def _verified(run: _Run, base: EpisodeConfig, inside: list[tuple[CalibrationPoint, EpisodeConfig]],
-              weights: dict[str, float], theta: Theta) -> tuple[list[dict[str, Any]], list[list[dict[str, Any]]]]:
-    """The chosen weights on VERIFY_SEEDS fresh seeds at each point and half a point's spacing either side of it
-    (where the car drifts and the model can be fitted): a job's drift lies within half a step of a calibrated
-    point, and weights that hold one drift need not hold its neighbour (the VW Vanagon's weights found at 0.64 rad,
-    44 m complete 10 of 10 there and 4 of 10 at 0.62). Returns each point's record and the records around it."""
-    run.stage.update(step="verify")
-    half_rad = POINT_SPACING_RAD / 2
-    nearby = [CalibrationPoint(round(p.sideslip_rad + side * half_rad, 4), p.radius_m)
-              for p, _ in inside for side in (-1, 1)]
-    around_inside, _ = split_drivable(base, nearby)
-    locations = [*inside, *around_inside]
-    try:
-        records = verify(locations, weights, run.run_batch, theta=theta)
-    except ConfigError:  # a neighbour where this model has no fit (found by the workers): checked without it
-        unfit = {p for p, _ in unfittable(around_inside)}
-        locations = [*inside, *((p, c) for p, c in around_inside if p not in unfit)]
-        records = verify(locations, weights, run.run_batch, theta=theta)
-    found = {p: {**asdict(p), **record} for (p, _), record in zip(locations, records, strict=True)}
-    checked = [found[p] for p, _ in inside]
-    around = [[found[q] for q in (CalibrationPoint(round(p.sideslip_rad + side * half_rad, 4), p.radius_m)
-                                  for side in (-1, 1)) if q in found] for p, _ in inside]
-    run.say(f"checked on {VERIFY_SEEDS} fresh seeds: " + "; ".join(
-        _record_text(p, found[p]) for p in sorted(found, key=lambda q: (q.radius_m, q.sideslip_rad))))
-    return [{k: v for k, v in record.items() if k not in ("sideslip_rad", "radius_m")} for record in checked], around
 
 
 def _learned_theta(run: _Run, point: CalibrationPoint, last: dict[str, Any]) -> Theta:

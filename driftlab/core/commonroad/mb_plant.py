@@ -122,7 +122,6 @@ def _mb_to_loop(z, p, out):
 # and the limit on that time after which the episode ends as invalid (FailureLimits.max_invalid_s; inf: never).
 (R_NEGATIVE_LOAD_S, R_FIRST_NEGATIVE_LOAD_S, R_ELAPSED_S, R_SIDE_OFF_S, R_INVALID_S,
  R_MAX_INVALID_S) = range(6)
-N_RECORD = 6
 
 
 @njit(cache=True, error_model="numpy")

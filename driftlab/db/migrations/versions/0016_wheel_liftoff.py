@@ -40,7 +40,7 @@ def _pinned(config):
             "failure": {**failure, "invalid_ends_episode": False}}
 
 
-def _pinned_spec(table, spec):
+def _pinned_spec(spec):
     if not isinstance(spec, dict):
         return None
     if isinstance(spec.get("spec"), dict):  # a seeds study: the job spec it made its jobs from
@@ -68,8 +68,8 @@ def _rewrite(bind, table, column, change):
 
 def upgrade() -> None:
     bind = op.get_bind()
-    _rewrite(bind, "jobs", "spec", lambda spec: _pinned_spec("jobs", spec))
-    _rewrite(bind, "studies", "spec", lambda spec: _pinned_spec("studies", spec))
+    _rewrite(bind, "jobs", "spec", _pinned_spec)
+    _rewrite(bind, "studies", "spec", _pinned_spec)
     _rewrite(bind, "rescores", "config", _pinned)
     _rewrite(bind, "car_profiles", "document", _profile)
     op.execute("UPDATE meta SET value = '16' WHERE key = 'schema_version'")

@@ -1,19 +1,23 @@
 """The chase camera in a real headless Chromium on the view's own viser server (in this process, on a real SQLite
-file holding one real episode): it follows the car when paused and when the time is scrubbed, not only while
-the episode plays."""
+file holding one real episode, reached through the API's relay as a user's browser reaches it): it follows the car
+when paused and when the time is scrubbed, not only while the episode plays."""
 
 import math
+import threading
 import time
 
 import pytest
+import uvicorn
+from fastapi import FastAPI
 
 from driftlab.core.config import Theta
 from driftlab.core.tuning import TuningSpec
 from driftlab.db import storage
+from driftlab.server.view import RecordingCache, add_view_routes
 from driftlab.web.scene import set_chase_camera
 from driftlab.web.view_app import ViewApp
-from driftlab.web.viser_server import RELAY_HEADER, RELAY_SECRET
 from driftlab.worker.executors import evaluate_episode
+from tests.server_process import free_port
 from tests.web.chromium import WAIT_S
 
 pytestmark = pytest.mark.e2e  # a browser
@@ -73,16 +77,24 @@ def dashboard(tmp_path_factory):
                                seeds=[{"seed": 0, "status": outcome.status, "J": outcome.J,
                                        "completed_fraction": 1.0}], trajectory_seed=0)
     view = ViewApp(factory, host="127.0.0.1", port=0)
-    yield view, outcome.trigger_points[0]["t_s"]
+    # The relay alone (no job runner): a browser's websocket cannot carry the relay's header itself (Chromium 150
+    # sends no extra header on a websocket handshake), so the page is opened where users open it.
+    app = FastAPI()
+    add_view_routes(app, lambda: view.port, RecordingCache(factory), lambda: len(view.sessions))
+    relay = uvicorn.Server(uvicorn.Config(app, host="127.0.0.1", port=free_port(), log_level="warning"))
+    thread = threading.Thread(target=relay.run, daemon=True)
+    thread.start()
+    _wait(lambda: relay.started, "the relay's start")
+    yield view, f"http://127.0.0.1:{relay.config.port}/viser/", outcome.trigger_points[0]["t_s"]
+    relay.should_exit = True
+    thread.join(timeout=10)
     view.stop()
 
 
 def test_the_chase_camera_follows_the_car_when_paused_and_scrubbed(dashboard, browser):
-    view, first_trigger_s = dashboard
-    # Straight to viser's port, as the API's relay connects (it answers nothing else: driftlab.web.viser_server).
-    page = browser.new_page(viewport={"width": 900, "height": 600},
-                            extra_http_headers={RELAY_HEADER: RELAY_SECRET})
-    page.goto(f"http://127.0.0.1:{view.port}/")
+    view, url, first_trigger_s = dashboard
+    page = browser.new_page(viewport={"width": 900, "height": 600})
+    page.goto(url)
     page.get_by_role("button", name="Play best").click()
     page.get_by_role("button", name="Pause").click()
     page.get_by_role("button", name="Play", exact=True).wait_for()

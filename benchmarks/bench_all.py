@@ -46,10 +46,11 @@ def calibration_ms() -> float:
 
 
 def warm_episode_ms() -> float:
-    from driftlab.core.config import EpisodeConfig, Theta
+    from driftlab.core.config import Theta
+    from driftlab.core.configure import preset_config
     from driftlab.core.episode import run_episode
 
-    config = EpisodeConfig.preset("default")
+    config = preset_config("default")
     run_episode(Theta(), config)
     times = []
     for seed in range(15):

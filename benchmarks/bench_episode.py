@@ -9,7 +9,8 @@ import time
 import numpy as np
 
 from driftlab.core import mpc
-from driftlab.core.config import EpisodeConfig, Theta
+from driftlab.core.config import Theta
+from driftlab.core.configure import preset_config
 from driftlab.core.episode import run_episode
 
 _solve = mpc.QpSession.solve_constrained
@@ -42,7 +43,7 @@ CASES = {
 def main() -> None:
     medians = {}
     for (plant, controller), theta in CASES.items():
-        config = EpisodeConfig.preset(plant, controller)
+        config = preset_config(plant, controller)
         OSQP_US.clear()
         run_episode(theta, config)  # warm-up: compiled code, cached QPs
         walls = []

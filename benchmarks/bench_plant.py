@@ -49,7 +49,8 @@ def main() -> None:
 def mb_steps_of_an_episode() -> list[tuple]:
     """(state, steer, drive, dt, params, actuators) of each MB plant step of the preset's untuned episode."""
     from driftlab.core.commonroad import mb_plant as crp
-    from driftlab.core.config import EpisodeConfig, Theta
+    from driftlab.core.config import Theta
+    from driftlab.core.configure import preset_config
     from driftlab.core.episode import run_episode
 
     steps, step = [], crp.CommonRoadMbPlant.step
@@ -61,7 +62,7 @@ def mb_steps_of_an_episode() -> list[tuple]:
     run_loop = crp.CommonRoadMbPlant.run_loop
     crp.CommonRoadMbPlant.step, crp.CommonRoadMbPlant.run_loop = recording, None  # every step through Python
     try:
-        run_episode(Theta(), EpisodeConfig.preset("commonroad_mb"))
+        run_episode(Theta(), preset_config("commonroad_mb"))
     finally:
         crp.CommonRoadMbPlant.step, crp.CommonRoadMbPlant.run_loop = step, run_loop
     return steps
@@ -117,10 +118,10 @@ def mb_closed_loop(seeds: range = range(1000, 1020)) -> None:
 
     from bench_episode import CASES
 
-    from driftlab.core.config import EpisodeConfig
+    from driftlab.core.configure import preset_config
     from driftlab.core.episode import run_episode
 
-    preset = EpisodeConfig.preset("commonroad_mb")
+    preset = preset_config("commonroad_mb")
     for substep_s in sorted({0.001, preset.plant.substep_s}):
         config = replace(preset, plant=replace(preset.plant, substep_s=substep_s))
         results = [run_episode(CASES["commonroad_mb", "default"], config, seed=seed) for seed in seeds]

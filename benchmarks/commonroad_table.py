@@ -17,7 +17,8 @@ from concurrent.futures import ProcessPoolExecutor
 
 import numpy as np
 
-from driftlab.core.config import EpisodeConfig, Theta, apply_overrides
+from driftlab.core.config import Theta
+from driftlab.core.configure import apply_overrides, preset_config
 from driftlab.core.drivability import drivable_reason
 from driftlab.core.episode import run_episode
 from driftlab.core.errors import ConfigError
@@ -71,7 +72,7 @@ def main() -> None:
         vehicle, beta = case.split(":")
         sets = [f"plant.commonroad_vehicle={vehicle}", f"scenario.sideslip_rad={beta}"]
         try:
-            config = apply_overrides(EpisodeConfig.preset(args.plant),
+            config = apply_overrides(preset_config(args.plant),
                                      {"plant.commonroad_vehicle": int(vehicle), "scenario.sideslip_rad": float(beta)})
         except ConfigError as exc:
             print(f"| {vehicle} | {beta} | refused: {exc} | | | | |")

@@ -16,7 +16,8 @@ from concurrent.futures import ProcessPoolExecutor
 
 import numpy as np
 
-from driftlab.core.config import EpisodeConfig, Theta, apply_overrides
+from driftlab.core.config import EpisodeConfig, Theta
+from driftlab.core.configure import apply_overrides, preset_config
 from driftlab.core.drivability import drivable_reason
 
 GRID = [("default", {})] + [("default", {f"plant.{k}": v}) for k, values in (
@@ -28,7 +29,7 @@ GRID += [("nominal", {f"plant.{k}": v}) for k, values in (
 
 
 def _config(base: str, change: dict, overrides: dict) -> EpisodeConfig:
-    return apply_overrides(EpisodeConfig.preset(plant=base), {**change, **overrides})
+    return apply_overrides(preset_config(plant=base), {**change, **overrides})
 
 
 def drivable(config: EpisodeConfig) -> str | None:

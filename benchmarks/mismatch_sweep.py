@@ -10,7 +10,8 @@ from multiprocessing import Pool
 
 import numpy as np
 
-from driftlab.core.config import EpisodeConfig, Theta, apply_overrides
+from driftlab.core.config import Theta
+from driftlab.core.configure import apply_overrides, preset_config
 from driftlab.core.episode import run_episode
 
 NOMINAL_PLANT = {"plant.friction_scale": 1.0, "plant.tyre_c_scale": 1.0, "plant.friction_circle": False,
@@ -52,7 +53,7 @@ def main() -> None:
     with Pool(2) as pool:
         for name, overrides in cases.items():
             for controller in ("paper", "default"):
-                config = apply_overrides(EpisodeConfig.preset(controller=controller), {**overrides, **extra})
+                config = apply_overrides(preset_config(controller=controller), {**overrides, **extra})
                 results = pool.map(_run, [(config, t) for t in thetas])
                 done = [r for r in results if r[0] == "completed"]
                 best = min(results, key=lambda r: r[1])

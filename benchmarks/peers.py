@@ -37,11 +37,12 @@ CHECKPOINTS = (25, 50, 100)
 def _objective(robust_samples: int, bo_seed: int, plant: tuple[str, ...] = ()):
     """theta dict -> (J or None if the evaluation failed, penalized J); ``plant``: key=value overrides of the
     default plant (a plant drawn away from it)."""
-    from driftlab.core.config import EpisodeConfig, Theta, apply_overrides
+    from driftlab.core.config import Theta
+    from driftlab.core.configure import apply_overrides, preset_config
     from driftlab.core.episode import run_episode
     from driftlab.core.robust import SampleResult, aggregate, tuning_seeds
 
-    config = apply_overrides(EpisodeConfig.preset("default"),
+    config = apply_overrides(preset_config("default"),
                              {k: float(v) for k, v in (item.split("=") for item in plant)})
     seeds = tuning_seeds(bo_seed, robust_samples)
 

@@ -14,7 +14,8 @@ from multiprocessing import Pool
 
 import numpy as np
 
-from driftlab.core.config import EpisodeConfig, Theta, apply_overrides
+from driftlab.core.config import Theta
+from driftlab.core.configure import apply_overrides, preset_config
 from driftlab.core.episode import run_episode
 
 TRAINING = [("default", {})] + [("default", {f"plant.{k}": v}) for k, values in (
@@ -59,7 +60,7 @@ def evaluate(args):
     settings = {**(perturb(rng, center) if center and i > 0 else center or sample(rng)), **base_overrides}
     results = []
     for plant, change in TRAINING:
-        config = apply_overrides(EpisodeConfig.preset(plant=plant), {**settings, **change})
+        config = apply_overrides(preset_config(plant=plant), {**settings, **change})
         results.append(run_episode(Theta(), config, seed=0))
     # A run that rings (over MAX_CHATTER_RAD per step) does not count as completed, however it scores.
     good = [r.completed and steer_chatter_rad(r) <= MAX_CHATTER_RAD for r in results]

@@ -20,7 +20,8 @@ from multiprocessing import Pool
 
 import numpy as np
 
-from driftlab.core.config import EpisodeConfig, Theta, apply_overrides
+from driftlab.core.config import Theta
+from driftlab.core.configure import apply_overrides, preset_config
 from driftlab.core.episode import run_episode
 
 THETAS = [Theta(0.02, 0.02, 0.0, 0.05), Theta(0.01, 0.03, 0.0, 0.02), Theta(0.03, 0.015, 0.1, 0.0),
@@ -42,7 +43,7 @@ def evaluate(args: tuple[int, int, str, dict | None, list[Theta]]):
     weights = sample(np.random.default_rng(5000 + i), around, spread)
     if around and i == 0:
         weights = dict(around)  # the centre itself, scored alike
-    config = apply_overrides(EpisodeConfig.preset(plant), weights)
+    config = apply_overrides(preset_config(plant), weights)
     results = [run_episode(t, config, seed=s) for t in thetas for s in range(seeds)]
     return sum(r.completed for r in results), sum(r.J for r in results), weights
 

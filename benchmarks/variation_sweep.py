@@ -12,7 +12,8 @@ from concurrent.futures import ProcessPoolExecutor
 
 import numpy as np
 
-from driftlab.core.config import EpisodeConfig, Theta, apply_overrides
+from driftlab.core.config import EpisodeConfig, Theta
+from driftlab.core.configure import apply_overrides
 from driftlab.core.episode import run_episode
 from driftlab.core.tuning import DEFAULT_BOUNDS
 

@@ -44,11 +44,11 @@ def test_the_window_of_a_car_that_cannot_drift_at_the_presets_sideslip_is_printe
     (low, high), = window["sideslip_ranges_rad"]
     assert window["radius_m"] == 44.0 and 0.5 < low <= 0.6 < 0.62 < high
     # A sideslip the user gives is kept, and refused: only the preset's is moved into the window.
-    from driftlab.core.config import EpisodeConfig, overrides_inside_window
+    from driftlab.core.configure import overrides_inside_window, preset_config
     from driftlab.core.errors import OutsideDriftWindowError
 
     with pytest.raises(OutsideDriftWindowError) as given:
-        overrides_inside_window(EpisodeConfig.preset("commonroad_std"),
+        overrides_inside_window(preset_config("commonroad_std"),
                                 {"plant.commonroad_vehicle": 3, "scenario.sideslip_rad": 0.5})
     assert given.value.field == "scenario.sideslip_rad" and given.value.window[0] > 0.5
     assert main(["episode", "--plant", "commonroad_std", "--set", "plant.commonroad_vehicle=3"]) == 2
@@ -56,7 +56,7 @@ def test_the_window_of_a_car_that_cannot_drift_at_the_presets_sideslip_is_printe
     low_rad, high_rad = given.value.window
     assert "sideslip 0.5 rad" in refused
     assert f"needs a scenario.sideslip_rad in {low_rad:.2f}-{high_rad:.2f} rad" in refused
-    moved = overrides_inside_window(EpisodeConfig.preset("commonroad_std"), {"plant.commonroad_vehicle": 3})
+    moved = overrides_inside_window(preset_config("commonroad_std"), {"plant.commonroad_vehicle": 3})
     assert moved.scenario.sideslip_rad == round(sum(given.value.window) / 2, 2)
 
 

@@ -52,3 +52,59 @@ def test_the_view_imports_neither_storage_nor_the_physics():
     assert wrong == []
     assert any(module == "driftlab.services" or module.startswith("driftlab.services.")
                for name, tree in _modules() if name.startswith("web/") for module in _imported(tree))
+
+
+def _module_name(relative: str) -> str:
+    name = "driftlab." + relative.removesuffix(".py").replace("/", ".")
+    return name.removesuffix(".__init__")
+
+
+def _import_graph():
+    """Every driftlab module and the driftlab modules it imports, at module level or inside a function."""
+    modules = {_module_name(name): (name, tree) for name, tree in _modules()}
+    graph = {}
+    for module, (name, tree) in modules.items():
+        package = module if name.endswith("__init__.py") else module.rpartition(".")[0]
+        targets = set()
+        for node in ast.walk(tree):
+            if isinstance(node, ast.Import):
+                candidates = [alias.name for alias in node.names]
+            elif isinstance(node, ast.ImportFrom):
+                base = node.module or ""
+                if node.level:
+                    parts = package.split(".")
+                    base = ".".join(parts[:len(parts) - node.level + 1] + ([node.module] if node.module else []))
+                candidates = [f"{base}.{alias.name}" for alias in node.names] + [base]
+            else:
+                continue
+            for candidate in candidates:
+                while candidate and candidate not in modules:
+                    candidate = candidate.rpartition(".")[0]
+                if candidate and candidate != module:
+                    targets.add(candidate)
+                    break
+        graph[module] = targets
+    return graph
+
+
+def test_driftlab_has_no_import_cycle_counting_imports_inside_functions():
+    from graphlib import CycleError, TopologicalSorter
+
+    try:
+        TopologicalSorter(_import_graph()).prepare()
+    except CycleError as exc:
+        raise AssertionError(f"an import cycle: {' -> '.join(exc.args[1])}") from None
+
+
+def test_the_config_schema_loads_no_plant_solver_or_controller():
+    """Importing the schema (what the view, the API's models and storage read) runs no physics: the plant catalog,
+    CommonRoad's models, the equilibrium solver, the MPC and its QP solver stay unloaded."""
+    import subprocess
+    import sys
+
+    loaded = subprocess.run([sys.executable, "-c", "import sys, driftlab.core.config; print(*sorted(sys.modules))"],
+                            check=True, capture_output=True, text=True).stdout.split()
+    heavy = ("driftlab.core.mpc", "driftlab.core.plants", "driftlab.core.commonroad", "driftlab.core.equilibrium",
+             "driftlab.core.controller", "driftlab.core.episode", "osqp", "vehiclemodels")
+    assert [m for m in loaded if any(m == h or m.startswith(f"{h}.") for h in heavy)] == []
+    assert "driftlab.core.config" in loaded

@@ -9,10 +9,13 @@ import sys
 from typing import Any
 
 from driftlab.cli.options import PLOT_SUFFIXES, check_output_file, episode_config, finite, key_values
-from driftlab.core.config import Theta, config_to_dict, fitted
-from driftlab.core.drivability import check_drivable, drift_window, tiled_radii
+from driftlab.core.config import Theta, config_to_dict
+from driftlab.core.configure import fitted
+from driftlab.core.drivability import check_drivable, drift_window
 from driftlab.core.equilibrium import drift_equilibrium
 from driftlab.core.errors import ConfigError, NoEquilibriumError
+from driftlab.core.plants import entry_of
+from driftlab.core.track import tiled_radii
 from driftlab.core.vehicle import pack_params
 
 DEFAULT_RADIUS_M = 44.0
@@ -32,7 +35,7 @@ def cmd_equilibrium(args: argparse.Namespace) -> int:
         return 2
     out: dict[str, Any] = eq.as_dict()
     if args.plant:
-        plant = config.plant.plant_type.equilibrium_summary(config.plant, config.vehicle, radius_m, args.beta)
+        plant = entry_of(config.plant).equilibrium_summary(config.plant, config.vehicle, radius_m, args.beta)
         if plant is not None and "V" in plant:
             # The drive the car applies: a CommonRoad car's through its wheel (drive_n), DriftLab's its Fxr.
             plant["mismatch"] = {"dV": plant["V"] - eq.speed_mps, "ddelta": plant["delta"] - eq.steer_rad,

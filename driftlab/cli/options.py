@@ -8,7 +8,8 @@ import os
 import sys
 from typing import TYPE_CHECKING, Any
 
-from driftlab.core.config import PLANT_PRESETS, EpisodeConfig, apply_overrides, overrides_inside_window
+from driftlab.core.config import EpisodeConfig
+from driftlab.core.configure import PLANT_PRESETS, apply_overrides, overrides_inside_window, preset_config
 from driftlab.core.errors import ConfigError
 from driftlab.core.plants import installed_names
 from driftlab.core.robust import MAX_ROBUST_SAMPLES
@@ -97,8 +98,8 @@ PLANT_CHOICES = (*PLANT_PRESETS, *installed_names())  # and any plant installed 
 
 def episode_config(args: argparse.Namespace, *, inside_window: bool = False) -> EpisodeConfig:
     """The config of ``--plant``, ``--controller`` and ``--set``; ``inside_window``: at the middle of the car's drift
-    window where the preset's sideslip is outside it (driftlab.core.config.overrides_inside_window)."""
-    preset = EpisodeConfig.preset(args.plant or "default", getattr(args, "controller", "default"))
+    window where the preset's sideslip is outside it (driftlab.core.configure.overrides_inside_window)."""
+    preset = preset_config(args.plant or "default", getattr(args, "controller", "default"))
     parse = overrides_inside_window if inside_window else apply_overrides
     return parse(preset, key_values(args.set or [], "--set"))
 

@@ -22,15 +22,17 @@ from collections.abc import Callable, Sequence
 from dataclasses import dataclass, field, replace
 from typing import Any
 
-from driftlab.core.config import EpisodeConfig, Theta, apply_overrides, config_to_dict, fitted
-from driftlab.core.drivability import TILED_RADIUS_SHARES, drift_window, drivable_reason
+from driftlab.core.config import EpisodeConfig, Theta, config_to_dict
+from driftlab.core.configure import apply_overrides, fitted
+from driftlab.core.drivability import drift_window, drivable_reason
 from driftlab.core.episode import failure_penalty
 from driftlab.core.errors import ConfigError
-from driftlab.core.mpc import MpcConfig
+from driftlab.core.mpc_config import MpcConfig
 from driftlab.core.optimizer import BayesianOptimizer
 from driftlab.core.statuses import EpisodeStatus
+from driftlab.core.track import TILED_RADIUS_SHARES
 
-# The weights searched (the cost terms of driftlab.core.mpc.config.MpcConfig and the disturbance estimator's gain),
+# The weights searched (the cost terms of driftlab.core.mpc_config.MpcConfig and the disturbance estimator's gain),
 # in log10, within LOG_SPAN_DECADES of the car's current set and inside these limits; the steering rate limit
 # [rad/s] and the estimator's hold after a flick [s] linearly within their ranges.
 LOG_WEIGHT_LIMITS: dict[str, tuple[float, float]] = {
@@ -93,7 +95,7 @@ def window_sideslips(config: EpisodeConfig) -> list[float]:
 
 def point_config(base: EpisodeConfig, point: CalibrationPoint) -> EpisodeConfig:
     """``base`` driving ``point``, its controller's model to be fitted there (its plant's catalog entry decides how):
-    each worker fits it once, with the point's first episode (driftlab.core.config.fitted), not the calibration's
+    each worker fits it once, with the point's first episode (driftlab.core.configure.fitted), not the calibration's
     thread before any episode runs (an MB fit is seconds a point, and a server that stops waits for that thread)."""
     return apply_overrides(base, point.overrides())
 
@@ -117,7 +119,7 @@ def split_drivable(base: EpisodeConfig, points: Sequence[CalibrationPoint]
 
 
 def unfittable(points: Sequence[tuple[CalibrationPoint, EpisodeConfig]]) -> list[tuple[CalibrationPoint, str]]:
-    """The points at which the controller's model cannot be fitted (driftlab.core.config.fitted raises), with the
+    """The points at which the controller's model cannot be fitted (driftlab.core.configure.fitted raises), with the
     reason. :func:`split_drivable`'s check (PlantType.check_fit) does not fit: inside the car's window a model
     structure can still miss the car's drift (the VW Vanagon's coupled rear model at 0.69 rad, 44 m: no friction of
     it reaches the car's speed), and the worker that fits it with the point's first episode raises. Each fit

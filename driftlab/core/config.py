@@ -1,17 +1,18 @@
-"""The one configuration schema shared by the CLI, the REST API and storage.
+"""The one configuration schema shared by the CLI, the REST API and storage: plain data.
 
-An :class:`EpisodeConfig` groups frozen, validated sections. Every value is reachable by a dotted key
-(``plant.friction_scale``, ``mpc.q_sideslip``, ``vehicle.mass_kg`` ...) through :func:`apply_overrides`,
-and :func:`config_to_dict` / :func:`config_from_dict` round-trip it through plain JSON types.
+An :class:`EpisodeConfig` groups frozen sections, each checking its own ranges. Every value is reachable by a dotted
+key (``plant.friction_scale``, ``mpc.q_sideslip``, ``vehicle.mass_kg`` ...); parsing a document or dotted keys,
+the presets and the checks against the plant catalog are driftlab.core.configure's (importing this module loads no
+plant, solver or controller), and :func:`config_to_dict` gives the plain JSON document back.
 """
 
 from __future__ import annotations
 
-from dataclasses import dataclass, field, fields, is_dataclass, replace
+from dataclasses import dataclass, field, fields, is_dataclass
 from typing import Any
 
-from driftlab.core.errors import ConfigError, OutsideDriftWindowError
-from driftlab.core.mpc import MpcConfig
+from driftlab.core.errors import ConfigError
+from driftlab.core.mpc_config import MpcConfig
 from driftlab.core.plant import PlantConfig
 from driftlab.core.theta import (  # noqa: F401  # re-exported: callers take theta from the config schema
     MODEL_SCALE_LIMITS,
@@ -110,10 +111,10 @@ class EpisodeConfig:
     """Everything an episode needs besides theta.
 
     Attributes:
-        to_fit: what is still to be fitted to the plant before the config runs (:data:`MODEL_FIT`, :data:`START_FIT`;
-            :func:`fitted`). Parsing does no physics: a CommonRoad car's model is fitted to its drift when the
-            config first runs (a job's when a runner claims it, and stored with the job), and a config document
-            leaves out what is still to be fitted (:func:`config_to_dict`).
+        to_fit: what is still to be fitted to the plant before the config runs (:data:`MODEL_FIT`,
+            :data:`START_FIT`; driftlab.core.configure.fitted). Parsing does no physics: a CommonRoad car's model is
+            fitted to its drift when the config first runs (a job's when a runner claims it, and stored with the
+            job), and a config document leaves out what is still to be fitted (:func:`config_to_dict`).
     """
 
     vehicle: VehicleParams = field(default_factory=VehicleParams)
@@ -123,186 +124,8 @@ class EpisodeConfig:
     failure: FailureLimits = field(default_factory=FailureLimits)
     to_fit: frozenset[str] = frozenset()
 
-    @classmethod
-    def preset(cls, plant: str = "default", controller: str = "default") -> EpisodeConfig:
-        """Preset by name. plant: "default" (mismatched), "nominal" (equals the controller's model),
-        "commonroad_std" (CommonRoad's STD, vehicle 2, with the controller's model of that car), "commonroad_mb",
-        or a plant installed under the entry-point group ``driftlab.plants`` (its own preset);
-        controller: "default" (DriftLab's extended MPC) or "paper" (the paper's formulation)."""
-        plant_config = _plant_preset(plant)
-        controllers = {"default": plant_config.plant_type.controller, "paper": MpcConfig.paper}
-        if controller not in controllers:
-            raise ConfigError(f"controller must be 'default' or 'paper', got {controller!r}")
-        sideslip_rad = plant_config.plant_type.default_sideslip_rad
-        scenario = ScenarioConfig() if sideslip_rad is None else ScenarioConfig(sideslip_rad=sideslip_rad)
-        return _fitted_unless_costly(cls(plant=plant_config, scenario=scenario, mpc=controllers[controller](),
-                                         to_fit=frozenset((MODEL_FIT, START_FIT))))
 
-
-def _plant_presets() -> dict[str, Any]:
-    """``--plant`` presets: DriftLab's plant as it is ("default") and equal to its model ("nominal"), then each
-    catalog entry that has one (driftlab.core.plants)."""
-    from driftlab.core.plants import preset_types
-
-    return {"default": PlantConfig, "nominal": PlantConfig.nominal,
-            **{name: entry.preset for name, entry in preset_types().items() if name != "default"}}
-
-
-PLANT_PRESETS = _plant_presets()
-
-
-def _plant_preset(name: str) -> PlantConfig:
-    if name in PLANT_PRESETS:
-        return PLANT_PRESETS[name]()
-    from driftlab.core.plants import installed_names, plant_type
-
-    entry = plant_type(name) if name in installed_names() else None
-    if entry is None:
-        raise ConfigError(f"plant must be one of {', '.join((*PLANT_PRESETS, *installed_names()))}, got {name!r}")
-    return entry.preset()
-
-
-def fitted(config: EpisodeConfig) -> EpisodeConfig:
-    """``config`` with what is still to be fitted to its plant fitted (:attr:`EpisodeConfig.to_fit`): the
-    controller's model (:func:`model_vehicle_for`), then the plant's start in the drift (:func:`started_in_drift`).
-    A CommonRoad car costs 0.3-0.8 s the first time in a process (cached after).
-
-    Raises:
-        OutsideDriftWindowError: the scenario's sideslip is outside the car's window (naming it).
-        ConfigError: inside it, the model cannot be fitted.
-    """
-    if not config.to_fit:
-        return config
-    vehicle = model_vehicle_for(config.plant, config.scenario) if MODEL_FIT in config.to_fit else config.vehicle
-    plant = started_in_drift(config.plant, config.scenario) if START_FIT in config.to_fit else config.plant
-    return replace(config, vehicle=vehicle, plant=plant, to_fit=frozenset())
-
-
-def _fitted_unless_costly(config: EpisodeConfig) -> EpisodeConfig:
-    """A plant that fits no model to itself (DriftLab's: Table I, no physics) is fitted at once; a plant that does
-    (PlantType.fits_model) waits for :func:`fitted`."""
-    return config if config.plant.plant_type.fits_model else fitted(config)
-
-
-def model_vehicle_for(plant: PlantConfig, scenario: ScenarioConfig) -> VehicleParams:
-    """The controller's vehicle a plant comes with (its catalog entry's): the paper's Table I for DriftLab's
-    plants; for a CommonRoad plant the car's own mass, geometry and tyre shape, placed at its drift at the
-    scenario's (left) radius and sideslip (raises ConfigError naming scenario.sideslip_rad where the car has no
-    countersteer drift)."""
-    return plant.plant_type.model_vehicle(plant, scenario.left_radius_m, scenario.sideslip_rad)
-
-
-def started_in_drift(plant: PlantConfig, scenario: ScenarioConfig) -> PlantConfig:
-    """The plant's start settings for the scenario's drift (its catalog entry's; a CommonRoad STD car's rear wheel
-    at the slip of its own drift at the scenario's left radius and sideslip)."""
-    return plant.plant_type.started_in_drift(plant, scenario.left_radius_m, scenario.sideslip_rad)
-
-
-def _coerce(section: str, name: str, current: Any, raw: Any) -> Any:
-    key = f"{section}.{name}"
-    if isinstance(current, bool):
-        if isinstance(raw, bool):
-            return raw
-        if isinstance(raw, str) and raw.lower() in ("true", "1", "yes", "on", "false", "0", "no", "off"):
-            return raw.lower() in ("true", "1", "yes", "on")
-        raise ConfigError(f"{key} must be true or false, got {raw!r}")
-    if isinstance(current, int):
-        try:
-            value = int(raw) if not isinstance(raw, bool) else None
-        except (TypeError, ValueError):
-            value = None
-        if value is None or (isinstance(raw, float) and raw != value):
-            raise ConfigError(f"{key} must be an integer, got {raw!r}")
-        return value
-    if isinstance(current, float):
-        try:
-            if isinstance(raw, bool):
-                raise ValueError
-            return float(raw)
-        except (TypeError, ValueError):
-            raise ConfigError(f"{key} must be a number, got {raw!r}") from None
-    if not isinstance(raw, str):
-        raise ConfigError(f"{key} must be a string, got {raw!r}")
-    return raw
-
-
-def apply_overrides(config: EpisodeConfig, overrides: dict[str, Any]) -> EpisodeConfig:
-    """A copy of ``config`` with dotted keys set, e.g. {"plant.cg_height_m": 0.3}; validated.
-
-    Raises:
-        ConfigError: unknown key, wrong type or value out of range (the message names the key).
-    """
-    sections = {f.name: getattr(config, f.name) for f in fields(config)}
-    changes: dict[str, dict[str, Any]] = {}
-    for dotted, raw in overrides.items():
-        section, _, name = dotted.partition(".")
-        if section not in sections or not name:
-            raise ConfigError(f"unknown config key {dotted!r}; keys look like "
-                              f"'<section>.<field>' with section one of {', '.join(sections)}", field=dotted)
-        valid = {f.name for f in fields(sections[section])}
-        if name not in valid:
-            raise ConfigError(f"unknown config key {dotted!r}; {section} has: {', '.join(sorted(valid))}",
-                              field=dotted)
-        current = getattr(sections[section], name)
-        changes.setdefault(section, {})[name] = _coerce(section, name, current, raw)
-    if MODEL_FIT in config.to_fit and "vehicle" in changes:
-        config = fitted(config)  # the model's settings changed: a change to the model fitted to the car, as before
-        sections = {f.name: getattr(config, f.name) for f in fields(config)}
-    _switch_plant_model(sections, changes)
-    updated = {s: replace(sections[s], **c) for s, c in changes.items()}
-    return _refit_model_vehicle(replace(config, **{**sections, **updated}), changes)
-
-
-def overrides_inside_window(config: EpisodeConfig, overrides: dict[str, Any]) -> EpisodeConfig:
-    """:func:`apply_overrides`, except that where the controller's model of the car cannot be fitted at the preset's
-    sideslip and no ``scenario.sideslip_rad`` is given (the VW Vanagon countersteers only from 0.57 rad at 44 m), the
-    scenario's sideslip is the middle of the car's window: for what scans or searches the window (`driftlab
-    equilibrium --window`, `driftlab calibrate`), not for a job, which is refused naming the window."""
-    try:
-        return fitted(apply_overrides(config, overrides))
-    except OutsideDriftWindowError as exc:
-        if exc.window is None or "scenario.sideslip_rad" in overrides:
-            raise
-        middle_rad = round((exc.window[0] + exc.window[1]) / 2, 2)
-        return fitted(apply_overrides(config, {**overrides, "scenario.sideslip_rad": middle_rad}))
-
-
-def _switch_plant_model(sections: dict[str, Any], changes: dict[str, dict[str, Any]]) -> None:
-    """Setting ``plant.model`` (or ``plant.commonroad_vehicle``) to another car starts from that car's preset: the
-    plant keys given apply on top. The plant's car needs no other keys either way."""
-    plant_changes = changes.get("plant", {})
-    current = sections["plant"]
-    model = plant_changes.get("model", current.model)
-    vehicle_id = plant_changes.get("commonroad_vehicle", current.commonroad_vehicle)
-    if model == current.model and (not current.plant_type.own_car or vehicle_id == current.commonroad_vehicle):
-        return
-    from driftlab.core.plants import plant_type
-
-    entry = plant_type(model)
-    if entry is not None and isinstance(vehicle_id, int) and not isinstance(vehicle_id, bool):
-        sections["plant"] = entry.preset(vehicle_id)
     # else: PlantConfig refuses the value, naming it
-
-
-def _refit_model_vehicle(config: EpisodeConfig, changes: dict[str, dict[str, Any]]) -> EpisodeConfig:
-    """The controller follows the plant's car: switching back to DriftLab's plant restores Table I and the default
-    weights, switching to a CommonRoad car takes its weights (driftlab.core.commonroad.weights; unless ``mpc.*``
-    keys are given), and a CommonRoad plant's model is to be fitted to the car's drift at the scenario's radius and
-    sideslip whenever the plant or the scenario changes (driftlab.core.commonroad.model_fit; :func:`fitted`),
-    unless ``vehicle.*`` keys are given; the plant then starts in the car's drift (:func:`started_in_drift`)
-    unless ``plant.initial_rear_slip`` is given."""
-    plant_changes = changes.get("plant", {})
-    plant_switched = "model" in plant_changes or "commonroad_vehicle" in plant_changes
-    if plant_switched and "mpc" not in changes:  # and the default controller's weights for that car
-        config = replace(config, mpc=config.plant.plant_type.controller())
-    to_fit = set(config.to_fit) - ({MODEL_FIT} if "vehicle" in changes else set())
-    refit = ("vehicle" not in changes and bool({"plant", "scenario"} & set(changes))
-             and (config.plant.plant_type.own_car or plant_switched))
-    if refit:
-        to_fit |= {MODEL_FIT, START_FIT}
-    if "initial_rear_slip" in plant_changes:
-        to_fit.discard(START_FIT)
-    return _fitted_unless_costly(replace(config, to_fit=frozenset(to_fit)))
 
 
 def dotted_config(document: Any) -> dict[str, Any]:
@@ -315,15 +138,10 @@ def dotted_config(document: Any) -> dict[str, Any]:
     return dict(document)
 
 
-def config_from_document(document: Any) -> EpisodeConfig:
-    """The episode config a stored or posted document describes (see :func:`dotted_config`); validated."""
-    return apply_overrides(EpisodeConfig(), dotted_config(document or {}))
-
-
 def check_json_types(values: dict[str, Any]) -> None:
     """Refuse a JSON value of the wrong type for its config key (flat dotted keys or nested sections): a number
     given as text ("0.03"), a switch as 1. The CLI's ``--set`` parses text; a JSON document states its types.
-    Unknown keys pass here: :func:`apply_overrides` refuses them, naming them.
+    Unknown keys pass here: driftlab.core.configure.apply_overrides refuses them, naming them.
 
     Raises:
         ConfigError: naming the key and the JSON type it needs.
@@ -346,8 +164,8 @@ def check_json_types(values: dict[str, Any]) -> None:
 
 
 def config_to_dict(config: EpisodeConfig) -> dict[str, dict[str, Any]]:
-    """Nested plain dict {section: {field: value}}, without what is still to be fitted (:func:`fitted`): parsed
-    again, it is to be fitted again."""
+    """Nested plain dict {section: {field: value}}, without what is still to be fitted
+    (driftlab.core.configure.fitted): parsed again, it is to be fitted again."""
     out = {f.name: {g.name: getattr(getattr(config, f.name), g.name) for g in fields(getattr(config, f.name))}
            for f in fields(config) if is_dataclass(getattr(config, f.name))}
     return without_keys(out, config.to_fit)
@@ -362,16 +180,6 @@ def without_keys(document: dict[str, dict[str, Any]], keys: frozenset[str]) -> d
         if name and section in out:
             out[section].pop(name, None)
     return out
-
-
-def config_from_dict(data: dict[str, dict[str, Any]], base: EpisodeConfig | None = None) -> EpisodeConfig:
-    """Inverse of :func:`config_to_dict`; missing keys keep ``base``'s values."""
-    flat = {}
-    for section, values in data.items():
-        if not isinstance(values, dict):
-            raise ConfigError(f"config.{section} must be an object of field values")
-        flat.update({f"{section}.{k}": v for k, v in values.items()})
-    return apply_overrides(base or EpisodeConfig(), flat)
 
 
 def config_keys() -> dict[str, Any]:

@@ -17,6 +17,8 @@ import numpy as np
 from driftlab.core.config import MODEL_FIT, EpisodeConfig
 from driftlab.core.errors import ConfigError
 from driftlab.core.plant import PlantConfig
+from driftlab.core.plants import entry_of
+from driftlab.core.track import tiled_radii
 from driftlab.core.vehicle import VehicleParams
 
 
@@ -26,12 +28,12 @@ class NotDrivableError(ConfigError):
 
 def check_drivable(config: EpisodeConfig) -> None:
     """Raises :class:`NotDrivableError` naming the circle, the radius, the sideslip and what lacks a drift. A
-    config whose controller's model is still to be fitted (driftlab.core.config.fitted) is checked without the fit:
+    config whose controller's model is still to be fitted (driftlab.core.configure.fitted) is checked without the fit:
     where it cannot be fitted, the plant's OutsideDriftWindowError names the window (PlantType.check_fit)."""
     s = config.scenario
     if MODEL_FIT in config.to_fit:
         for radius_m in dict.fromkeys((s.left_radius_m, s.right_radius_m)):
-            config.plant.plant_type.check_fit(config.plant, radius_m, s.sideslip_rad)
+            entry_of(config.plant).check_fit(config.plant, radius_m, s.sideslip_rad)
     reason = _reason(_checked_model(config), config.plant, s.left_radius_m, s.right_radius_m, s.sideslip_rad)
     if reason is not None:
         raise NotDrivableError(reason)
@@ -57,7 +59,7 @@ def _reason(vehicle: VehicleParams | None, plant: PlantConfig, left_radius_m: fl
     """The controller's model on each circle (``vehicle``; None: still to be fitted, where the plant's fit check
     decides), then the plant's own drift (its catalog entry's check). A right-hand drift mirrors a left-hand one
     (same V, delta, Fxr): one solve per radius is enough."""
-    entry = plant.plant_type
+    entry = entry_of(plant)
     circles = [("left", left_radius_m)] + ([("right", right_radius_m)] if right_radius_m != left_radius_m else [])
     for circle, radius in circles:
         reason = (entry.model_reason(vehicle, radius, sideslip_rad, circle) if vehicle is not None
@@ -73,7 +75,7 @@ def _reason(vehicle: VehicleParams | None, plant: PlantConfig, left_radius_m: fl
 
 def _fit_reason(plant: PlantConfig, radius_m: float, sideslip_rad: float) -> str | None:
     try:
-        plant.plant_type.check_fit(plant, radius_m, sideslip_rad)
+        entry_of(plant).check_fit(plant, radius_m, sideslip_rad)
     except ConfigError as exc:
         return str(exc)
     return None
@@ -110,14 +112,6 @@ WINDOW_STEP_RAD = 0.01
 # view): CommonRoad's drift families are scanned over it (driftlab.core.commonroad.family); beyond 0.8 rad the
 # failure limits (1.2 rad) leave a flick no room.
 WINDOW_SCAN_RAD = (0.2, 0.8)
-# The circles a calibration tiles besides the scenario's (driftlab.core.calibration.default_points), as a share of
-# its radius: the paper's 44 m and circles of 30 m and 52 m.
-TILED_RADIUS_SHARES = (30 / 44, 52 / 44)
-
-
-def tiled_radii(radius_m: float) -> tuple[float, ...]:
-    """The circle of ``radius_m`` and those a calibration tiles beside it, smallest first."""
-    return tuple(sorted({float(radius_m), *(round(radius_m * share, 2) for share in TILED_RADIUS_SHARES)}))
 
 
 def drift_window(config: EpisodeConfig, radius_m: float, low_rad: float = WINDOW_SCAN_RAD[0],
@@ -129,7 +123,7 @@ def drift_window(config: EpisodeConfig, radius_m: float, low_rad: float = WINDOW
     reads both the left- and the right-hand drift (a CommonRoad car's PAC2002 tyres are not symmetric). The one
     scan `driftlab equilibrium --window`, the calibration's points and the view all read. Where the grid has no
     sideslip, ``reason`` says why (PlantType.window_reason)."""
-    entry = config.plant.plant_type
+    entry = entry_of(config.plant)
     if entry.fits_model:
         config = replace(config, to_fit=config.to_fit | {MODEL_FIT})
     grid = np.round(np.arange(low_rad, high_rad + 1e-9, WINDOW_STEP_RAD), 4)

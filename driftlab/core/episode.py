@@ -28,7 +28,8 @@ from driftlab.core.closed_loop import (
     new_loop_state,
     run_until_constrained,
 )
-from driftlab.core.config import EpisodeConfig, Theta, fitted
+from driftlab.core.config import EpisodeConfig, Theta
+from driftlab.core.configure import fitted
 from driftlab.core.controller import ControllerModel, build_controller_model, has_drift, no_drift_reason
 from driftlab.core.errors import ConfigError, NoEquilibriumError
 from driftlab.core.metrics import EpisodeMetrics, compute_metrics
@@ -45,8 +46,8 @@ from driftlab.core.plant import (
     X_POS,
     Y_POS,
     YAW_RATE,
-    make_plant,
 )
+from driftlab.core.plants import make_plant
 from driftlab.core.statuses import EpisodeStatus
 from driftlab.core.track import LEFT, RIGHT, FigureEight, wrap_angle
 from driftlab.core.variation import MAX_SEED, draw_variation
@@ -139,7 +140,7 @@ def run_episode(theta: Theta, config: EpisodeConfig, *, seed: int = 0) -> Episod
     """
     if isinstance(seed, bool) or not isinstance(seed, int) or not 0 <= seed <= MAX_SEED:
         raise ConfigError(f"seed must be an integer in [0, {MAX_SEED}], got {seed!r}")
-    config = fitted(config)  # a config parsed, not yet run (driftlab.core.config.fitted); the fit is cached
+    config = fitted(config)  # a config parsed, not yet run (driftlab.core.configure.fitted); the fit is cached
     started = time.perf_counter()
     scenario = config.scenario
     track = FigureEight(scenario.left_radius_m, scenario.right_radius_m, scenario.laps)

@@ -56,13 +56,6 @@ A_STEER_LAG, A_STEER_RATE, A_DRIVE_LAG, A_DRIVE_RATE = range(4)
 PLANT_DRIFTLAB, PLANT_COMMONROAD_STD, PLANT_EXTERNAL = range(3)
 
 
-def register_plant(name: str, plant) -> None:
-    """Register a plant under ``plant.model`` = ``name`` (see driftlab.core.plants.register_plant)."""
-    from driftlab.core.plants import register_plant as register
-
-    register(name, plant)
-
-
 @dataclass(frozen=True)
 class PlantConfig:
     """What the plant adds to, or changes from, the controller's model. Defaults: the default plant.
@@ -157,7 +150,8 @@ class PlantConfig:
 
     def __post_init__(self) -> None:
         check_ranges(self, "plant", PLANT_LIMITS)
-        self.plant_type.check(self)
+        if not isinstance(self.model, str) or not self.model:
+            raise ConfigError(f"plant.model must be a plant's name, got {self.model!r}", field="plant.model")
         if self.steer_lag_spread_s > self.steer_lag_s:
             raise ConfigError(f"plant.steer_lag_spread_s must be in [0, plant.steer_lag_s = {self.steer_lag_s}], "
                               f"got {self.steer_lag_spread_s!r}")
@@ -165,9 +159,6 @@ class PlantConfig:
                      "wheel_liftoff"):
             if not isinstance(getattr(self, name), bool):
                 raise ConfigError(f"plant.{name} must be true or false, got {getattr(self, name)!r}")
-        if self.wheel_liftoff and not self.plant_type.wheel_loads:
-            raise ConfigError(f"plant.wheel_liftoff applies to a plant with wheel loads (CommonRoad's MB); "
-                              f"plant.model {self.model!r} has none: keep it false", field="plant.wheel_liftoff")
 
     @classmethod
     def nominal(cls) -> PlantConfig:
@@ -175,36 +166,6 @@ class PlantConfig:
         no_variation: dict[str, Any] = dict.fromkeys(VARIATION_LIMITS, 0.0)
         return cls(friction_scale=1.0, tyre_c_scale=1.0, friction_circle=False, load_transfer=False,
                    steer_lag_s=0.0, steer_rate_radps=100.0, drive_lag_s=0.0, drive_rate_nps=1e7, **no_variation)
-
-    @classmethod
-    def commonroad_std(cls, vehicle_id: int = 2) -> PlantConfig:
-        """CommonRoad's STD with vehicle ``vehicle_id`` (its catalog preset: RK4 at 2 ms)."""
-        from driftlab.core.plants import built_in
-
-        return built_in("commonroad_std").preset(vehicle_id)
-
-    @classmethod
-    def commonroad_mb(cls, vehicle_id: int = 2) -> PlantConfig:
-        """CommonRoad's multi-body model with vehicle ``vehicle_id`` (its catalog preset: RK4 at 3 ms, inside the
-        stability bound of its fastest mode, a front wheel's speed, above the failure rule's 8 m/s)."""
-        from driftlab.core.plants import built_in
-
-        return built_in("commonroad_mb").preset(vehicle_id)
-
-    @property
-    def plant_type(self):
-        """This plant's entry in the plant catalog (driftlab.core.plants.PlantType).
-
-        Raises:
-            ConfigError: ``model`` names no plant (built in, registered or installed).
-        """
-        from driftlab.core.plants import built_in_names, plant_type
-
-        found = plant_type(self.model)
-        if found is None:
-            raise ConfigError(f"plant.model must be one of {', '.join(built_in_names())} or a registered plant, "
-                              f"got {self.model!r}", field="plant.model")
-        return found
 
     @property
     def varies(self) -> bool:
@@ -306,8 +267,3 @@ class Plant:
     def step(self, state: np.ndarray, steer_cmd_rad: float, drive_cmd_n: float, duration_s: float) -> np.ndarray:
         return plant_step(state, steer_cmd_rad, drive_cmd_n, duration_s, self.config.substep_s,
                           self.params, self.actuators)
-
-
-def make_plant(config: PlantConfig, model_vehicle: VehicleParams) -> Plant:
-    """The plant ``config.model`` names (DriftLab's own, a CommonRoad model, a registered one)."""
-    return config.plant_type.build(config, model_vehicle)

@@ -14,7 +14,8 @@ import math
 from dataclasses import dataclass
 from typing import Any
 
-from driftlab.core.config import EpisodeConfig, Theta, apply_overrides, config_from_document, config_to_dict
+from driftlab.core.config import EpisodeConfig, Theta, config_to_dict
+from driftlab.core.configure import apply_overrides, config_from_document
 from driftlab.core.errors import ConfigError
 from driftlab.core.limits import JOB_LIMITS, MAX_ROBUST_SAMPLES, check_int
 from driftlab.core.robust import tuning_seeds

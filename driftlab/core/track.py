@@ -185,3 +185,13 @@ def circle_errors(center_x_m, center_y_m, radius_m, direction, x_m, y_m, course_
     swept = (p0_angle - phi) if direction == LEFT else (phi - p0_angle)
     swept = swept % TWO_PI
     return lateral, course_error, swept * radius_m, swept / TWO_PI
+
+
+# The circles a calibration tiles besides the scenario's (driftlab.core.calibration.default_points), as a share of
+# its radius: the paper's 44 m and circles of 30 m and 52 m.
+TILED_RADIUS_SHARES = (30 / 44, 52 / 44)
+
+
+def tiled_radii(radius_m: float) -> tuple[float, ...]:
+    """The circle of ``radius_m`` and those a calibration tiles beside it, smallest first."""
+    return tuple(sorted({float(radius_m), *(round(radius_m * share, 2) for share in TILED_RADIUS_SHARES)}))

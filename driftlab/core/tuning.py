@@ -11,18 +11,11 @@ from dataclasses import dataclass, field, replace
 from functools import partial
 from typing import Any
 
-from driftlab.core.config import (
-    MODEL_FIT,
-    THETA_KEYS,
-    THETA_LIMITS,
-    EpisodeConfig,
-    Theta,
-    config_from_document,
-    config_to_dict,
-    fitted,
-)
+from driftlab.core.config import MODEL_FIT, THETA_KEYS, THETA_LIMITS, EpisodeConfig, Theta, config_to_dict
+from driftlab.core.configure import config_from_document, fitted
 from driftlab.core.errors import ConfigError
 from driftlab.core.limits import JOB_LIMITS, MAX_ROBUST_SAMPLES, check_int
+from driftlab.core.plants import entry_of
 from driftlab.core.robust import tuning_seeds
 from driftlab.core.stopping import StopRules
 from driftlab.core.warm_start import WarmStart
@@ -144,7 +137,7 @@ class TuningSpec:
             raise ConfigError(f"model_correction must be true or false, got {self.model_correction!r}",
                               field="model_correction")
         if self.local_phase is None:
-            object.__setattr__(self, "local_phase", self.config.plant.plant_type.local_phase)
+            object.__setattr__(self, "local_phase", entry_of(self.config.plant).local_phase)
         if not isinstance(self.local_phase, bool):
             raise ConfigError(f"local_phase must be true or false, got {self.local_phase!r}", field="local_phase")
         if not isinstance(self.stop, StopRules):
@@ -153,7 +146,7 @@ class TuningSpec:
             raise ConfigError(f"deterministic must be true or false, got {self.deterministic!r}",
                               field="deterministic")
         object.__setattr__(self, "bounds", validate_bounds(dict(self.bounds), self.model_correction,
-                                                           self.config.plant.plant_type.theta_bounds))
+                                                           entry_of(self.config.plant).theta_bounds))
         if self.warm_start is not None:
             self.warm_start.check(self.bounds)
         if self.model_correction and MODEL_FIT not in self.config.to_fit:
@@ -167,7 +160,7 @@ class TuningSpec:
                                       f"vehicle's range ({exc})", field="bounds") from None
 
     def fitted(self) -> TuningSpec:
-        """This job with its config fitted to its plant (driftlab.core.config.fitted: a runner does it when it claims
+        """This job with its config fitted to its plant (driftlab.core.configure.fitted: a runner does it when it claims
         the job, and stores it), validated again."""
         return self if not self.config.to_fit else replace(self, config=fitted(self.config))
 

@@ -18,6 +18,7 @@ from typing import Any
 import numpy as np
 
 from driftlab.core.plant import PLANT_LIMITS, VARIATION_LIMITS, PlantConfig
+from driftlab.core.plants import entry_of
 
 # Measurement noise columns.
 NOISE_X, NOISE_Y, NOISE_HEADING, NOISE_SPEED, NOISE_SIDESLIP, NOISE_YAW_RATE = range(6)
@@ -71,7 +72,7 @@ def draw_variation(plant: PlantConfig, seed: int, n_steps: int) -> EpisodeVariat
         mass_scale=_within("mass_scale", plant.mass_scale * mass_factor),
         # (A CommonRoad plant scales its yaw inertia with mass_scale itself.)
         yaw_inertia_scale=_within("yaw_inertia_scale", plant.yaw_inertia_scale * mass_factor)
-        if not plant.plant_type.own_car else plant.yaw_inertia_scale,
+        if not entry_of(plant).own_car else plant.yaw_inertia_scale,
         steer_lag_s=_within("steer_lag_s", steer_lag_s),
         **SPENT_SPREADS,
     )

@@ -27,16 +27,12 @@ from driftlab.core.calibration import (
     split_drivable,
     unfittable,
 )
-from driftlab.core.config import (
-    EpisodeConfig,
-    Theta,
-    apply_overrides,
-    config_to_dict,
-    overrides_inside_window,
-)
+from driftlab.core.config import EpisodeConfig, Theta, config_to_dict
+from driftlab.core.configure import apply_overrides, overrides_inside_window, preset_config
 from driftlab.core.drivability import drift_window
 from driftlab.core.errors import ConfigError, OutsideDriftWindowError
 from driftlab.core.limits import check_int
+from driftlab.core.plants import entry_of
 from driftlab.db import profiles, storage
 from driftlab.services.calibration_checks import checked_around
 from driftlab.services.profiles import calibrated_window, drift_distance, known_weight_sets, limits_of, window_text
@@ -95,14 +91,14 @@ class CalibrationRequest:
         Theta.from_mapping(self.theta)
         # A car that cannot drift at its preset's sideslip is calibrated around the middle of its window.
         try:
-            config = overrides_inside_window(EpisodeConfig.preset(self.plant), self.sets)
+            config = overrides_inside_window(preset_config(self.plant), self.sets)
         except OutsideDriftWindowError as exc:
             if not self.points:
                 raise ConfigError(f"{exc}; --points SIDESLIP@RADIUS calibrates it where it drifts",
                                   field=exc.field) from None
             # The points given are checked one by one (split_drivable): the scenario's own drift need not exist
             # (a car with no drift on the scenario's circle is calibrated on the circles where it has one).
-            config = apply_overrides(EpisodeConfig.preset(self.plant), self.sets)
+            config = apply_overrides(preset_config(self.plant), self.sets)
         for point in parse_points(self.points) or []:  # in the scenario's ranges (ScenarioConfig checks them)
             try:
                 replace(config.scenario, sideslip_rad=point.sideslip_rad, left_radius_m=point.radius_m,
@@ -123,10 +119,10 @@ def _model_candidates(base: EpisodeConfig, sets: dict[str, Any]) -> list[dict[st
     (the VW Vanagon holds its drift at 0.62 rad, 44 m with 0.5 rad of countersteer and needs the rest for its
     flick: docs/results.md). What the request sets itself is not varied."""
     couplings: list[dict[str, Any]] = [{}]
-    if base.plant.plant_type.own_car and "plant.model_drive_coupling" not in sets:
+    if entry_of(base.plant).own_car and "plant.model_drive_coupling" not in sets:
         couplings.append({"plant.model_drive_coupling": not base.plant.model_drive_coupling})
     limits: list[dict[str, Any]] = [{}]
-    reach_rad = base.plant.plant_type.steering_reach_rad(base.plant)
+    reach_rad = entry_of(base.plant).steering_reach_rad(base.plant)
     if reach_rad is not None and reach_rad != base.mpc.steer_limit_rad and "mpc.steer_limit_rad" not in sets:
         limits.append({"mpc.steer_limit_rad": reach_rad})
     return [{**coupling, **limit} for limit in limits for coupling in couplings]

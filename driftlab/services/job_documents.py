@@ -7,8 +7,10 @@ from __future__ import annotations
 from functools import lru_cache
 from typing import Any
 
-from driftlab.core.config import PLANT_PRESETS, EpisodeConfig, config_to_dict, dotted_config
+from driftlab.core.config import EpisodeConfig, config_to_dict, dotted_config
+from driftlab.core.configure import PLANT_PRESETS, preset_config
 from driftlab.core.limits import JOB_LIMITS
+from driftlab.core.plants import entry_of
 from driftlab.core.tuning import DEFAULT_BOUNDS, MODEL_BOUNDS, TuningSpec
 
 
@@ -18,13 +20,13 @@ def plant_preset_sets() -> dict[str, dict[str, Any]]:
     default = dotted_config(config_to_dict(EpisodeConfig()))
     out: dict[str, dict[str, Any]] = {}
     for name, make in PLANT_PRESETS.items():
-        entry = make().plant_type
+        entry = entry_of(make())
         if entry.own_car:
             # Switching plant.model loads that car's preset and fits the controller's model to it
-            # (driftlab.core.config), at the sideslip EpisodeConfig.preset drifts it at.
+            # (driftlab.core.config), at the sideslip preset_config drifts it at.
             out[name] = {"plant.model": name, "scenario.sideslip_rad": entry.default_sideslip_rad}
             continue
-        preset = dotted_config(config_to_dict(EpisodeConfig.preset(name)))
+        preset = dotted_config(config_to_dict(preset_config(name)))
         out[name] = {k: v for k, v in preset.items() if default.get(k) != v}
     return out
 
@@ -32,8 +34,8 @@ def plant_preset_sets() -> dict[str, dict[str, Any]]:
 def plant_bounds() -> dict[str, dict[str, list[float]]]:
     """Per plant preset, where its jobs' default search box differs from DEFAULT_BOUNDS
     (driftlab.core.plants.PlantType.theta_bounds)."""
-    return {name: {k: list(v) for k, v in make().plant_type.theta_bounds.items()}
-            for name, make in PLANT_PRESETS.items() if make().plant_type.theta_bounds}
+    return {name: {k: list(v) for k, v in entry_of(make()).theta_bounds.items()}
+            for name, make in PLANT_PRESETS.items() if entry_of(make()).theta_bounds}
 
 
 def job_form() -> dict[str, Any]:

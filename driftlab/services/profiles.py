@@ -20,8 +20,9 @@ from typing import Any
 from sqlalchemy.orm import Session
 
 from driftlab.core.calibration import POINT_SPACING_RAD, VERIFIED_SHARE
-from driftlab.core.config import apply_overrides, dotted_config
-from driftlab.core.mpc import MpcConfig
+from driftlab.core.config import dotted_config
+from driftlab.core.configure import apply_overrides
+from driftlab.core.mpc_config import MpcConfig
 from driftlab.core.tuning import TuningSpec
 from driftlab.core.warm_start import profile_start
 from driftlab.db import profiles

@@ -14,7 +14,8 @@ import numpy as np
 from sqlalchemy.orm import Session, sessionmaker
 
 from driftlab.core.compiled import episode_kernels_cached
-from driftlab.core.config import apply_overrides, config_from_dict, config_to_dict
+from driftlab.core.config import config_to_dict
+from driftlab.core.configure import apply_overrides, config_from_dict
 from driftlab.core.drivability import check_drivable, drift_window
 from driftlab.core.errors import ConfigError
 from driftlab.core.statuses import JobStatus

@@ -189,7 +189,7 @@ class _Lease:
 def _fit_config(factory: sessionmaker[Session], job_id: int) -> None:
     """A job queued with its config still to be fitted to its plant (parsing does no physics: POST /api/jobs and
     `driftlab tune` store it so) is fitted once, here, off the server's request path, and stored fitted: what every
-    episode of it runs, and what re-runs it, is the stored config (driftlab.core.config.fitted)."""
+    episode of it runs, and what re-runs it, is the stored config (driftlab.core.configure.fitted)."""
     with storage.snapshot(factory) as session:
         spec = TuningSpec.from_dict(storage.get_job(session, job_id=job_id).spec)
     if not spec.config.to_fit:

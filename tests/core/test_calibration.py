@@ -16,8 +16,9 @@ from driftlab.core.calibration import (
     split_drivable,
     weights_of,
 )
-from driftlab.core.config import EpisodeConfig, apply_overrides
-from driftlab.core.mpc import MpcConfig
+from driftlab.core.config import EpisodeConfig
+from driftlab.core.configure import apply_overrides, preset_config
+from driftlab.core.mpc_config import MpcConfig
 from driftlab.core.robust import RESCORE_SEED_BASE
 
 
@@ -38,7 +39,7 @@ def test_the_default_points_tile_the_cars_window_on_its_circle():
     from driftlab.core.drivability import drivable_reason
     from driftlab.services.profiles import drift_distance
 
-    config = EpisodeConfig.preset("commonroad_std")
+    config = preset_config("commonroad_std")
     points = default_points(config)
     assert points[-2:] == [CalibrationPoint(0.5, 30.0), CalibrationPoint(0.5, 52.0)]
     on_circle = points[:-2]
@@ -53,7 +54,7 @@ def test_the_default_points_tile_the_cars_window_on_its_circle():
 
 
 def test_points_outside_the_cars_window_are_set_aside_with_the_reason():
-    inside, outside = split_drivable(EpisodeConfig.preset("commonroad_std"),
+    inside, outside = split_drivable(preset_config("commonroad_std"),
                                      [CalibrationPoint(0.5, 44.0), CalibrationPoint(0.2, 44.0)])
     assert [p for p, _ in inside] == [CalibrationPoint(0.5, 44.0)]
     assert inside[0][1].scenario.sideslip_rad == 0.5

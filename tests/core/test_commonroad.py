@@ -23,20 +23,22 @@ from driftlab.core.commonroad.parameters import (
 )
 from driftlab.core.commonroad.std import std_derivatives
 from driftlab.core.commonroad.weights import std_weights
-from driftlab.core.config import (
-    EpisodeConfig,
-    Theta,
-    apply_overrides,
-    config_from_document,
-    config_to_dict,
-    fitted,
-)
+from driftlab.core.config import EpisodeConfig, Theta, config_to_dict
+from driftlab.core.configure import apply_overrides, config_from_document, fitted, preset_config
 from driftlab.core.drivability import drivable_reason
 from driftlab.core.episode import run_episode
 from driftlab.core.equilibrium import drift_equilibrium
 from driftlab.core.errors import ConfigError, NoEquilibriumError, OutsideDriftWindowError
-from driftlab.core.mpc import MpcConfig
+from driftlab.core.mpc_config import MpcConfig
+from driftlab.core.plants import built_in, make_plant
 from driftlab.core.vehicle import pack_params
+
+STD, MB = built_in("commonroad_std"), built_in("commonroad_mb")
+
+
+def _stepper(entry):
+    """The stepper of the entry's vehicle 2 (what a car's yaw answer is read from)."""
+    return entry.build(entry.preset(2), None)
 
 
 @pytest.mark.parametrize("vehicle_id", [2, 3])
@@ -82,7 +84,7 @@ def test_the_low_speed_countersteer_states_hold_only_by_a_frozen_front_wheel():
 
 
 def test_the_controllers_model_drifts_where_the_car_does_on_both_circles():
-    vehicle = fitted_model_vehicle(2, 44.0, 0.5)
+    vehicle = fitted_model_vehicle(2, 44.0, 0.5, STD)
     car = commonroad_drifts(2, 44.0, 0.5)[0]
     left = drift_equilibrium(44.0, -0.5, pack_params(vehicle))
     right = drift_equilibrium(44.0, 0.5, pack_params(vehicle))
@@ -90,12 +92,12 @@ def test_the_controllers_model_drifts_where_the_car_does_on_both_circles():
     assert abs(left.drive_force_n - vehicle.mass_kg * car.acceleration_mps2) < 1e-3
     assert right.speed_mps == left.speed_mps and right.steer_rad == -left.steer_rad
     # The offsets are the model's: the plant's own car never carries them.
-    assert EpisodeConfig.preset("commonroad_std").plant.vehicle(vehicle).steer_offset_rad == 0.0
+    assert preset_config("commonroad_std").plant.vehicle(vehicle).steer_offset_rad == 0.0
 
 
 def test_a_commonroad_config_is_one_key_and_refuses_what_cannot_drift():
     config = apply_overrides(EpisodeConfig(), {"plant.model": "commonroad_std", "scenario.sideslip_rad": 0.5})
-    assert config == EpisodeConfig.preset("commonroad_std") and drivable_reason(config) is None
+    assert config == preset_config("commonroad_std") and drivable_reason(config) is None
     with pytest.raises(ConfigError, match="front-wheel drive"):
         apply_overrides(config, {"plant.commonroad_vehicle": 1})
     with pytest.raises(ConfigError, match="plant.tyre_c_scale shapes DriftLab's own plant"):
@@ -125,7 +127,7 @@ def test_parsing_a_commonroad_config_does_no_physics_and_its_fit_is_what_parsing
     assert config_from_document(stored) == parsed and calls == []  # stored and read back: still to be fitted
     done = fitted(parsed)
     assert len(calls) == 1 and done.to_fit == frozenset()
-    assert done.vehicle == fitted_model_vehicle(2, 41.0, 0.53) and done.vehicle != EpisodeConfig().vehicle
+    assert done.vehicle == fitted_model_vehicle(2, 41.0, 0.53, STD) and done.vehicle != EpisodeConfig().vehicle
     assert done.plant.initial_rear_slip == pytest.approx(commonroad_drifts(2, 41.0, 0.53)[0].rear_slip, abs=1e-4)
     assert config_from_document(config_to_dict(done)) == done  # fitted, it is stored in full and parsed as is
     # A model setting given on top of a config still to be fitted changes the fitted model (`--plant P --set
@@ -145,14 +147,14 @@ def test_without_the_package_the_error_names_the_extra(monkeypatch):
 
 
 def test_an_std_episode_is_a_pure_function_of_its_arguments():
-    config = EpisodeConfig.preset("commonroad_std")
+    config = preset_config("commonroad_std")
     first, again = (run_episode(Theta(), config, seed=4) for _ in range(2))
     assert first.J == again.J and np.array_equal(first.trajectory, again.trajectory)
     assert first.trajectory[0, 4] == pytest.approx(commonroad_drifts(2, 44.0, 0.5)[0].speed_mps, abs=0.5)
 
 
 def test_the_plant_key_brings_the_cars_controller_and_switching_back_restores_the_default():
-    config = EpisodeConfig.preset("commonroad_std")
+    config = preset_config("commonroad_std")
     assert config.mpc == std_weights() and config.scenario.sideslip_rad == 0.5
     back = apply_overrides(config, {"plant.model": "driftlab", "scenario.sideslip_rad": 0.4})
     assert back == EpisodeConfig()
@@ -242,7 +244,7 @@ def _published(config: EpisodeConfig, **more) -> EpisodeConfig:
 
 def _published_mb_without_the_validity_rule(max_time_s: float) -> EpisodeConfig:
     """The loop's mechanics past the first second: the published MB, its episodes not ended as invalid."""
-    return _published(EpisodeConfig.preset("commonroad_mb"),
+    return _published(preset_config("commonroad_mb"),
                       **{"failure.invalid_ends_episode": False, "scenario.max_time_s": max_time_s})
 
 
@@ -293,11 +295,10 @@ def test_mbs_substep_integrates_a_control_step_as_a_fine_one_does(monkeypatch):
 def test_the_mb_model_answers_the_steering_as_the_car_does_and_std_keeps_its_read_off_grip():
     from driftlab.core.commonroad.mb_equilibrium import mb_main_drift
     from driftlab.core.commonroad.steering_gain import car_yaw_response, model_yaw_response
-    from driftlab.core.plant import PlantConfig
 
     drift = mb_main_drift(2, 44.0, 0.5)
-    car, steering, _ = car_yaw_response(PlantConfig.commonroad_mb(2), drift, 44.0)
-    fitted = fitted_model_vehicle(2, 44.0, 0.5, "commonroad_mb")
+    car, steering, _ = car_yaw_response(_stepper(MB), drift, 44.0)
+    fitted = fitted_model_vehicle(2, 44.0, 0.5, MB)
     right = mb_main_drift(2, 44.0, 0.5, right=True)
     read_off = _placed_at_drift(replace(fitted, front_grip_scale=1.0), 44.0, 0.5, drift, right)
     assert car > 3 * model_yaw_response(read_off, drift, steering)  # the mismatch the fit removes
@@ -309,7 +310,7 @@ def test_the_mb_model_answers_the_steering_as_the_car_does_and_std_keeps_its_rea
     eq = drift_equilibrium(44.0, -0.5, pack_params(fitted))
     assert eq.speed_mps == pytest.approx(drift.speed_mps, abs=1e-6) and eq.steer_rad == pytest.approx(
         drift.steer_rad, abs=1e-6)
-    assert fitted_model_vehicle(2, 44.0, 0.5).front_grip_scale == 1.0  # STD's front axle is saturated
+    assert fitted_model_vehicle(2, 44.0, 0.5, STD).front_grip_scale == 1.0  # STD's front axle is saturated
 
 
 def test_the_mb_model_answers_more_drive_with_more_yaw_rate_as_the_car_does():
@@ -318,13 +319,12 @@ def test_the_mb_model_answers_more_drive_with_more_yaw_rate_as_the_car_does():
     more, as the car does, so the MPC no longer pushes the drive the wrong way to hold the sideslip."""
     from driftlab.core.commonroad.mb_equilibrium import mb_main_drift
     from driftlab.core.commonroad.steering_gain import car_yaw_response, model_yaw_response
-    from driftlab.core.plant import PlantConfig
 
     drift = mb_main_drift(2, 44.0, 0.5)
-    car, steering, drive = car_yaw_response(PlantConfig.commonroad_mb(2), drift, 44.0, steer_step_rad=0.0,
+    car, steering, drive = car_yaw_response(_stepper(MB), drift, 44.0, steer_step_rad=0.0,
                                             drive_step_n=500.0)
-    fitted = fitted_model_vehicle(2, 44.0, 0.5, "commonroad_mb")
-    assert fitted.rear_friction_circle and not fitted_model_vehicle(2, 44.0, 0.5).rear_friction_circle
+    fitted = fitted_model_vehicle(2, 44.0, 0.5, MB)
+    assert fitted.rear_friction_circle and not fitted_model_vehicle(2, 44.0, 0.5, STD).rear_friction_circle
     paper_coupling = replace(fitted, rear_friction_circle=False)
     assert car > 0.02  # rad/s, mean over 0.1..0.3 s
     assert model_yaw_response(fitted, drift, steering, drive) > 0.5 * car
@@ -335,11 +335,11 @@ def test_an_mb_plant_starts_steady_in_its_own_drift():
     """With no variation the episode's first steps hold MB's drift: every wheel at its own slip, the body rolled (the
     published model's: with lift-off its inner front wheel, pulling here, lifts)."""
     from driftlab.core.commonroad.mb_equilibrium import mb_main_drift
-    from driftlab.core.plant import DRIVE, SIDESLIP, SPEED, STEER, YAW_RATE, PlantConfig, make_plant
+    from driftlab.core.plant import DRIVE, SIDESLIP, SPEED, STEER, YAW_RATE
 
     drift = mb_main_drift(2, 44.0, 0.5)
-    plant = make_plant(replace(PlantConfig.commonroad_mb(2), wheel_liftoff=False),
-                       fitted_model_vehicle(2, 44.0, 0.5, "commonroad_mb"))
+    plant = make_plant(replace(MB.preset(2), wheel_liftoff=False),
+                       fitted_model_vehicle(2, 44.0, 0.5, MB))
     plant.start_in_drift_of(44.0, 0.5)
     loop = np.zeros(8)
     loop[SPEED], loop[SIDESLIP], loop[YAW_RATE] = drift.speed_mps, drift.sideslip_rad, drift.yaw_rate_radps
@@ -356,9 +356,10 @@ def test_a_plant_stepped_in_python_runs_the_same_loop_bit_for_bit():
     episode bit for bit; DriftLab's own plant registered as a Python plant against its compiled step: the same."""
     from dataclasses import replace
 
-    from driftlab.core.plant import PLANT_EXTERNAL, Plant, register_plant
+    from driftlab.core.plant import PLANT_EXTERNAL, Plant
+    from driftlab.core.plants import register_plant
 
-    config = apply_overrides(EpisodeConfig.preset("commonroad_std"), {"scenario.max_time_s": 3.0})
+    config = apply_overrides(preset_config("commonroad_std"), {"scenario.max_time_s": 3.0})
     reference = replace(config, plant=replace(config.plant, model="commonroad_std_reference"))
     compiled, python = run_episode(Theta(), config, seed=2), run_episode(Theta(), reference, seed=2)
     assert len(compiled.trajectory) > 50 and np.array_equal(compiled.trajectory, python.trajectory)
@@ -373,20 +374,19 @@ def test_a_plant_stepped_in_python_runs_the_same_loop_bit_for_bit():
     a, b = run_episode(Theta(), default, seed=5), run_episode(Theta(), mine, seed=5)  # a whole figure 8
     assert a.completed and a.J == b.J and np.array_equal(a.trajectory, b.trajectory)
     with pytest.raises(ConfigError, match="or a registered plant"):
-        replace(default.plant, model="not_registered")
+        apply_overrides(default, {"plant.model": "not_registered"})
 
 
 def test_a_model_with_matched_drive_coupling_answers_the_drive_as_the_car_does():
     """STD's car, like MB's, answers more drive with more yaw rate (its rear slides further); the paper's model
     does not answer and the whole friction circle answers twice as strongly: the coupling is matched to the car."""
     from driftlab.core.commonroad.steering_gain import DRIVE_STEP_N, car_yaw_response, model_yaw_response
-    from driftlab.core.plant import PlantConfig
 
     drift = commonroad_drifts(2, 44.0, 0.5)[0]
-    car, steering, drive = car_yaw_response(PlantConfig.commonroad_std(2), drift, 44.0, steer_step_rad=0.0,
+    car, steering, drive = car_yaw_response(_stepper(STD), drift, 44.0, steer_step_rad=0.0,
                                             drive_step_n=DRIVE_STEP_N)
-    paper = fitted_model_vehicle(2, 44.0, 0.5)
-    matched = fitted_model_vehicle(2, 44.0, 0.5, drive_coupling=True)
+    paper = fitted_model_vehicle(2, 44.0, 0.5, STD)
+    matched = fitted_model_vehicle(2, 44.0, 0.5, STD, drive_coupling=True)
     assert car > 0.015 and abs(model_yaw_response(paper, drift, steering, drive)) < 0.002
     assert matched.rear_friction_circle and 0.5 < matched.rear_coupling < 0.95
     assert model_yaw_response(matched, drift, steering, drive) == pytest.approx(car, abs=2e-4)
@@ -400,9 +400,8 @@ def test_the_published_mbs_episode_ends_invalid_once_a_wheel_has_pulled_the_road
     from driftlab.core.commonroad.mb import mb_wheel_loads
     from driftlab.core.commonroad.parameters import package_parameters
     from driftlab.core.episode import failure_penalty
-    from driftlab.core.plant import make_plant
 
-    config = _published(EpisodeConfig.preset("commonroad_mb"), **{"scenario.max_time_s": 2.0})
+    config = _published(preset_config("commonroad_mb"), **{"scenario.max_time_s": 2.0})
     plant = make_plant(config.plant, config.vehicle)
     loop = np.zeros(8)
     loop[4] = 20.0
@@ -423,7 +422,7 @@ def test_the_published_mbs_episode_ends_invalid_once_a_wheel_has_pulled_the_road
     ruleless = run_episode(Theta(), apply_overrides(config, {"failure.invalid_ends_episode": False}), seed=0)
     assert ruleless.status != "invalid" and ruleless.metrics.duration_s > result.metrics.duration_s
     assert ruleless.metrics.plant_validity["negative_wheel_load_s"] > limit_s
-    assert run_episode(Theta(), apply_overrides(EpisodeConfig.preset("commonroad_std"),
+    assert run_episode(Theta(), apply_overrides(preset_config("commonroad_std"),
                                                 {"scenario.max_time_s": 1.0}), seed=0).metrics.plant_validity is None
 
 
@@ -451,10 +450,10 @@ def test_a_lifted_wheel_carries_no_force_and_a_loaded_one_is_the_published_model
 
 
 def test_mb_lifts_its_wheels_by_default_and_the_published_model_is_one_setting_away():
-    mb = EpisodeConfig.preset("commonroad_mb")
+    mb = preset_config("commonroad_mb")
     assert mb.plant.wheel_liftoff and mb.failure.invalid_ends_episode
     assert not _published(mb).plant.wheel_liftoff
-    assert not EpisodeConfig.preset("commonroad_std").plant.wheel_liftoff
+    assert not preset_config("commonroad_std").plant.wheel_liftoff
     with pytest.raises(ConfigError, match=r"plant\.wheel_liftoff applies to a plant with wheel loads"):
         apply_overrides(EpisodeConfig(), {"plant.wheel_liftoff": True})
 
@@ -463,7 +462,7 @@ def test_with_lift_off_an_episode_reports_time_off_the_road_and_on_two_wheels():
     """MB's BMW reaches ~0.96 g in its 0.5 rad, 44 m drift, 94% of the lateral acceleration at which its steady
     states' inner loads sum to zero: its inner front wheel lifts at once. The record keeps the time any wheel was off
     the road apart from the time two wheels of one side were, which alone is outside the model with lift-off."""
-    result = run_episode(Theta(), apply_overrides(EpisodeConfig.preset("commonroad_mb"),
+    result = run_episode(Theta(), apply_overrides(preset_config("commonroad_mb"),
                                                   {"scenario.max_time_s": 3.0}), seed=0)
     validity = result.metrics.plant_validity
     assert validity["wheel_liftoff"] is True
@@ -482,7 +481,7 @@ def test_a_refused_sideslip_names_where_the_car_and_its_model_both_drift():
     """The window the refusal names, checked point by point: the car's main drift countersteers both ways at its
     edges and not one step outside. The model read off the car's tyres drifts up to 0.57 rad; above, its front grip
     is raised until it does, so the car's own window is the job's."""
-    config = fitted(EpisodeConfig.preset("commonroad_std"))
+    config = fitted(preset_config("commonroad_std"))
     with pytest.raises(ConfigError) as refused:
         fitted(apply_overrides(config, {"scenario.sideslip_rad": 0.3}))
     found = re.search(r"needs a scenario.sideslip_rad in (\d\.\d\d)-(\d\.\d\d) rad", str(refused.value))
@@ -520,5 +519,5 @@ def test_an_std_car_starts_its_rear_wheel_at_the_slip_of_its_own_drift():
     # A config that names its start (as every stored job's does) keeps it when it is loaded again.
     assert config_from_document(config_to_dict(old_config := apply_overrides(
         EpisodeConfig(), {**vanagon, "plant.initial_rear_slip": -0.5}))).plant == old_config.plant
-    assert fitted(EpisodeConfig.preset("commonroad_std")).plant.initial_rear_slip == pytest.approx(
+    assert fitted(preset_config("commonroad_std")).plant.initial_rear_slip == pytest.approx(
         commonroad_drifts(2, 44.0, 0.5)[0].rear_slip, abs=1e-4)

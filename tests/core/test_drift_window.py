@@ -8,7 +8,7 @@ import re
 
 import pytest
 
-from driftlab.core.config import EpisodeConfig, apply_overrides, fitted
+from driftlab.core.configure import apply_overrides, fitted, preset_config
 from driftlab.core.drivability import drift_window
 from driftlab.core.errors import ConfigError, OutsideDriftWindowError
 from driftlab.core.plants import CommonRoadVariant, plant_type, register_plant
@@ -21,7 +21,7 @@ def light_bmw():
     if plant_type("light_bmw_test") is None:
         register_plant("light_bmw_test", CommonRoadVariant(LIGHT))
         register_plant("light_bmw_engine_test", CommonRoadVariant({**LIGHT, "longitudinal.a_max": 1 / 0.85}))
-    return apply_overrides(EpisodeConfig.preset("commonroad_std"), {"plant.model": "light_bmw_test"})
+    return apply_overrides(preset_config("commonroad_std"), {"plant.model": "light_bmw_test"})
 
 
 def test_a_circle_without_a_drift_says_the_engine_is_short_and_where_the_car_drifts(light_bmw):
@@ -70,7 +70,7 @@ def test_the_window_of_a_circle_is_where_both_its_drifts_exist(light_bmw):
 
 def test_a_sideslip_inside_the_window_without_a_fit_of_the_model_names_no_range_that_holds_it():
     """The VW Vanagon at 0.69 rad, 44 m drifts both ways; its coupled rear model has no friction reaching its speed."""
-    config = apply_overrides(EpisodeConfig.preset("commonroad_std"),
+    config = apply_overrides(preset_config("commonroad_std"),
                              {"plant.commonroad_vehicle": 3, "scenario.sideslip_rad": 0.69,
                               "plant.model_drive_coupling": True})
     with pytest.raises(ConfigError) as refused:

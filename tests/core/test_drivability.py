@@ -2,7 +2,8 @@
 
 import pytest
 
-from driftlab.core.config import EpisodeConfig, apply_overrides
+from driftlab.core.config import EpisodeConfig
+from driftlab.core.configure import apply_overrides, preset_config
 from driftlab.core.drivability import NotDrivableError, check_drivable, drift_window, drivable_reason
 from driftlab.core.equilibrium import drift_equilibrium
 from driftlab.core.errors import ConfigError, NoEquilibriumError
@@ -11,7 +12,7 @@ from driftlab.core.vehicle import pack_params
 
 def test_the_presets_are_drivable():
     assert drivable_reason(EpisodeConfig()) is None
-    assert drivable_reason(EpisodeConfig.preset(plant="nominal", controller="paper")) is None
+    assert drivable_reason(preset_config(plant="nominal", controller="paper")) is None
 
 
 @pytest.mark.parametrize("change", [{"plant.friction_scale": 1.15}, {"plant.tyre_c_scale": 1.0},
@@ -32,7 +33,7 @@ def test_default_plant_changes_without_a_drift_are_refused_naming_the_plant(chan
 def test_each_circle_of_unequal_radii_is_checked():
     config = apply_overrides(EpisodeConfig(), {"scenario.right_radius_m": 60.0})
     assert "right circle" in drivable_reason(config) and "60 m" in drivable_reason(config)
-    nominal = apply_overrides(EpisodeConfig.preset("nominal"), {"scenario.left_radius_m": 30.0,
+    nominal = apply_overrides(preset_config("nominal"), {"scenario.left_radius_m": 30.0,
                                                                  "scenario.right_radius_m": 60.0})
     assert drivable_reason(nominal) is None
 

@@ -6,12 +6,13 @@ import math
 import numpy as np
 import pytest
 
-from driftlab.core.config import PAPER_THETA, EpisodeConfig, ScenarioConfig, Theta, apply_overrides
+from driftlab.core.config import PAPER_THETA, EpisodeConfig, ScenarioConfig, Theta
+from driftlab.core.configure import apply_overrides, preset_config
 from driftlab.core.episode import COL, failure_penalty, run_episode
 from driftlab.core.errors import ConfigError
 from driftlab.core.planner import Phase
 
-NOMINAL = EpisodeConfig.preset(plant="nominal", controller="paper")
+NOMINAL = preset_config(plant="nominal", controller="paper")
 
 
 @pytest.fixture(scope="module")
@@ -78,7 +79,7 @@ def driving_rows(r):
 def test_a_theta_whose_model_cannot_drift_is_refused_saying_why():
     from driftlab.core.episode import refusal_reason, runs
 
-    std = EpisodeConfig.preset("commonroad_std")
+    std = preset_config("commonroad_std")
     r = run_episode(Theta(model_c_scale=0.85), std)
     assert r.status == "refused" and len(r.trajectory) == 0 and r.metrics.duration_s == 0.0
     assert "model_c_scale 0.85" in r.metrics.failure_reason and "no drift to hold" in r.metrics.failure_reason
@@ -92,8 +93,8 @@ def test_the_optimizers_quick_check_answers_as_the_refusal_does_across_the_corre
     a part of the box has no drift (refused), the rest has one: the two agree on both, and on unequal radii."""
     from driftlab.core.episode import refusal_reason, runs
 
-    for config in (EpisodeConfig.preset("commonroad_std"),
-                   apply_overrides(EpisodeConfig.preset("commonroad_std"), {"scenario.right_radius_m": 30.0})):
+    for config in (preset_config("commonroad_std"),
+                   apply_overrides(preset_config("commonroad_std"), {"scenario.right_radius_m": 30.0})):
         answers = []
         for mu in np.linspace(0.85, 1.2, 5):
             for c in np.linspace(0.85, 1.3, 6):
@@ -153,7 +154,7 @@ def test_default_controller_drifts_the_eight_on_the_mismatched_plant(seed):
 
 
 def test_paper_controller_fails_on_the_mismatched_plant():
-    r = run_episode(DEFAULT_PLANT_THETA, EpisodeConfig.preset(controller="paper"))
+    r = run_episode(DEFAULT_PLANT_THETA, preset_config(controller="paper"))
     assert r.status != "completed"
 
 

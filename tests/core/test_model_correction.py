@@ -2,7 +2,8 @@
 
 import pytest
 
-from driftlab.core.config import EpisodeConfig, Theta, apply_overrides
+from driftlab.core.config import EpisodeConfig, Theta
+from driftlab.core.configure import apply_overrides, preset_config
 from driftlab.core.episode import run_episode
 from driftlab.core.errors import ConfigError
 from driftlab.core.tuning import MODEL_BOUNDS, TuningSpec
@@ -20,7 +21,7 @@ def test_the_corrections_scale_the_models_friction_and_tyre_c_only():
 def test_knowing_the_plants_tyre_c_brings_the_car_onto_the_line():
     """Nominal plant with C x 1.2: the model as configured drifts the 8 ~1.3 m off the line; corrected by the
     plant's own factor the offset-free target is the plant's drift and the error falls below 0.5 m."""
-    config = apply_overrides(EpisodeConfig.preset(plant="nominal"), {"plant.tyre_c_scale": 1.2})
+    config = apply_overrides(preset_config(plant="nominal"), {"plant.tyre_c_scale": 1.2})
     plain = run_episode(Theta(), config)
     corrected = run_episode(Theta(model_c_scale=1.2), config)
     assert plain.completed and corrected.completed
@@ -58,9 +59,9 @@ def test_the_local_phase_is_on_for_driftlabs_plants_and_off_for_a_commonroad_car
     default = TuningSpec()
     assert default.local_phase and default.optimizer_options["local_points"] == 11
     assert default.optimizer_options["local_radius"] == {name: 0.05 for name in MODEL_BOUNDS}
-    std = TuningSpec(config=EpisodeConfig.preset("commonroad_std"))
+    std = TuningSpec(config=preset_config("commonroad_std"))
     assert std.local_phase is False and "local_points" not in std.optimizer_options
-    assert TuningSpec(config=EpisodeConfig.preset("commonroad_std"), local_phase=True).local_phase
+    assert TuningSpec(config=preset_config("commonroad_std"), local_phase=True).local_phase
     assert "local_points" not in TuningSpec(model_correction=False).optimizer_options  # four dimensions: no phase
     assert TuningSpec.from_dict(std.to_dict()).local_phase is False  # stored as what it resolved to
     with pytest.raises(ConfigError, match="local_phase must be true or false"):

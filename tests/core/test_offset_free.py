@@ -4,7 +4,8 @@ to the plant's own drift (checked against the plant's equilibrium, solved indepe
 import numpy as np
 import pytest
 
-from driftlab.core.config import EpisodeConfig, Theta, apply_overrides
+from driftlab.core.config import Theta
+from driftlab.core.configure import apply_overrides, preset_config
 from driftlab.core.controller import hold_estimate
 from driftlab.core.episode import run_episode
 from driftlab.core.equilibrium import drift_equilibrium
@@ -56,7 +57,7 @@ def test_reference_moves_to_the_plants_own_drift(friction):
     """On the nominal car with other friction, the drift at R 44, beta 0.4 is slower or faster than the
     model's: the reference speed settles at the plant's equilibrium in the first sustained drift, and the car
     drives nearer the plant's drift than the model's (it trades some speed error for the path, not settled)."""
-    config = apply_overrides(EpisodeConfig.preset(plant="nominal"), {"plant.friction_scale": friction})
+    config = apply_overrides(preset_config(plant="nominal"), {"plant.friction_scale": friction})
     plant_eq = drift_equilibrium(44.0, -0.4, config.plant.packed_params(config.vehicle))
     model_eq = drift_equilibrium(44.0, -0.4, pack_params(config.vehicle))
     assert abs(plant_eq.speed_mps - model_eq.speed_mps) > 0.9  # a real shift, not a rounding
@@ -79,7 +80,7 @@ def test_the_paper_controller_has_no_offset_free_parts():
 def test_unequal_radii_drift_each_circle_at_its_own_equilibrium():
     """The paper's future work: a 30 m left circle and a 44 m right one, each with its own reference drift, and
     the reference speed moved to the next circle's before each flick (scenario.speed_change_accel_mps2)."""
-    config = apply_overrides(EpisodeConfig.preset(plant="nominal"), {"scenario.left_radius_m": 30.0,
+    config = apply_overrides(preset_config(plant="nominal"), {"scenario.left_radius_m": 30.0,
                                                                        "scenario.right_radius_m": 44.0})
     r = run_episode(Theta(), config)
     assert r.status == "completed"
@@ -103,7 +104,7 @@ def test_unequal_radii_drift_each_circle_at_its_own_equilibrium():
 
 def test_unequal_radii_scale_dv_by_each_circles_drift_speed():
     """dV is a correction at the left circle's drift speed; the right circle's moves by the same share."""
-    config = apply_overrides(EpisodeConfig.preset(plant="nominal"), {"scenario.left_radius_m": 30.0,
+    config = apply_overrides(preset_config(plant="nominal"), {"scenario.left_radius_m": 30.0,
                                                                        "scenario.right_radius_m": 44.0})
     r = run_episode(Theta(dV=0.5), config)
     assert r.status == "completed"

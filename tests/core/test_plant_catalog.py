@@ -7,9 +7,10 @@ from pathlib import Path
 
 import pytest
 
-from driftlab.core.config import EpisodeConfig, apply_overrides, fitted
+from driftlab.core.config import EpisodeConfig
+from driftlab.core.configure import apply_overrides, fitted, preset_config
 from driftlab.core.errors import ConfigError
-from driftlab.core.mpc import MpcConfig
+from driftlab.core.mpc_config import MpcConfig
 from driftlab.core.plant import PlantConfig
 from driftlab.core.plants import CommonRoadPlantType, PlantType, plant_type, register_plant
 from driftlab.core.vehicle import VehicleParams
@@ -32,9 +33,9 @@ def test_nothing_outside_the_catalog_tests_a_plants_name():
 def test_each_built_in_plant_is_one_catalog_entry_with_its_presets():
     std, mb = plant_type("commonroad_std"), plant_type("commonroad_mb")
     assert isinstance(std, CommonRoadPlantType) and not std.multibody and mb.multibody
-    assert PlantConfig.commonroad_std(3) == std.preset(3) and std.preset(3).substep_s == 0.002
+    assert std.preset(3).substep_s == 0.002
     assert plant_type("driftlab").local_phase and not std.local_phase
-    assert EpisodeConfig.preset("commonroad_std").mpc == std.controller() != MpcConfig()
+    assert preset_config("commonroad_std").mpc == std.controller() != MpcConfig()
     assert plant_type("nonexistent") is None
     # How far each car steers (the package's steering.max), which a calibration also tries the controller with.
     assert std.steering_reach_rad(std.preset(2)) == 1.066 and mb.steering_reach_rad(mb.preset(3)) == 1.023
@@ -82,7 +83,7 @@ def test_a_commonroad_variant_drives_its_own_scaled_parameters():
     # Its drift is its own: 15 % less grip drifts slower (V^2 ~ mu g R), and the controller's model follows it.
     own, bmw = commonroad_drifts(car, 44.0, 0.5)[0], commonroad_drifts(2, 44.0, 0.5)[0]
     assert own.speed_mps < bmw.speed_mps - 0.5
-    config = fitted(EpisodeConfig.preset("scaled_bmw"))
+    config = fitted(preset_config("scaled_bmw"))
     assert config.plant.model == "scaled_bmw" and config.scenario.sideslip_rad == 0.5
     assert config.vehicle.mass_kg == pytest.approx(1.3 * published.m)
     assert config.mpc == plant_type("commonroad_std").controller()  # the base car's weights until calibrated
@@ -94,7 +95,7 @@ def test_a_variant_with_no_scales_is_its_base_car_bit_for_bit():
     from driftlab.core.plants import CommonRoadVariant
 
     register_plant("same_bmw", CommonRoadVariant({}))
-    same, bmw = fitted(EpisodeConfig.preset("same_bmw")), fitted(EpisodeConfig.preset("commonroad_std"))
+    same, bmw = fitted(preset_config("same_bmw")), fitted(preset_config("commonroad_std"))
     assert same.vehicle == bmw.vehicle and same.mpc == bmw.mpc
     ours, theirs = run_episode(Theta(), same, seed=3), run_episode(Theta(), bmw, seed=3)
     assert ours.J == theirs.J and (ours.trajectory == theirs.trajectory).all()
@@ -105,23 +106,23 @@ def test_a_variant_refuses_a_parameter_the_package_does_not_have():
 
     register_plant("typo_bmw", CommonRoadVariant({"tire.p_dy9": 0.9}))
     with pytest.raises(ConfigError, match="p_dy9") as refused:
-        EpisodeConfig.preset("typo_bmw")
+        preset_config("typo_bmw")
     assert refused.value.field == "plant.model"
     with pytest.raises(ConfigError, match="built on one of commonroad_std, commonroad_mb"):
         CommonRoadVariant({"m": 1.1}, base="driftlab")
     with pytest.raises(ConfigError, match="positive"):
         register_plant("negative_bmw", CommonRoadVariant({"m": -1.0}))
-        EpisodeConfig.preset("negative_bmw")
+        preset_config("negative_bmw")
 
 
 def test_a_jobs_default_search_box_is_its_plants():
     from driftlab.core.tuning import DEFAULT_BOUNDS, TuningSpec
 
     assert TuningSpec(config=EpisodeConfig()).bounds["k"] == DEFAULT_BOUNDS["k"]  # the paper's, on DriftLab's plant
-    std = TuningSpec(config=EpisodeConfig.preset("commonroad_std"))
+    std = TuningSpec(config=preset_config("commonroad_std"))
     assert std.bounds["k"][0] < 0.0 < std.bounds["k"][1] and std.bounds["dV"] == (-1.0, 1.0)
     assert std.bounds["c_lr"] == DEFAULT_BOUNDS["c_lr"]
-    given = TuningSpec(config=EpisodeConfig.preset("commonroad_std"), bounds={"k": [0.0, 0.1]})
+    given = TuningSpec(config=preset_config("commonroad_std"), bounds={"k": [0.0, 0.1]})
     assert given.bounds["k"] == (0.0, 0.1) and given.bounds["dV"] == (-1.0, 1.0)  # a given bound wins
     stored = TuningSpec.from_dict(TuningSpec(config=EpisodeConfig()).to_dict())
     assert stored.bounds == TuningSpec(config=EpisodeConfig()).bounds

@@ -9,7 +9,8 @@ import sys
 import numpy as np
 import pytest
 
-from driftlab.core.config import EpisodeConfig, Theta, apply_overrides, config_to_dict
+from driftlab.core.config import EpisodeConfig, Theta, config_to_dict
+from driftlab.core.configure import apply_overrides, preset_config
 from driftlab.core.episode import run_episode
 from driftlab.core.plant import PlantConfig
 from driftlab.core.variation import draw_variation
@@ -86,7 +87,7 @@ def test_same_result_in_a_pool_worker_after_other_episodes(reference):
 def test_seeds_vary_the_default_plant_but_not_the_nominal_one():
     default = [run_episode(Theta(), EpisodeConfig(), seed=s) for s in (0, 1)]
     assert default[0].J != default[1].J
-    nominal = EpisodeConfig.preset(plant="nominal", controller="paper")
+    nominal = preset_config(plant="nominal", controller="paper")
     a, b = (run_episode(Theta(), nominal, seed=s) for s in (0, 7))
     assert a.J == b.J and np.array_equal(a.trajectory, b.trajectory)
 

@@ -7,7 +7,8 @@ import zlib
 
 import numpy as np
 
-from driftlab.core.config import EpisodeConfig, Theta, apply_overrides, config_to_dict
+from driftlab.core.config import EpisodeConfig, Theta, config_to_dict
+from driftlab.core.configure import apply_overrides, preset_config
 from driftlab.core.episode import run_episode
 from driftlab.core.plant import VARIATION_LIMITS
 from driftlab.core.tuning import TuningSpec
@@ -253,7 +254,7 @@ def test_revision_0016_keeps_stored_mb_jobs_on_the_model_they_ran_on(tmp_path):
 
     url = f"sqlite:///{tmp_path / 'v15.db'}"
     engine = create_engine(url)
-    mb_spec = TuningSpec(config=EpisodeConfig.preset("commonroad_mb")).to_dict()
+    mb_spec = TuningSpec(config=preset_config("commonroad_mb")).to_dict()
     del mb_spec["config"]["plant"]["wheel_liftoff"]  # as revision 15 stored it
     for key in ("max_invalid_s", "invalid_ends_episode"):
         del mb_spec["config"]["failure"][key]
@@ -282,5 +283,5 @@ def test_revision_0016_keeps_stored_mb_jobs_on_the_model_they_ran_on(tmp_path):
         assert rescore["plant"]["wheel_liftoff"] is False and rescore["failure"]["invalid_ends_episode"] is False
         assert session.get(CarProfile, 1).document["plant"]["wheel_liftoff"] is False
         fresh = TuningSpec.from_dict(storage.create_job(session, name="new", spec=mb_spec | {
-            "config": TuningSpec(config=EpisodeConfig.preset("commonroad_mb")).to_dict()["config"]}, seed=0).spec)
+            "config": TuningSpec(config=preset_config("commonroad_mb")).to_dict()["config"]}, seed=0).spec)
         assert fresh.config.plant.wheel_liftoff and fresh.config.failure.invalid_ends_episode

@@ -113,10 +113,10 @@ def test_points_two_steps_out_search_only_the_model_the_nearest_calibrated_point
     from types import SimpleNamespace
 
     from driftlab.core.calibration import CalibrationPoint
-    from driftlab.core.config import EpisodeConfig
+    from driftlab.core.configure import preset_config
     from driftlab.services.calibration import _model_candidates, _models_for
 
-    given = EpisodeConfig.preset("commonroad_std")  # 0.5 rad, 44 m
+    given = preset_config("commonroad_std")  # 0.5 rad, 44 m
     run = SimpleNamespace(given=given, request=SimpleNamespace(sets={}))
     every = _model_candidates(given, {})
     assert len(every) == 4  # two rear models x two steering limits

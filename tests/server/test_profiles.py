@@ -62,7 +62,7 @@ def test_a_profile_brings_the_steering_limit_its_weights_were_found_with(tmp_pat
 def test_a_calibration_knows_each_calibrated_cars_newest_weights_then_the_shipped_ones(tmp_path):
     from dataclasses import replace
 
-    from driftlab.core.mpc import MpcConfig
+    from driftlab.core.mpc_config import MpcConfig
     from driftlab.core.plants import plant_type
     from driftlab.services.profiles import known_weight_sets
 

@@ -4,7 +4,8 @@ the downloads and the metrics cut them, and the window the drivability check dec
 import numpy as np
 import pytest
 
-from driftlab.core.config import EpisodeConfig, Theta, apply_overrides
+from driftlab.core.config import EpisodeConfig, Theta
+from driftlab.core.configure import apply_overrides
 from driftlab.core.episode import COLUMNS, run_episode
 from driftlab.core.track import FigureEight
 from driftlab.reports.export import with_lap_column

@@ -230,7 +230,8 @@ class RecordingExecutor(ShuffledExecutor):
 def test_a_runner_fits_a_cars_model_when_it_claims_the_job_and_stores_it_fitted(tmp_path):
     """Creating a job does no physics (POST /api/jobs, `driftlab tune`): its stored config has no controller's model
     yet. The runner that claims it fits the model to the car's drift, stores it, and sends every episode that."""
-    from driftlab.core.config import config_from_document, config_to_dict, fitted
+    from driftlab.core.config import config_to_dict
+    from driftlab.core.configure import config_from_document, fitted
 
     factory = storage.open_database(f"sqlite:///{tmp_path / 'fit.db'}")
     spec = TuningSpec.from_dict({"iterations": 3, "seed_points": 2, "robust_samples": 1, "confirm_samples": 0,

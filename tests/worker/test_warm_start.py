@@ -4,7 +4,8 @@ with the job; and the REST API's edge."""
 
 import pytest
 
-from driftlab.core.config import EpisodeConfig, apply_overrides
+from driftlab.core.config import EpisodeConfig
+from driftlab.core.configure import apply_overrides
 from driftlab.core.errors import ConfigError
 from driftlab.core.tuning import TuningSpec
 from driftlab.core.warm_start import WARM_POINTS

@@ -18,11 +18,7 @@ __all__ = ["PlantDrift", "countersteer_window", "describe_family", "drift_family
 def drift_family(plant_type: Any, vehicle_id: int, radius_m: float, sideslip_rad: float, right: bool = False,
                  friction_scale: float = 1.0, mass_scale: float = 1.0) -> tuple[PlantDrift, ...]:
     """The car's steady drifts at (radius, |sideslip|), left- or ``right``-hand, fastest (the main one) first.
-    ``plant_type``: a CommonRoad catalog entry, or its ``plant.model`` name."""
-    if isinstance(plant_type, str):
-        from driftlab.core.plants import plant_type as entry_of
-
-        plant_type = entry_of(plant_type)
+    ``plant_type``: a CommonRoad catalog entry (driftlab.core.plants.CommonRoadPlantType)."""
     return plant_type.drifts(vehicle_id, radius_m, sideslip_rad, right, friction_scale, mass_scale)
 
 

@@ -177,9 +177,9 @@ class CommonRoadMbPlant:
 
     kind = PLANT_EXTERNAL
 
-    def __init__(self, config: PlantConfig) -> None:
+    def __init__(self, config: PlantConfig, car) -> None:
         self.config = config
-        self.car = config.plant_type.car(config.commonroad_vehicle)
+        self.car = car
         self.params = pack_mb(self.car, friction_scale=config.friction_scale, mass_scale=config.mass_scale,
                               steer_rate_radps=config.steer_rate_radps, wheel_liftoff=config.wheel_liftoff)
         self.actuators = np.append(config.actuator_params(), 1.0 if config.locked_differential else 0.0)

@@ -18,11 +18,21 @@ from typing import Any
 
 from scipy.optimize import brentq
 
-from driftlab.core.commonroad.family import describe_family, drift_family, sideslip_window
+from driftlab.core.commonroad.family import describe_family, drift_family
 from driftlab.core.commonroad.parameters import commonroad_model_vehicle
-from driftlab.core.commonroad.window import CircleWindow, circle_window, elsewhere_text, no_drift_reason, range_text
+from driftlab.core.commonroad.window import (
+    FRONT_GRIP_LIMIT,
+    FRONT_GRIP_STEP,
+    CircleWindow,
+    circle_window,
+    elsewhere_text,
+    no_drift_reason,
+    range_text,
+    widest_front_grip,
+)
 from driftlab.core.equilibrium import drift_equilibrium
 from driftlab.core.errors import ConfigError, NoEquilibriumError, OutsideDriftWindowError
+from driftlab.core.track import tiled_radii
 from driftlab.core.vehicle import VehicleParams, pack_params
 
 
@@ -35,10 +45,10 @@ def _speed_gap(friction: float, base: VehicleParams, radius_m: float, sideslip_r
 
 
 def fitted_model_vehicle(vehicle_id: int, radius_m: float, sideslip_rad: float,
-                         model: Any = "commonroad_std", *, drive_coupling: bool = False) -> VehicleParams:
+                         model: Any, *, drive_coupling: bool = False) -> VehicleParams:
     """The model of CommonRoad vehicle ``vehicle_id`` whose drift at (radius, sideslip) is the car's main drift
-    (``model``: the car's catalog entry or its ``plant.model`` name; a multi-body car's model also answers the
-    steering as strongly as the car does, its front grip, :func:`matched_front_grip`).
+    (``model``: the car's catalog entry, a driftlab.core.plants.CommonRoadPlantType; a multi-body car's model also
+    answers the steering as strongly as the car does, its front grip, :func:`matched_front_grip`).
 
     Raises:
         OutsideDriftWindowError: the sideslip is outside the car's window on this circle (the error carries it).
@@ -47,10 +57,6 @@ def fitted_model_vehicle(vehicle_id: int, radius_m: float, sideslip_rad: float,
     ``drive_coupling``: the model takes the rear friction circle with the coupling at which its yaw rate answers a
     drive step from the drift as the car's does (:func:`matched_rear_coupling`).
     """
-    if isinstance(model, str):
-        from driftlab.core.plants import plant_type
-
-        model = plant_type(model)
     return _fitted(vehicle_id, radius_m, sideslip_rad, model, drive_coupling)
 
 
@@ -87,8 +93,6 @@ def _refusal(exc: ConfigError, vehicle_id: int, radius_m: float, sideslip_rad: f
              drive_coupling: bool | None = None) -> ConfigError:
     """Why a fit at this drift fails, with where a job of this car can drift instead: the sideslips of this circle
     (never a range that holds the refused one), or, where it has none, why not and which other circles it drifts."""
-    from driftlab.core.drivability import tiled_radii
-
     window, beta = circle_window(model, vehicle_id, radius_m), abs(sideslip_rad)
     job = window.job
     if job is not None and job[0] <= beta <= job[1]:  # inside the window, but this model has no fit: not its edge
@@ -114,27 +118,6 @@ def windows_text(model: Any, vehicle_id: int, window: CircleWindow) -> str:
             f"{range_text(window.job)}")
 
 
-@lru_cache(maxsize=64)
-def model_window(vehicle: VehicleParams, radius_m: float) -> tuple[float, float] | None:
-    """[lowest, highest] |sideslip| from 0.2 to 0.8 (to 0.01 rad) at which ``vehicle`` (the controller's model) has
-    a countersteer drift on a circle of ``radius_m`` (None: nowhere)."""
-    params = pack_params(vehicle)
-
-    def drifts(sideslip_rad: float) -> bool:
-        try:
-            drift_equilibrium(radius_m, -sideslip_rad, params)
-        except NoEquilibriumError:
-            return False
-        return True
-    return sideslip_window(drifts)
-
-
-# Where the model read off the car's tyres has no drift at the car's speed, its front grip is raised in these steps
-# until it has (driftlab.core.vehicle.VehicleParams.front_grip_scale), at most to FRONT_GRIP_LIMIT.
-FRONT_GRIP_STEP = 0.05
-FRONT_GRIP_LIMIT = 2.0
-
-
 def _fit(vehicle_id: int, radius_m: float, sideslip_rad: float, model: Any, drive_coupling: bool) -> VehicleParams:
     left = _main_drift(vehicle_id, radius_m, sideslip_rad, False, model)
     right = _main_drift(vehicle_id, radius_m, sideslip_rad, True, model)
@@ -148,11 +131,6 @@ def _fit(vehicle_id: int, radius_m: float, sideslip_rad: float, model: Any, driv
         base = replace(base, rear_friction_circle=True)
         base = replace(base, front_grip_scale=matched_front_grip(base, vehicle_id, radius_m, left, right, model))
     return _placed_with_front_grip(base, radius_m, sideslip_rad, left, right)
-
-
-def widest_front_grip(vehicle: VehicleParams) -> VehicleParams:
-    """``vehicle`` with the most front grip a fit may give it: where it drifts, some fit does."""
-    return replace(vehicle, front_grip_scale=max(vehicle.front_grip_scale, FRONT_GRIP_LIMIT))
 
 
 def _placed_with_front_grip(base: VehicleParams, radius_m: float, sideslip_rad: float, left, right) -> VehicleParams:
@@ -180,7 +158,7 @@ def matched_front_grip(base: VehicleParams, vehicle_id: int, radius_m: float, le
     off its tyre (STD's saturated front axle does). Each candidate is placed at the car's drift first."""
     from driftlab.core.commonroad.steering_gain import car_yaw_response, model_yaw_response
 
-    car, steering, _ = car_yaw_response(model.preset(vehicle_id), left, radius_m)
+    car, steering, _ = car_yaw_response(model.build(model.preset(vehicle_id), VehicleParams()), left, radius_m)
 
     def gap(grip: float) -> float:
         vehicle = _placed_at_drift(replace(base, front_grip_scale=grip), radius_m, left.sideslip_rad, left, right)
@@ -200,8 +178,8 @@ def matched_rear_coupling(base: VehicleParams, vehicle_id: int, radius_m: float,
     whole circle +0.037 to +0.044."""
     from driftlab.core.commonroad.steering_gain import DRIVE_STEP_N, car_yaw_response, model_yaw_response
 
-    car, steering, drive = car_yaw_response(model.preset(vehicle_id), left, radius_m, steer_step_rad=0.0,
-                                            drive_step_n=DRIVE_STEP_N)
+    car, steering, drive = car_yaw_response(model.build(model.preset(vehicle_id), VehicleParams()), left, radius_m,
+                                            steer_step_rad=0.0, drive_step_n=DRIVE_STEP_N)
 
     def gap(coupling: float) -> float:
         vehicle = _placed_at_drift(replace(base, rear_coupling=coupling), radius_m, left.sideslip_rad, left, right)

@@ -141,7 +141,7 @@ def pack_commonroad(car: int | ParameterSet, *, friction_scale: float = 1.0, mas
 def steering_reach_rad(car: int | ParameterSet) -> float:
     """How far the car steers either way [rad] (the package's ``steering.min``/``max``: 1.066 for the BMW 320i,
     1.023 for the VW Vanagon), within what an MPC may be given (driftlab.core.mpc.MpcConfig)."""
-    from driftlab.core.mpc.config import STEER_LIMIT_RANGE_RAD
+    from driftlab.core.mpc_config import STEER_LIMIT_RANGE_RAD
 
     p = package_parameters(car)
     reach = min(abs(float(p.steering.min)), float(p.steering.max))

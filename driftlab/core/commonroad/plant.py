@@ -127,9 +127,8 @@ class CommonRoadStdPlant:
 
     kind = PLANT_COMMONROAD_STD  # stepped inside the loop's kernel
 
-    def __init__(self, config: PlantConfig) -> None:
+    def __init__(self, config: PlantConfig, car) -> None:
         self.config = config
-        car = config.plant_type.car(config.commonroad_vehicle)
         self.params = pack_commonroad(car, friction_scale=config.friction_scale, mass_scale=config.mass_scale,
                                       steer_rate_radps=config.steer_rate_radps)
         self.actuators = config.actuator_params()

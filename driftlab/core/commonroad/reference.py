@@ -1,6 +1,6 @@
 """CommonRoad's STD through the package's own Python functions, as a registered plant (plant.model
 ``commonroad_std_reference``): the reference the compiled port is checked against at the level of whole
-episodes, and an example of a plant that brings no compiled step (driftlab.core.plant.register_plant).
+episodes, and an example of a plant that brings no compiled step (driftlab.core.plants.register_plant).
 
 About 0.1 ms of Python per derivative: ~60x slower than ``commonroad_std``; for checks, not for tuning.
 """
@@ -42,11 +42,10 @@ def _rate(actual: float, command: float, lag_s: float, limit: float) -> float:
 class ReferenceStdPlant:
     kind = PLANT_EXTERNAL
 
-    def __init__(self, config: PlantConfig) -> None:
+    def __init__(self, config: PlantConfig, car) -> None:
         from dataclasses import replace
 
         self.config = config
-        car = config.plant_type.car(config.commonroad_vehicle)
         base = package_parameters(car)
         # The package's object, with the plant's steering rate and scales (as pack_commonroad applies them).
         self.p = replace(base, m=base.m * config.mass_scale, I_z=base.I_z * config.mass_scale,

@@ -20,7 +20,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from driftlab.core.plant import DRIVE, SIDESLIP, SPEED, STEER, YAW_RATE, PlantConfig, make_plant
+from driftlab.core.plant import DRIVE, SIDESLIP, SPEED, STEER, YAW_RATE
 from driftlab.core.vehicle import VehicleParams, drift_derivatives, pack_params
 
 STEP_RAD = 0.02  # toward less countersteer: small enough to stay near the drift, large enough to read
@@ -30,11 +30,11 @@ WINDOW_S = (0.1, 0.3)
 _MODEL_DT_S = 0.001
 
 
-def car_yaw_response(plant_config: PlantConfig, drift, radius_m: float, steer_step_rad: float = STEP_RAD,
+def car_yaw_response(plant, drift, radius_m: float, steer_step_rad: float = STEP_RAD,
                      drive_step_n: float = 0.0) -> tuple[float, np.ndarray, np.ndarray]:
     """(mean yaw-rate change over WINDOW_S after a step of the steering and/or drive command from the car's
-    left-hand ``drift`` [rad/s], the car's steering angle [rad] and drive force [N] every PERIOD_S during it)."""
-    plant = make_plant(plant_config, VehicleParams())
+    left-hand ``drift`` [rad/s], the car's steering angle [rad] and drive force [N] every PERIOD_S during it).
+    ``plant``: the car's stepper (PlantType.build)."""
     if hasattr(plant, "start_in_drift_of"):
         plant.start_in_drift_of(radius_m, drift.sideslip_rad)
     loop = np.zeros(8)

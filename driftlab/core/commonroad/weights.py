@@ -5,7 +5,7 @@ database's own newer profile of a car wins over these (driftlab.services.profile
 
 from __future__ import annotations
 
-from driftlab.core.mpc import MpcConfig
+from driftlab.core.mpc_config import MpcConfig
 
 
 def std_weights() -> MpcConfig:

@@ -9,13 +9,16 @@ gives at drift speed (81%); a variant 15% lighter on 10% grippier tyres needs 4.
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from functools import lru_cache
 from typing import Any
 
 from driftlab.core.commonroad.equilibrium import PlantDrift, drive_cap_mps2, unlimited_drive_drifts
-from driftlab.core.commonroad.family import countersteer_window
+from driftlab.core.commonroad.family import countersteer_window, sideslip_window
 from driftlab.core.commonroad.parameters import commonroad_model_vehicle
+from driftlab.core.equilibrium import drift_equilibrium
+from driftlab.core.errors import NoEquilibriumError
+from driftlab.core.vehicle import VehicleParams, pack_params
 
 Window = tuple[float, float] | None
 
@@ -49,12 +52,36 @@ class CircleWindow:
         return overlap(self.car, self.model)
 
 
+# Where the model read off the car's tyres has no drift at the car's speed, its front grip is raised in these steps
+# until it has (driftlab.core.vehicle.VehicleParams.front_grip_scale), at most to FRONT_GRIP_LIMIT.
+FRONT_GRIP_STEP = 0.05
+FRONT_GRIP_LIMIT = 2.0
+
+
+def widest_front_grip(vehicle: VehicleParams) -> VehicleParams:
+    """``vehicle`` with the most front grip a fit may give it: where it drifts, some fit does."""
+    return replace(vehicle, front_grip_scale=max(vehicle.front_grip_scale, FRONT_GRIP_LIMIT))
+
+
+@lru_cache(maxsize=64)
+def model_window(vehicle: VehicleParams, radius_m: float) -> tuple[float, float] | None:
+    """[lowest, highest] |sideslip| from 0.2 to 0.8 (to 0.01 rad) at which ``vehicle`` (the controller's model) has
+    a countersteer drift on a circle of ``radius_m`` (None: nowhere)."""
+    params = pack_params(vehicle)
+
+    def drifts(sideslip_rad: float) -> bool:
+        try:
+            drift_equilibrium(radius_m, -sideslip_rad, params)
+        except NoEquilibriumError:
+            return False
+        return True
+    return sideslip_window(drifts)
+
+
 @lru_cache(maxsize=64)
 def circle_window(plant_type: Any, vehicle_id: int, radius_m: float) -> CircleWindow:
     """The car's and its model's windows on this circle (the model with its front grip raised as far as a fit raises
     it: where it drifts, some fit does; driftlab.core.commonroad.model_fit)."""
-    from driftlab.core.commonroad.model_fit import model_window, widest_front_grip
-
     car = overlap(countersteer_window(plant_type, vehicle_id, radius_m),
                   countersteer_window(plant_type, vehicle_id, radius_m, right=True))
     model = model_window(widest_front_grip(commonroad_model_vehicle(plant_type.car(vehicle_id))), radius_m)

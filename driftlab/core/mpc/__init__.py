@@ -31,7 +31,6 @@ returns and what the compiled loop reads).
 
 from driftlab.core.mpc.arrays import MpcSolution, QpArrays
 from driftlab.core.mpc.condensing import ReferenceQp
-from driftlab.core.mpc.config import KN, N_PER_KN, N_U, N_X, N_Z, MpcConfig
 from driftlab.core.mpc.estimator import update_estimate
 from driftlab.core.mpc.kernels import (
     clip,
@@ -43,6 +42,7 @@ from driftlab.core.mpc.kernels import (
 )
 from driftlab.core.mpc.model import discretize, scale_inputs, to_scaled
 from driftlab.core.mpc.session import QpSession
+from driftlab.core.mpc_config import KN, N_PER_KN, N_U, N_X, N_Z, MpcConfig
 
 __all__ = ["KN", "N_PER_KN", "N_U", "N_X", "N_Z", "MpcConfig", "MpcSolution", "QpArrays", "QpSession", "ReferenceQp",
            "clip", "constrained_terms", "discretize", "next_commands", "pack_state", "reference_terms", "scale_inputs",

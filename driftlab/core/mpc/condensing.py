@@ -7,7 +7,6 @@ import scipy.linalg
 
 from driftlab.core.equilibrium import Equilibrium, jacobians
 from driftlab.core.mpc.arrays import QpArrays
-from driftlab.core.mpc.config import KN, N_U, N_X, MpcConfig
 from driftlab.core.mpc.kernels import pack_state
 from driftlab.core.mpc.model import (
     discretize,
@@ -18,6 +17,7 @@ from driftlab.core.mpc.model import (
     with_path_errors,
     with_steer_feedback,
 )
+from driftlab.core.mpc_config import KN, N_U, N_X, MpcConfig
 
 
 class ReferenceQp:

@@ -5,8 +5,8 @@ from __future__ import annotations
 
 from numba import njit
 
-from driftlab.core.mpc.config import N_X
 from driftlab.core.mpc.kernels import clip
+from driftlab.core.mpc_config import N_X
 
 
 @njit(cache=True)

@@ -5,7 +5,7 @@ from __future__ import annotations
 import numpy as np
 from numba import njit
 
-from driftlab.core.mpc.config import N_U, N_X
+from driftlab.core.mpc_config import N_U, N_X
 
 
 @njit(cache=True)

@@ -9,7 +9,7 @@ import numpy as np
 import scipy.linalg
 
 from driftlab.core.equilibrium import Equilibrium
-from driftlab.core.mpc.config import KN, N_U, N_X, MpcConfig
+from driftlab.core.mpc_config import KN, N_U, N_X, MpcConfig
 
 
 def to_scaled(state: np.ndarray, inputs: np.ndarray) -> np.ndarray:

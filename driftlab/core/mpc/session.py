@@ -7,8 +7,8 @@ import numpy as np
 
 from driftlab.core.mpc.arrays import MpcSolution
 from driftlab.core.mpc.condensing import ReferenceQp
-from driftlab.core.mpc.config import KN, N_U
 from driftlab.core.mpc.kernels import constrained_terms, next_commands, reference_terms, unconstrained_increments
+from driftlab.core.mpc_config import KN, N_U
 
 
 class QpSession:

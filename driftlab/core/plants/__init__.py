@@ -12,13 +12,14 @@ from collections.abc import Callable
 from importlib.metadata import entry_points
 
 from driftlab.core.errors import ConfigError
+from driftlab.core.plant import PlantConfig
 from driftlab.core.plants.base import ExternalPlantType, PlantType, model_reason
 from driftlab.core.plants.commonroad import COMMONROAD_BUILT_INS, DRIFTLAB_ONLY, CommonRoadPlantType, CommonRoadVariant
 from driftlab.core.plants.driftlab_plant import DriftLabPlantType
 
 __all__ = ["DRIFTLAB_ONLY", "CommonRoadPlantType", "CommonRoadVariant", "ExternalPlantType", "PlantType",
-           "built_in", "built_in_names", "installed_names", "model_reason", "plant_type", "preset_types",
-           "register_plant"]
+           "built_in", "built_in_names", "check_plant", "entry_of", "installed_names", "make_plant", "model_reason",
+           "plant_type", "preset_types", "register_plant"]
 
 _BUILT_IN: dict[str, PlantType] = {entry.name: entry for entry in (DriftLabPlantType(), *COMMONROAD_BUILT_INS)}
 _REGISTERED: dict[str, PlantType] = {}
@@ -73,3 +74,36 @@ def installed_names() -> tuple[str, ...]:
 def preset_types() -> dict[str, PlantType]:
     """The kinds that a ``--plant`` preset starts from, by preset name."""
     return {entry.preset_name: entry for entry in _BUILT_IN.values() if entry.preset_name is not None}
+
+
+def entry_of(config: PlantConfig) -> PlantType:
+    """The catalog entry of the plant ``config.model`` names.
+
+    Raises:
+        ConfigError: ``model`` names no plant (built in, registered or installed).
+    """
+    found = plant_type(config.model)
+    if found is None:
+        raise ConfigError(f"plant.model must be one of {', '.join(built_in_names())} or a registered plant, "
+                          f"got {config.model!r}", field="plant.model")
+    return found
+
+
+def check_plant(config: PlantConfig) -> PlantType:
+    """``config``'s entry, once its settings are checked against what that plant can take (PlantType.check); the
+    check a config gets at the edge where it is parsed (driftlab.core.configure).
+
+    Raises:
+        ConfigError: naming the field.
+    """
+    entry = entry_of(config)
+    entry.check(config)
+    if config.wheel_liftoff and not entry.wheel_loads:
+        raise ConfigError(f"plant.wheel_liftoff applies to a plant with wheel loads (CommonRoad's MB); "
+                          f"plant.model {config.model!r} has none: keep it false", field="plant.wheel_liftoff")
+    return entry
+
+
+def make_plant(config: PlantConfig, model_vehicle):
+    """What the episode loop steps for ``config`` (DriftLab's own plant, a CommonRoad model, a registered one)."""
+    return entry_of(config).build(config, model_vehicle)

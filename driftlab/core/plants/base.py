@@ -11,7 +11,7 @@ from typing import Any
 
 from driftlab.core.equilibrium import drift_equilibrium
 from driftlab.core.errors import NoEquilibriumError
-from driftlab.core.mpc import MpcConfig
+from driftlab.core.mpc_config import MpcConfig
 from driftlab.core.plant import PlantConfig
 from driftlab.core.vehicle import VehicleParams, pack_params
 
@@ -27,7 +27,7 @@ class PlantType(ABC):
             settings stay off, and its mass scale carries its yaw inertia.
         fits_model: the controller's model is fitted to the plant's own drift at each job's drift
             (:meth:`model_vehicle` solves the plant's drift family): a config is fitted when it first runs, not
-            when it is parsed (driftlab.core.config.fitted), and :meth:`check_fit` tells before whether it can be.
+            when it is parsed (driftlab.core.configure.fitted), and :meth:`check_fit` tells before whether it can be.
         preset_name: the ``--plant`` preset that starts from it (None: reached only through ``plant.model``).
         default_sideslip_rad: the sideslip its preset drifts at, or None for the scenario's default.
         local_phase: new jobs start their seed points near the uncorrected model (TuningSpec.local_phase).
@@ -84,10 +84,11 @@ class PlantType(ABC):
         a job at this drift would get) has no countersteer drift on this circle, or None."""
         return model_reason(vehicle, radius_m, sideslip_rad, circle)
 
-    def plant_reason(self, config: PlantConfig, vehicle: VehicleParams, radius_m: float, sideslip_rad: float,
+    def plant_reason(self, config: PlantConfig, vehicle: VehicleParams | None, radius_m: float, sideslip_rad: float,
                      circle: str) -> str | None:
         """Why the plant itself cannot hold a countersteer drift on this circle, or None (unknown counts as
-        drivable: only the controller's model is checked then)."""
+        drivable: only the controller's model is checked then). ``vehicle``: the controller's (None: still to be
+        fitted)."""
         return None
 
     def equilibrium_summary(self, config: PlantConfig, vehicle: VehicleParams, radius_m: float,

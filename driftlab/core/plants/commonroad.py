@@ -10,7 +10,7 @@ from typing import Any
 
 from driftlab.core.commonroad.parameters import ParameterSet
 from driftlab.core.errors import ConfigError
-from driftlab.core.mpc import MpcConfig
+from driftlab.core.mpc_config import MpcConfig
 from driftlab.core.plant import PLANT_LIMITS, PlantConfig
 from driftlab.core.plants.base import PlantType, model_reason
 from driftlab.core.vehicle import VehicleParams
@@ -86,8 +86,10 @@ class CommonRoadPlantType(PlantType):
         return f"CommonRoad vehicle {vehicle_id} ({VEHICLE_NAMES.get(vehicle_id, '?')})"
 
     def build(self, config: PlantConfig, model_vehicle: VehicleParams) -> Any:
+        """The stepper of ``config``'s car (its parameter set, :meth:`car`): the class ``stepper`` names, called
+        with the config and the car."""
         module_name, _, attribute = self.stepper.partition(":")
-        return getattr(importlib.import_module(module_name), attribute)(config)
+        return getattr(importlib.import_module(module_name), attribute)(config, self.car(config.commonroad_vehicle))
 
     def model_vehicle(self, config: PlantConfig, radius_m: float, sideslip_rad: float) -> VehicleParams:
         from driftlab.core.commonroad.model_fit import fitted_model_vehicle
@@ -141,12 +143,12 @@ class CommonRoadPlantType(PlantType):
     def model_reason(self, vehicle: VehicleParams, radius_m: float, sideslip_rad: float, circle: str) -> str | None:
         """The model fitted at another drift, with its front grip raised as a fit at this one would raise it
         (driftlab.core.commonroad.model_fit)."""
-        from driftlab.core.commonroad.model_fit import widest_front_grip
+        from driftlab.core.commonroad.window import widest_front_grip
 
         reason = model_reason(vehicle, radius_m, sideslip_rad, circle)
         return reason and model_reason(widest_front_grip(vehicle), radius_m, sideslip_rad, circle)
 
-    def plant_reason(self, config: PlantConfig, vehicle: VehicleParams, radius_m: float, sideslip_rad: float,
+    def plant_reason(self, config: PlantConfig, vehicle: VehicleParams | None, radius_m: float, sideslip_rad: float,
                      circle: str) -> str | None:
         from driftlab.core.commonroad.family import describe_family
 

@@ -29,10 +29,11 @@ class DriftLabPlantType(PlantType):
     def build(self, config: PlantConfig, model_vehicle: VehicleParams) -> Plant:
         return Plant(config, model_vehicle)
 
-    def plant_reason(self, config: PlantConfig, vehicle: VehicleParams, radius_m: float, sideslip_rad: float,
+    def plant_reason(self, config: PlantConfig, vehicle: VehicleParams | None, radius_m: float, sideslip_rad: float,
                      circle: str) -> str | None:
+        own_car = config.packed_params(VehicleParams() if vehicle is None else vehicle)  # Table I: nothing to fit
         try:
-            drift_equilibrium(radius_m, -abs(sideslip_rad), config.packed_params(vehicle))
+            drift_equilibrium(radius_m, -abs(sideslip_rad), own_car)
         except NoEquilibriumError:
             return (f"config is not drivable: the plant has no countersteer drift equilibrium on the {circle} circle "
                     f"(scenario radius {radius_m:g} m, sideslip {abs(sideslip_rad):g} rad){self.not_drivable_hint}")

@@ -9,7 +9,8 @@ from fastapi import APIRouter, Depends, HTTPException, Path, Request, Response
 from pydantic import BaseModel, ConfigDict, Field
 from sqlalchemy.orm import Session, sessionmaker
 
-from driftlab.core.config import PLANT_PRESETS, dotted_config
+from driftlab.core.config import dotted_config
+from driftlab.core.configure import PLANT_PRESETS
 from driftlab.core.plants import installed_names
 from driftlab.server import quotas
 from driftlab.server.responses import Calibration, ProfileSummary, errors

@@ -68,7 +68,7 @@ def _config_of(config_json: str):
     """The validated config of a job's document, parsed (and fitted, where a what-if or a robustness study's cell
     sends it still to be fitted) once per worker process: every episode of a job sends the same document (parsing
     it: ~0.4 ms of a ~17 ms default episode; the key: ~0.03 ms). EpisodeConfig is frozen."""
-    from driftlab.core.config import config_from_dict, fitted
+    from driftlab.core.configure import config_from_dict, fitted
 
     return fitted(config_from_dict(json.loads(config_json)))
 

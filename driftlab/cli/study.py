@@ -126,6 +126,7 @@ def _run_seeds_jobs(factory, study_id: int, executor, workers: int, runner: str)
 def _run_cells(factory, study_id: int, executor, workers: int, runner: str) -> None:
     from driftlab.db import lifecycle, storage, studies
     from driftlab.db.lifecycle import JobStatus
+    from driftlab.worker.slots import EpisodeSlots
     from driftlab.worker.study_runner import run_study
 
     with storage.transaction(factory) as session:
@@ -138,7 +139,7 @@ def _run_cells(factory, study_id: int, executor, workers: int, runner: str) -> N
         if not studies.claim_study(session, study_id=study_id, runner=runner):
             raise lifecycle.LeaseHeld(f"study {study_id} is being run by another runner; pause it first")
     try:
-        run_study(factory, study_id, executor, runner=runner, workers=workers)
+        run_study(factory, study_id, executor, runner=runner, slots=EpisodeSlots(workers))
     except KeyboardInterrupt:
         with storage.transaction(factory) as session:
             studies.release_study(session, study_id=study_id, runner=runner, status=JobStatus.PAUSED)

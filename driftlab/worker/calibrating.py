@@ -5,7 +5,6 @@ event, its episodes in flight dropped, the profiles it stored kept."""
 
 from __future__ import annotations
 
-import threading
 import time
 from collections.abc import Callable, Hashable
 from typing import Any
@@ -18,6 +17,7 @@ from driftlab.db.models import Calibration, RescoreStatus
 from driftlab.services.calibration import CalibrationRequest, CalibrationStopped, run_calibration
 from driftlab.worker.executors import EpisodeExecutor, EpisodeOutcome
 from driftlab.worker.slots import EpisodeSlots
+from driftlab.worker.slotted import SlottedEpisodes
 
 
 def run_stored_calibration(factory: sessionmaker[Session], calibration_id: int, executor: EpisodeExecutor, *,
@@ -27,12 +27,10 @@ def run_stored_calibration(factory: sessionmaker[Session], calibration_id: int, 
     runner shuts down: back to the queue). Returns its status."""
     with storage.snapshot(factory) as session:
         request = CalibrationRequest(**session.get(Calibration, calibration_id).request)
-    wake = threading.Event()
-    slots.join(owner, wake)
     reporter = _Reporter(factory, calibration_id, runner, should_stop)
     try:
-        run_calibration(request, factory, _slotted_batches(executor, slots, owner, wake, reporter.check),
-                        on_event=reporter)
+        with SlottedEpisodes(executor, slots, owner) as episodes:
+            run_calibration(request, factory, _slotted_batches(episodes, reporter.check), on_event=reporter)
         reporter.flush()
     except CalibrationStopped:
         return _release(factory, calibration_id, runner, RescoreStatus.QUEUED if should_stop() else None)
@@ -40,8 +38,6 @@ def run_stored_calibration(factory: sessionmaker[Session], calibration_id: int, 
         return _release(factory, calibration_id, runner, RescoreStatus.FAILED, str(exc))
     except Exception as exc:  # a worker that died mid-episode: the calibration failed, its profiles stay
         return _release(factory, calibration_id, runner, RescoreStatus.FAILED, f"{type(exc).__name__}: {exc}")
-    finally:
-        slots.leave(owner)
     return _release(factory, calibration_id, runner, RescoreStatus.FINISHED)
 
 
@@ -86,28 +82,18 @@ def calibration_score(outcome: EpisodeOutcome) -> tuple[str, float, float, float
             None if error is None else float(error))
 
 
-def _slotted_batches(executor: EpisodeExecutor, slots: EpisodeSlots, owner: Hashable, wake: threading.Event,
-                     check: Callable[[], None]):
+def _slotted_batches(episodes: SlottedEpisodes, check: Callable[[], None]):
     """A calibration's batches on the shared executor, never more in flight than its share of the slots."""
     def run(batch):
-        waiting, futures = list(enumerate(batch)), {}
         results: list[Any] = [None] * len(batch)
-        try:
-            while waiting or futures:
-                while waiting and slots.try_take(owner):
-                    i, (theta, doc, seed) = waiting.pop(0)
-                    future = executor.submit(theta, doc, seed)
-                    future.add_done_callback(lambda _: wake.set())
-                    futures[future] = i
-                wake.wait(timeout=lease.HEARTBEAT_S)
-                wake.clear()
-                for future in [f for f in futures if f.done()]:
-                    results[futures.pop(future)] = calibration_score(future.result())
-                    slots.give_back(owner)
-                check()
-        finally:  # stopped: what is in flight is dropped (its slots are freed when the calibration leaves)
-            for future in futures:
-                future.cancel()
+
+        def scored(index: int, outcome: EpisodeOutcome) -> None:
+            results[index] = calibration_score(outcome)
+
+        def go_on() -> bool:
+            check()  # raises CalibrationStopped: what is in flight is dropped
+            return True
+        episodes.run(batch, scored, go_on)
         return results
     return run
 

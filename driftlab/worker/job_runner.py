@@ -1,9 +1,9 @@
 """The server's background job runner: one thread that claims claimable jobs (queued, or held by a dead runner)
-and runs each on a thread of its own, as many at once as the executor has workers, or else (when no job runs or
-waits) the next claimable robustness study; and beside them one rescore (driftlab.worker.rescoring) and one
-calibration (driftlab.worker.calibrating) at a time.
-Every episode runs on the one executor, whose capacity the running jobs, the rescore and the calibration share
-(driftlab.worker.slots): a seeds study's jobs run side by side, each with its own optimizer.
+and runs each on a thread of its own, as many at once as the executor has workers; and beside them one robustness
+study (driftlab.worker.study_runner), one rescore (driftlab.worker.rescoring) and one calibration
+(driftlab.worker.calibrating) at a time, each on a thread of its own: the runner's thread only claims and starts.
+Every episode runs on the one executor, whose capacity the running jobs, the study, the rescore and the calibration
+share (driftlab.worker.slots): a seeds study's jobs run side by side, each with its own optimizer.
 
 Exactly one runner runs a job at a time (the lease in driftlab.db.lifecycle): a `driftlab tune` on the same
 job is refused while this one holds it, and a job this server held when it died is taken over by the next
@@ -53,17 +53,22 @@ class JobRunner:
         self._executor: EpisodeExecutor | None = None
         self._slots: EpisodeSlots | None = None
         self._jobs: JobPool | None = None  # the jobs running now, each on its thread
-        # The rescore and the calibration running now, if any: (kind, id) -> its thread.
-        self._side_tasks: dict[str, threading.Thread] = {}
+        # The robustness study, the rescore and the calibration running now, if any: kind -> (its id, its thread).
+        self._side_tasks: dict[str, tuple[int, threading.Thread]] = {}
         # With optimizer_process, the jobs' asks and tells off the server's interpreter (below the requests in
         # priority, as the episodes); else on each job's thread.
         self._optimizers = OptimizerHost(niceness=10) if optimizer_process else None
-        self.current_study_id: int | None = None
 
     @property
     def optimizers(self) -> OptimizerHost | None:
         """The jobs' optimizer processes (None: the jobs ask on their own threads)."""
         return self._optimizers
+
+    @property
+    def current_study_id(self) -> int | None:
+        """The robustness study this runner runs now, if any."""
+        running = self._side_tasks.get("study")
+        return running[0] if running is not None and running[1].is_alive() else None
 
     @property
     def running_job_ids(self) -> list[int]:
@@ -123,26 +128,6 @@ class JobRunner:
             return None
         return job_id
 
-    def _claim_next_study(self) -> int | None:
-        with storage.transaction(self.factory) as session:
-            study_id = studies.next_claimable_study(session)
-            if study_id is None or not studies.claim_study(session, study_id=study_id, runner=self.runner_id):
-                return None
-        return study_id
-
-    def _run_next_study(self) -> bool:
-        """Runs the next claimable robustness study, if any (after the jobs: a study waits for the queue)."""
-        study_id = self._claim_next_study()
-        if study_id is None:
-            return False
-        self.current_study_id = study_id
-        try:
-            run_study(self.factory, study_id, self._executor, runner=self.runner_id, workers=self.workers,
-                      should_stop=self._stop.is_set)
-        finally:
-            self.current_study_id = None
-        return True
-
     def _start_claimable_jobs(self) -> bool:
         """Claims what it can (no more jobs at once than the executor has workers) and starts them together; a job
         that stops wakes the loop: its share is free for the next."""
@@ -156,8 +141,14 @@ class JobRunner:
         return bool(claimed)
 
     def _start_side_tasks(self) -> None:
-        """One rescore and one calibration at a time, each on its share of the slots beside the jobs (neither
-        waits for the queue)."""
+        """One robustness study, one rescore and one calibration at a time, each on its share of the slots beside
+        the jobs (none waits for the queue)."""
+        self._start_side_task("study", studies.next_claimable_study,
+                              lambda session, row_id: studies.claim_study(session, study_id=row_id,
+                                                                          runner=self.runner_id),
+                              lambda row_id: run_study(self.factory, row_id, self._executor, runner=self.runner_id,
+                                                       slots=self._slots, owner=("study", row_id),
+                                                       should_stop=self._stop.is_set))
         self._start_side_task("rescore", rescores.next_claimable,
                               lambda session, row_id: rescores.claim(session, rescore_id=row_id,
                                                                      runner=self.runner_id),
@@ -174,7 +165,7 @@ class JobRunner:
 
     def _start_side_task(self, kind: str, next_claimable, claim, run) -> None:
         running = self._side_tasks.get(kind)
-        if running is not None and running.is_alive():
+        if running is not None and running[1].is_alive():
             return
         with storage.transaction(self.factory) as session:
             row_id = next_claimable(session)
@@ -187,8 +178,9 @@ class JobRunner:
                 run(row_id)
             finally:
                 self._wake.set()
-        self._side_tasks[kind] = threading.Thread(target=target, daemon=True, name=f"driftlab-{kind}-{row_id}")
-        self._side_tasks[kind].start()
+        thread = threading.Thread(target=target, daemon=True, name=f"driftlab-{kind}-{row_id}")
+        self._side_tasks[kind] = (row_id, thread)
+        thread.start()
 
     def _loop(self) -> None:
         try:
@@ -196,11 +188,9 @@ class JobRunner:
                 self._start_side_tasks()
                 if self._start_claimable_jobs():
                     continue
-                if not self.running_job_ids and self._run_next_study():
-                    continue
                 self._wake.wait(self.busy_poll_s if self.running_job_ids else self.poll_s)
                 self._wake.clear()
         finally:  # each stops after its episodes in flight (should_stop)
             self._jobs.join(timeout_s=30)
-            for thread in list(self._side_tasks.values()):
+            for _, thread in list(self._side_tasks.values()):
                 thread.join(timeout=30)

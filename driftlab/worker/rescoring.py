@@ -8,10 +8,8 @@ flight dropped.
 
 from __future__ import annotations
 
-import threading
 import time
 from collections.abc import Callable, Hashable
-from concurrent.futures import Future
 
 from sqlalchemy.orm import Session, sessionmaker
 
@@ -20,57 +18,50 @@ from driftlab.db import lease, rescores, storage
 from driftlab.db.models import Rescore, RescoreStatus
 from driftlab.worker.executors import EpisodeExecutor, EpisodeOutcome
 from driftlab.worker.slots import EpisodeSlots
+from driftlab.worker.slotted import SlottedEpisodes
 
 
 def run_rescore(factory: sessionmaker[Session], rescore_id: int, executor: EpisodeExecutor, *, runner: str,
                 slots: EpisodeSlots, owner: Hashable, should_stop: Callable[[], bool] = lambda: False) -> str:
     """Runs a rescore whose lease ``runner`` holds until every seed is back (finished), it is cancelled, or
     ``should_stop()`` (the runner shuts down: back to the queue, its samples kept). Returns its status."""
-    wake = threading.Event()
-    slots.join(owner, wake)
-    try:
-        return _run(factory, rescore_id, executor, runner, slots, owner, wake, should_stop)
-    finally:
-        slots.leave(owner)
-
-
-def _run(factory, rescore_id, executor, runner, slots, owner, wake, should_stop) -> str:
     with storage.snapshot(factory) as session:
         rescore = session.get(Rescore, rescore_id)
         theta, config, seeds = dict(rescore.theta), dict(rescore.config), list(rescore.seeds)
         back = {s["seed"] for s in rescore.samples}
-    waiting = [seed for seed in seeds if seed not in back]
-    in_flight: dict[Future[EpisodeOutcome], int] = {}
-    held, last_beat = True, time.monotonic()
+    lease_kept = _LeaseKept(factory, rescore_id, runner, should_stop)
+
+    def store(_index: int, outcome: EpisodeOutcome) -> None:
+        with storage.transaction(factory) as session:
+            lease_kept.held = rescores.add_sample(session, rescore_id=rescore_id, runner=runner,
+                                                  sample=outcome.sample().as_dict())
     try:
-        while held and (waiting or in_flight):
-            if should_stop():
-                return _release(factory, rescore_id, runner, RescoreStatus.QUEUED)
-            while waiting and slots.try_take(owner):
-                future = executor.submit(theta, config, waiting.pop(0))
-                future.add_done_callback(lambda _: wake.set())
-                in_flight[future] = 0
-            wake.wait(timeout=lease.HEARTBEAT_S)
-            wake.clear()
-            for future in [f for f in in_flight if f.done()]:
-                del in_flight[future]
-                slots.give_back(owner)
-                sample = future.result().sample().as_dict()
-                with storage.transaction(factory) as session:
-                    held = rescores.add_sample(session, rescore_id=rescore_id, runner=runner, sample=sample)
-            if time.monotonic() - last_beat >= lease.HEARTBEAT_S:
-                with storage.transaction(factory) as session:
-                    held = held and lease.renew(session, Rescore, row_id=rescore_id, runner=runner)
-                last_beat = time.monotonic()
+        with SlottedEpisodes(executor, slots, owner) as episodes:
+            episodes.run([(theta, config, seed) for seed in seeds if seed not in back], store, lease_kept)
     except Exception as exc:  # a worker that died mid-episode: the rescore failed, its samples stay
         return _release(factory, rescore_id, runner, RescoreStatus.FAILED, error=f"{type(exc).__name__}: {exc}")
-    for future in in_flight:
-        future.cancel()
-    if not held:  # cancelled, or taken over by another runner
+    if should_stop():
+        return _release(factory, rescore_id, runner, RescoreStatus.QUEUED)
+    if not lease_kept.held:  # cancelled, or taken over by another runner
         with storage.snapshot(factory) as session:
             rescore = session.get(Rescore, rescore_id)
             return rescore.status if rescore is not None else RescoreStatus.CANCELLED
     return _finish(factory, rescore_id, runner)
+
+
+class _LeaseKept:
+    """Between results: go on while the runner holds the lease (renewed every HEARTBEAT_S) and is not stopping."""
+
+    def __init__(self, factory, rescore_id: int, runner: str, should_stop: Callable[[], bool]) -> None:
+        self.factory, self.rescore_id, self.runner, self.should_stop = factory, rescore_id, runner, should_stop
+        self.held, self.last_beat = True, time.monotonic()
+
+    def __call__(self) -> bool:
+        if self.held and time.monotonic() - self.last_beat >= lease.HEARTBEAT_S:
+            with storage.transaction(self.factory) as session:
+                self.held = lease.renew(session, Rescore, row_id=self.rescore_id, runner=self.runner)
+            self.last_beat = time.monotonic()
+        return self.held and not self.should_stop()
 
 
 def _finish(factory, rescore_id: int, runner: str) -> str:

@@ -87,6 +87,11 @@ class EpisodeSlots:
             if owner != but and self._room(owner):
                 wake.set()
 
+    def owners_in_flight(self) -> tuple[Hashable, ...]:
+        """The owners with at least one episode in flight now, in the order they joined."""
+        with self._lock:
+            return tuple(owner for owner, held in self._held.items() if held > 0)
+
     @property
     def in_flight(self) -> int:
         with self._lock:

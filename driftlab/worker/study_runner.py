@@ -1,6 +1,7 @@
 """Runs a robustness study: its theta on every pending cell of the grid, one episode per seed on the executor
-(the local pool or Dask, as a job's episodes), each cell stored as soon as its episodes are back; a cell whose
-plant cannot drift the scenario is stored as not drivable without running.
+(the local pool or Dask, as a job's episodes) within its share of the episode slots (driftlab.worker.slotted), each
+cell stored as soon as its episodes are back; a cell whose plant cannot drift the scenario is stored as not drivable
+without running.
 
 The runner holds the study's lease (driftlab.db.studies) as a job's runner holds the job's: a pause request,
 a delete or a takeover ends the lease, and the runner stops after the episodes in flight. A study that was
@@ -10,8 +11,7 @@ interrupted continues with the cells still pending.
 from __future__ import annotations
 
 import time
-from collections.abc import Callable
-from concurrent.futures import FIRST_COMPLETED, Future, wait
+from collections.abc import Callable, Hashable
 from dataclasses import dataclass, field
 from typing import Any
 
@@ -25,6 +25,8 @@ from driftlab.db.lifecycle import JobStatus
 from driftlab.db.models import Study
 from driftlab.worker.executors import EpisodeExecutor, EpisodeOutcome
 from driftlab.worker.job_loop import interrupted_status
+from driftlab.worker.slots import EpisodeSlots
+from driftlab.worker.slotted import SlottedEpisodes
 
 
 @dataclass
@@ -66,9 +68,10 @@ def _store_not_drivable(factory: sessionmaker[Session], study_id: int, runner: s
 
 
 def run_study(factory: sessionmaker[Session], study_id: int, executor: EpisodeExecutor, *, runner: str,
-              workers: int = 1, should_stop: Callable[[], bool] = lambda: False) -> str:
-    """Runs a study whose lease ``runner`` holds (:func:`driftlab.db.studies.claim_study`) until every cell is
-    stored, it is paused, or ``should_stop()`` (back to the queue). Returns the status it leaves it in."""
+              slots: EpisodeSlots, owner: Hashable = "study", should_stop: Callable[[], bool] = lambda: False) -> str:
+    """Runs a study whose lease ``runner`` holds (:func:`driftlab.db.studies.claim_study`) on ``owner``'s share of
+    the episode slots until every cell is stored, it is paused, or ``should_stop()`` (back to the queue; the cells
+    not stored yet run again). Returns the status it leaves it in."""
     with storage.transaction(factory) as session:
         study = studies.get_study(session, study_id=study_id)
         spec = RobustnessStudySpec.from_dict(study.spec)
@@ -78,35 +81,40 @@ def run_study(factory: sessionmaker[Session], study_id: int, executor: EpisodeEx
              if drivable_reason(spec.cell_episode_config(settings)) is None]
     _store_not_drivable(factory, study_id, runner, [cell_id for cell_id, _ in todo
                                                     if cell_id not in {c.cell_id for c in queue}])
-    episodes: dict[Future[EpisodeOutcome], _PendingCell] = {}
-    held, shutting_down, last_beat = True, False, time.monotonic()
+    tasks = [(cell, seed) for cell in queue for seed in seeds]
+    lease_kept = _LeaseKept(factory, study_id, runner, should_stop)
+
+    def store(index: int, outcome: EpisodeOutcome) -> None:
+        cell = tasks[index][0]
+        cell.outcomes[outcome.seed] = outcome
+        if cell.done and lease_kept.held:
+            lease_kept.held = _store_cell(factory, study_id, runner, cell)
     try:
-        while queue or episodes:
-            if time.monotonic() - last_beat >= lifecycle.HEARTBEAT_S:
-                with storage.transaction(factory) as session:
-                    held = studies.heartbeat_study(session, study_id=study_id, runner=runner)
-                last_beat = time.monotonic()
-            shutting_down = shutting_down or should_stop()
-            while held and not shutting_down and queue and len(episodes) < workers:
-                cell = queue.pop(0)
-                for seed in seeds:
-                    episodes[executor.submit(spec.theta, cell.config_doc, seed)] = cell
-            if not episodes:
-                break
-            finished, _ = wait(list(episodes), timeout=lifecycle.HEARTBEAT_S, return_when=FIRST_COMPLETED)
-            for future in finished:
-                outcome = future.result()
-                cell = episodes.pop(future)
-                cell.outcomes[outcome.seed] = outcome
-                if cell.done and held:
-                    held = _store_cell(factory, study_id, runner, cell)
+        with SlottedEpisodes(executor, slots, owner) as episodes:
+            done = episodes.run([(spec.theta, cell.config_doc, seed) for cell, seed in tasks], store, lease_kept)
     except Exception as exc:
         status, error = interrupted_status(exc)
         with storage.transaction(factory) as session:
             studies.release_study(session, study_id=study_id, runner=runner, status=status, error=error)
         return status
-    status = JobStatus.FINISHED if not queue and held else JobStatus.QUEUED if shutting_down else JobStatus.PAUSED
+    status = (JobStatus.FINISHED if done and lease_kept.held else JobStatus.QUEUED if should_stop()
+              else JobStatus.PAUSED)
     with storage.transaction(factory) as session:
         studies.release_study(session, study_id=study_id, runner=runner, status=status)
         study = session.get(Study, study_id)
         return study.status if study is not None else status
+
+
+class _LeaseKept:
+    """Between results: go on while the runner holds the study (renewed every HEARTBEAT_S) and is not stopping."""
+
+    def __init__(self, factory, study_id: int, runner: str, should_stop: Callable[[], bool]) -> None:
+        self.factory, self.study_id, self.runner, self.should_stop = factory, study_id, runner, should_stop
+        self.held, self.last_beat = True, time.monotonic()
+
+    def __call__(self) -> bool:
+        if self.held and time.monotonic() - self.last_beat >= lifecycle.HEARTBEAT_S:
+            with storage.transaction(self.factory) as session:
+                self.held = studies.heartbeat_study(session, study_id=self.study_id, runner=self.runner)
+            self.last_beat = time.monotonic()
+        return self.held and not self.should_stop()

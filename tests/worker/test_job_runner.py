@@ -199,7 +199,7 @@ def test_pausing_one_job_leaves_the_other_running_and_it_resumes_without_repeats
     assert cluster.peak <= cluster.workers
 
 
-def test_a_robustness_study_still_runs_after_the_jobs(factory):
+def test_a_robustness_study_runs_beside_a_job_and_both_finish(factory):
     job = _job(factory, "first", 4, 6)
     with storage.transaction(factory) as session:
         study_id = start_study(session, doc={"kind": "robustness", "theta": {"k": 0.05}, "robust_samples": 2,
@@ -212,6 +212,7 @@ def test_a_robustness_study_still_runs_after_the_jobs(factory):
                 return studies.get_study(session, study_id=study_id).status == "finished"
 
         _wait(study_finished, what="the robustness study")
+        _wait(lambda: _status(factory, job) == ("finished", None), what="the job")
     finally:
         runner.stop()
     assert _status(factory, job) == ("finished", None) and _indices(factory, job) == list(range(6))
@@ -245,3 +246,51 @@ def test_the_cli_runs_a_seeds_studys_jobs_at_once_too(factory):
     finally:
         again.shutdown()
     assert again.peak == 0  # every job was finished: nothing ran again
+
+
+def test_a_study_a_job_a_rescore_and_a_calibration_run_at_once_on_one_runner(factory):
+    """Every kind of leased work runs on its own thread within its share of the shared episode slots: while a
+    robustness study's grid runs, the runner still claims a job, a rescore and a calibration, and all four have
+    episodes in flight together; none of them waits for another to end."""
+    from driftlab.db import calibrations, rescores
+    from driftlab.db.models import Calibration, Rescore
+    from driftlab.services.calibration import CalibrationRequest
+
+    job = _job(factory, "job", 4, 40)
+    with storage.transaction(factory) as session:
+        study_id = start_study(session, doc={"kind": "robustness", "theta": {"k": 0.05}, "robust_samples": 4,
+                                             "grid": {"plant.mass_scale": [0.9 + 0.02 * i for i in range(10)]}}).id
+        done = storage.create_job(session, name="done", spec=TuningSpec.from_dict(SPEC).to_dict(), seed=0)
+        done.status = lifecycle.JobStatus.FINISHED  # only its rescore is work
+        best = storage.add_evaluation(session, job_id=done.id, theta={"k": 0.05}, J=-1.0, status="completed",
+                                      metrics={"completed_fraction": 1.0}, trigger_points=[], wall_ms=1.0,
+                                      columns=["t_s"], trajectory=np.zeros((1, 1)),
+                                      seeds=[{"seed": 0, "status": "completed", "J": -1.0}], trajectory_seed=0)
+        rescore_id = rescores.queue(session, job_id=done.id, evaluation_id=best.id, theta={"k": 0.05},
+                                    config=done.spec["config"], seeds=list(range(1000, 1030))).id
+        request = CalibrationRequest(plant="commonroad_std", points="0.5@44", iterations=2, seeds=1,
+                                     sets={"plant.model_drive_coupling": False})
+        calibration_id = calibrations.queue(session, request=request.as_dict()).id
+    cluster = FakeCluster(workers=4, episode_s=0.2, gate_s=0.0)
+    runner = _runner(factory, cluster)
+    seen: set[str] = set()
+    together = 0
+    try:
+        def all_four_in_flight():
+            nonlocal together
+            kinds = {owner[0] if isinstance(owner, tuple) else "job" for owner in runner._slots.owners_in_flight()}
+            seen.update(kinds)
+            together = max(together, len(kinds))
+            return together == 4
+        _wait(all_four_in_flight, timeout_s=120, what=f"the four kinds in flight at once (seen {seen})")
+        assert runner.current_study_id == study_id and runner.running_job_ids == [job]
+        assert cluster.peak <= cluster.workers  # shared, never oversubscribed (a stop drops what is in flight)
+    finally:
+        runner.stop()
+    with storage.snapshot(factory) as session:
+        assert any(c.status == "completed" for c in studies.cells(session, study_id=study_id))
+        assert session.get(Rescore, rescore_id).samples
+        calibration = session.get(Calibration, calibration_id)  # handed back at the stop, what it said kept
+        assert calibration.status == "queued"
+        assert any(m.startswith("calibrating 0.5 rad @ R 44 m") for m in calibration.messages)
+    assert _indices(factory, job)

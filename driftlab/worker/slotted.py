@@ -1,0 +1,65 @@
+"""The one loop that runs a piece of leased work's episodes (a rescore's seeds, a calibration's batches, a robustness
+study's cells) on the runner's executor: never more in flight than its share of the episode slots
+(driftlab.worker.slots), each result handed over as it comes back, and the lease looked after between results.
+
+Each kind supplies only what it does with a result (store a sample, a cell, a score) and what it checks between
+them (the lease, a stop request); submit, wait, give back and drop-on-stop are this loop's.
+"""
+
+from __future__ import annotations
+
+import threading
+from collections.abc import Callable, Hashable, Iterable
+from concurrent.futures import Future
+from typing import Any
+
+from driftlab.db.lease import HEARTBEAT_S
+from driftlab.worker.executors import EpisodeExecutor, EpisodeOutcome
+from driftlab.worker.slots import EpisodeSlots
+
+Task = tuple[dict[str, float], dict[str, Any], int]  # (theta, config document, seed): one episode
+
+
+class SlottedEpisodes:
+    """``owner``'s part of the shared slots while the ``with`` block runs (joined on entry, left on exit: its share
+    goes back to the others, whatever it still had in flight is freed)."""
+
+    def __init__(self, executor: EpisodeExecutor, slots: EpisodeSlots, owner: Hashable) -> None:
+        self.executor, self.slots, self.owner = executor, slots, owner
+        self.wake = threading.Event()
+
+    def __enter__(self) -> SlottedEpisodes:
+        self.slots.join(self.owner, self.wake)
+        return self
+
+    def __exit__(self, *exc_info: object) -> None:
+        self.slots.leave(self.owner)
+
+    def run(self, tasks: Iterable[Task], on_result: Callable[[int, EpisodeOutcome], None],
+            go_on: Callable[[], bool]) -> bool:
+        """Runs ``tasks`` in order, calling ``on_result(index, outcome)`` as each comes back (in the order they come
+        back) and ``go_on()`` after each wait, at least every HEARTBEAT_S: the place to renew a lease. ``go_on()``
+        False (or an exception from either) stops the run, and what is in flight is dropped: whoever runs the work
+        next runs those episodes again. Returns whether every task came back."""
+        waiting = list(enumerate(tasks))
+        waiting.reverse()  # popped from the end: submitted in the order given
+        in_flight: dict[Future[EpisodeOutcome], int] = {}
+        try:
+            while waiting or in_flight:
+                while waiting and self.slots.try_take(self.owner):
+                    index, (theta, document, seed) = waiting.pop()
+                    future = self.executor.submit(theta, document, seed)
+                    future.add_done_callback(lambda _: self.wake.set())
+                    in_flight[future] = index
+                self.wake.wait(timeout=HEARTBEAT_S)
+                self.wake.clear()
+                for future in [f for f in in_flight if f.done()]:
+                    index = in_flight.pop(future)
+                    self.slots.give_back(self.owner)
+                    on_result(index, future.result())
+                if not go_on():
+                    return False
+            return True
+        finally:
+            for future in in_flight:
+                future.cancel()

@@ -81,14 +81,14 @@ def _run_seeds_jobs(factory, study_id: int, executor, workers: int, runner: str)
     import threading
 
     from driftlab.db import lifecycle, storage, studies
-    from driftlab.db.lifecycle import JobStatus
+    from driftlab.db.lifecycle import WorkStatus
     from driftlab.worker.job_loop import claim_job
     from driftlab.worker.job_pool import JobPool
     from driftlab.worker.slots import EpisodeSlots
 
     with storage.transaction(factory) as session:
         todo = [(j.id, j.name) for j in studies.study_jobs(session, study_id=study_id)
-                if j.status != JobStatus.FINISHED]
+                if j.status != WorkStatus.FINISHED]
     names, started = dict(todo), {}
     stop, done = threading.Event(), threading.Semaphore(0)
 
@@ -102,7 +102,7 @@ def _run_seeds_jobs(factory, study_id: int, executor, workers: int, runner: str)
 
     def start(batch: list[tuple[int, str]]) -> None:
         for job_id, _ in batch:
-            claim_job(factory, job_id, runner, from_statuses=(JobStatus.QUEUED, JobStatus.PAUSED, JobStatus.FAILED))
+            claim_job(factory, job_id, runner, from_statuses=(WorkStatus.QUEUED, WorkStatus.PAUSED, WorkStatus.FAILED))
             started[job_id] = time.perf_counter()
         pool.start([job_id for job_id, _ in batch])
 
@@ -118,22 +118,22 @@ def _run_seeds_jobs(factory, study_id: int, executor, workers: int, runner: str)
         pool.join()
         with storage.transaction(factory) as session:
             for job_id, status in pool.statuses.items():
-                if status == JobStatus.QUEUED:  # stopped by us, not finished: paused, as `tune` leaves a job
+                if status == WorkStatus.QUEUED:  # stopped by us, not finished: paused, as `tune` leaves a job
                     lifecycle.request_pause(session, job_id=job_id)
         raise
 
 
 def _run_cells(factory, study_id: int, executor, workers: int, runner: str) -> None:
     from driftlab.db import lifecycle, storage, studies
-    from driftlab.db.lifecycle import JobStatus
+    from driftlab.db.lifecycle import WorkStatus
     from driftlab.worker.slots import EpisodeSlots
     from driftlab.worker.study_runner import run_study
 
     with storage.transaction(factory) as session:
         study = studies.get_study(session, study_id=study_id)
-        if study.status == JobStatus.FINISHED:
+        if study.status == WorkStatus.FINISHED:
             return
-        if study.status in (JobStatus.PAUSED, JobStatus.FAILED):
+        if study.status in (WorkStatus.PAUSED, WorkStatus.FAILED):
             studies.resume_study(session, study_id=study_id)
     with storage.transaction(factory) as session:
         if not studies.claim_study(session, study_id=study_id, runner=runner):
@@ -142,7 +142,7 @@ def _run_cells(factory, study_id: int, executor, workers: int, runner: str) -> N
         run_study(factory, study_id, executor, runner=runner, slots=EpisodeSlots(workers))
     except KeyboardInterrupt:
         with storage.transaction(factory) as session:
-            studies.release_study(session, study_id=study_id, runner=runner, status=JobStatus.PAUSED)
+            studies.release_study(session, study_id=study_id, runner=runner, status=WorkStatus.PAUSED)
         raise
 
 
@@ -201,7 +201,7 @@ def cmd_study(args: argparse.Namespace, tuning_spec, db_url: str, dask_address: 
     with storage.transaction(factory) as session:
         summary = study_views.study_summary(session, studies.get_study(session, study_id=study_id))
     print(json.dumps({**brief_summary(summary, args.every), "wall_s": round(time.perf_counter() - started, 2)}))
-    return 0 if summary["status"] != lifecycle.JobStatus.FAILED else 1
+    return 0 if summary["status"] != lifecycle.WorkStatus.FAILED else 1
 
 
 def add_study_parser(sub, db_help: str, dask_help: str, int_in, tune_options) -> argparse.ArgumentParser:

@@ -84,7 +84,7 @@ def open_tuning_job(factory, args: argparse.Namespace, runner: str) -> tuple[int
     """Create the job, or take up the stored one of that name (its settings win; a given --iterations extends
     it); then claim its lease. A job another live runner holds is refused (LeaseHeld: exit 2)."""
     from driftlab.db import lifecycle, storage
-    from driftlab.db.lifecycle import JobStatus
+    from driftlab.db.lifecycle import WorkStatus
 
     with storage.transaction(factory) as session:
         job = storage.find_job(session, name=args.name) if args.name else None
@@ -118,10 +118,10 @@ def open_tuning_job(factory, args: argparse.Namespace, runner: str) -> tuple[int
         if args.enqueue:
             enqueue_texts(session, job.id, args.enqueue)
             message += f"; {len(args.enqueue)} theta(s) enqueued (evaluated next when it runs)"
-    if status != JobStatus.FINISHED:
+    if status != WorkStatus.FINISHED:
         with storage.transaction(factory) as session:
             lifecycle.claim(session, job_id=job_id, runner=runner,
-                            from_statuses=(JobStatus.QUEUED, JobStatus.PAUSED, JobStatus.FAILED))
+                            from_statuses=(WorkStatus.QUEUED, WorkStatus.PAUSED, WorkStatus.FAILED))
     sys.stderr.write(message + "\n")
     return job_id, name
 
@@ -150,23 +150,23 @@ def cmd_tune(args: argparse.Namespace) -> int:
     started = time.perf_counter()
     with storage.transaction(factory) as session:
         status = storage.get_job(session, job_id=job_id).status
-    if status == lifecycle.JobStatus.RUNNING and episode_kernels_cached() is False:
+    if status == lifecycle.WorkStatus.RUNNING and episode_kernels_cached() is False:
         sys.stderr.write("compiling the simulation (numba, once after an install); the first evaluation follows\n")
-    if status == lifecycle.JobStatus.RUNNING:  # ours now
+    if status == lifecycle.WorkStatus.RUNNING:  # ours now
         executor, workers = open_executor(args.workers, dask_address(args))
         try:
             status = run_job(factory, job_id, executor, runner=runner, workers=workers, on_progress=progress,
                              max_trajectories=settings().max_trajectories_per_job)
         except KeyboardInterrupt:
             with storage.transaction(factory) as session:
-                lifecycle.release(session, job_id=job_id, runner=runner, status=lifecycle.JobStatus.PAUSED)
+                lifecycle.release(session, job_id=job_id, runner=runner, status=lifecycle.WorkStatus.PAUSED)
             sys.stderr.write(f"\njob {name} paused; run the same command to continue\n")
             return 130
         finally:
             executor.shutdown()
     with storage.transaction(factory) as session:
         job = storage.get_job(session, job_id=job_id)
-        if status == lifecycle.JobStatus.PAUSED and job.error:
+        if status == lifecycle.WorkStatus.PAUSED and job.error:
             sys.stderr.write(f"\ndriftlab: job {name} paused: {job.error}; run the same command to continue\n")
         best = storage.best_evaluation(session, job_id=job_id)
         if job.stop_reason:
@@ -178,7 +178,7 @@ def cmd_tune(args: argparse.Namespace) -> int:
     storage.close_database(factory)
     sys.stderr.write("\n")
     print(json.dumps(out))
-    return 0 if status != lifecycle.JobStatus.FAILED else 1
+    return 0 if status != lifecycle.WorkStatus.FAILED else 1
 
 
 def cmd_rescore(args: argparse.Namespace) -> int:

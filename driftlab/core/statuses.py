@@ -32,11 +32,15 @@ class StudyKind(StrEnum):
     ROBUSTNESS = "robustness"
 
 
-class JobStatus(StrEnum):
-    """A job's (and a robustness study's) status; the transitions are driftlab.db.lifecycle's."""
+class WorkStatus(StrEnum):
+    """The status of every kind of leased work (a job, a robustness study, a rescore, a calibration): queued until a
+    runner takes its lease, running while it holds it, then finished, paused (a job or a study asked to stop),
+    failed, or cancelled (a rescore or a calibration asked to stop). The transitions are driftlab.db.lease's and
+    driftlab.db.lifecycle's."""
 
     QUEUED = "queued"
     RUNNING = "running"
     PAUSED = "paused"
     FINISHED = "finished"
     FAILED = "failed"
+    CANCELLED = "cancelled"

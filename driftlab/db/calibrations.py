@@ -10,10 +10,10 @@ from sqlalchemy import select
 from sqlalchemy.orm import Session
 
 from driftlab.db import lease
-from driftlab.db.models import Calibration, RescoreStatus, utcnow
+from driftlab.db.models import Calibration, WorkStatus
 from driftlab.db.storage import NotFound
 
-ACTIVE = (RescoreStatus.QUEUED, RescoreStatus.RUNNING)
+ACTIVE = (WorkStatus.QUEUED, WorkStatus.RUNNING)
 MESSAGES_KEPT = 200  # the newest messages a calibration keeps (a 5-point, 5-round run says about 60)
 
 
@@ -27,7 +27,7 @@ def queue(session: Session, *, request: dict[str, Any]) -> Calibration:
     if active is not None:
         raise CalibrationBusy(f"calibration {active.id} is {active.status}; one runs at a time (cancel it with "
                               f"DELETE /api/calibrations/{active.id})")
-    calibration = Calibration(request=request, messages=[], profile_ids=[], status=RescoreStatus.QUEUED)
+    calibration = Calibration(request=request, messages=[], profile_ids=[], status=WorkStatus.QUEUED)
     session.add(calibration)
     session.flush()
     return calibration
@@ -49,21 +49,9 @@ def cancel(session: Session, *, calibration_id: int) -> Calibration:
     calibration = get(session, calibration_id=calibration_id)
     if calibration.status not in ACTIVE:
         raise NotFound(f"calibration {calibration_id} is {calibration.status}, not queued or running")
-    calibration.status = RescoreStatus.CANCELLED
+    calibration.status = WorkStatus.CANCELLED
     calibration.runner_id, calibration.heartbeat_at = None, None
     return calibration
-
-
-def next_claimable(session: Session) -> int | None:
-    """The oldest queued calibration, or one whose runner died."""
-    stale = (Calibration.status == RescoreStatus.RUNNING) & lease.is_stale(Calibration, utcnow())
-    return session.scalar(select(Calibration.id).where((Calibration.status == RescoreStatus.QUEUED) | stale)
-                          .order_by(Calibration.id).limit(1))
-
-
-def claim(session: Session, *, calibration_id: int, runner: str) -> bool:
-    return lease.take(session, Calibration, row_id=calibration_id, runner=runner,
-                      from_statuses=(RescoreStatus.QUEUED,), now=utcnow())
 
 
 def record(session: Session, *, calibration_id: int, runner: str, progress: dict[str, Any] | None = None,
@@ -71,7 +59,7 @@ def record(session: Session, *, calibration_id: int, runner: str, progress: dict
     """Store what the run reported and renew the lease; False when ``runner`` no longer holds it (cancelled or
     taken over: stop)."""
     calibration = session.get(Calibration, calibration_id)
-    if calibration is None or calibration.runner_id != runner or calibration.status != RescoreStatus.RUNNING:
+    if calibration is None or calibration.runner_id != runner or calibration.status != WorkStatus.RUNNING:
         return False
     if progress is not None:
         calibration.progress = progress
@@ -82,7 +70,7 @@ def record(session: Session, *, calibration_id: int, runner: str, progress: dict
     return lease.renew(session, Calibration, row_id=calibration_id, runner=runner)
 
 
-def finish(session: Session, *, calibration_id: int, runner: str, status: RescoreStatus,
+def finish(session: Session, *, calibration_id: int, runner: str, status: WorkStatus,
            error: str | None = None) -> None:
     lease.release(session, Calibration, row_id=calibration_id, runner=runner, status=status, error=error)
 

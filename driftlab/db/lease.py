@@ -1,5 +1,10 @@
-"""The lease that lets exactly one runner run a thing at a time: a job, or a robustness study (any table with the
-columns ``status``, ``runner_id``, ``heartbeat_at`` and ``error``).
+"""The lease that lets exactly one runner run a piece of work at a time: a job, a robustness study, a rescore, a
+calibration (any table with the columns ``id``, ``status``, ``runner_id``, ``heartbeat_at`` and ``error``).
+
+The contract every kind keeps: a row is claimable when it is queued or its runner is dead (:func:`next_claimable`,
+oldest first); :func:`claim` takes it (one conditional UPDATE); the runner renews it (:func:`renew`) at least every
+HEARTBEAT_S and stops when a renewal fails (paused, cancelled, deleted or taken over); :func:`release` ends it with
+the status the runner reached unless a request changed it meanwhile.
 
 A runner takes the lease with one conditional UPDATE (two runners racing for it cannot both win), renews the
 heartbeat while it runs, and clears the lease when it stops. A heartbeat older than ``LEASE_TIMEOUT_S`` belongs to
@@ -14,14 +19,14 @@ import uuid
 from datetime import datetime, timedelta
 from typing import Any, cast
 
-from sqlalchemy import CursorResult, Executable, or_, update
+from sqlalchemy import CursorResult, Executable, or_, select, update
 from sqlalchemy.orm import Session
 
-from driftlab.db.models import JobStatus, utcnow
+from driftlab.db.models import WorkStatus, utcnow
 
 LEASE_TIMEOUT_S = 15.0  # a runner renews every HEARTBEAT_S; three missed renewals and more mean it is gone
 HEARTBEAT_S = 2.0
-RUNNING = JobStatus.RUNNING
+RUNNING = WorkStatus.RUNNING
 
 
 def new_runner_id(kind: str) -> str:
@@ -52,6 +57,19 @@ def is_live(row: Any, now: datetime | None = None) -> bool:
 def rows_updated(session: Session, statement: Executable) -> int:
     """Rows an UPDATE matched (``Session.execute`` types its result as a plain Result; an UPDATE's is a cursor's)."""
     return cast(CursorResult[Any], session.execute(statement)).rowcount
+
+
+def next_claimable(session: Session, table: Any, also: Any = True) -> int | None:
+    """The oldest row of ``table`` that is queued, or whose runner died, where ``also`` (an SQL condition) holds."""
+    stale = (table.status == RUNNING) & is_stale(table, utcnow())
+    return session.scalar(select(table.id).where(or_(table.status == WorkStatus.QUEUED, stale), also)
+                          .order_by(table.id).limit(1))
+
+
+def claim(session: Session, table: Any, *, row_id: int, runner: str, also: Any = True) -> bool:
+    """Take the lease of a queued row, or of one whose runner died (:func:`take` from queued, now)."""
+    return take(session, table, row_id=row_id, runner=runner, from_statuses=(WorkStatus.QUEUED,), now=utcnow(),
+                also=also)
 
 
 def take(session: Session, table: Any, *, row_id: int, runner: str, from_statuses: tuple[str, ...], now: datetime,

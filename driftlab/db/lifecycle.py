@@ -18,10 +18,10 @@ from sqlalchemy.orm import Session
 from driftlab.core.statuses import StudyKind
 from driftlab.db import lease
 from driftlab.db.lease import HEARTBEAT_S, LEASE_TIMEOUT_S, new_runner_id
-from driftlab.db.models import EnqueuedTheta, Evaluation, Job, JobStatus, Rescore, Study, Trajectory, utcnow
+from driftlab.db.models import EnqueuedTheta, Evaluation, Job, Rescore, Study, Trajectory, WorkStatus, utcnow
 from driftlab.db.storage import count_evaluations, get_job
 
-__all__ = ["HEARTBEAT_S", "LEASE_TIMEOUT_S", "JobStatus", "LeaseHeld", "TransitionError", "claim", "delete_job",
+__all__ = ["HEARTBEAT_S", "LEASE_TIMEOUT_S", "WorkStatus", "LeaseHeld", "TransitionError", "claim", "delete_job",
            "extend", "heartbeat", "lease_is_live", "new_runner_id", "next_claimable", "release", "request_pause",
            "requeue"]
 
@@ -49,7 +49,7 @@ def lease_is_live(job: Job, now: datetime | None = None) -> bool:
     return lease.is_live(job, now)
 
 
-def claim(session: Session, *, job_id: int, runner: str, from_statuses: tuple[JobStatus, ...] = (JobStatus.QUEUED,)
+def claim(session: Session, *, job_id: int, runner: str, from_statuses: tuple[WorkStatus, ...] = (WorkStatus.QUEUED,)
           ) -> Job:
     """Take the job for ``runner``: from one of ``from_statuses``, or from a dead runner's stale lease.
 
@@ -92,7 +92,7 @@ def heartbeat(session: Session, *, job_id: int, runner: str) -> bool:
     return held
 
 
-def release(session: Session, *, job_id: int, runner: str, status: JobStatus, error: str | None = None,
+def release(session: Session, *, job_id: int, runner: str, status: WorkStatus, error: str | None = None,
             stop_reason: str | None = None) -> None:
     """The runner stops: the job takes ``status`` unless someone changed it meanwhile (driftlab.db.lease), adds this
     run's wall time to the time it has run in all (``run_s``, what a time budget counts), and keeps the stop rule
@@ -103,25 +103,25 @@ def release(session: Session, *, job_id: int, runner: str, status: JobStatus, er
         ran_s = (lease.naive(utcnow()) - lease.naive(job.started_at)).total_seconds()
         job.run_s = (job.run_s or 0.0) + max(ran_s, 0.0)
         job.stop_reason = stop_reason
-        if (status == JobStatus.FINISHED and stop_reason is None
+        if (status == WorkStatus.FINISHED and stop_reason is None
                 and int(job.spec["iterations"]) > count_evaluations(session, job_id=job_id)):
-            status = JobStatus.QUEUED
+            status = WorkStatus.QUEUED
     lease.release(session, Job, row_id=job_id, runner=runner, status=status, error=error)
 
 
 def request_pause(session: Session, *, job_id: int) -> Job:
     job = get_job(session, job_id=job_id)
-    if job.status not in (JobStatus.QUEUED, JobStatus.RUNNING):
+    if job.status not in (WorkStatus.QUEUED, WorkStatus.RUNNING):
         raise TransitionError(f"job {job_id} is {job.status}; pause needs queued or running")
-    job.status = JobStatus.PAUSED
+    job.status = WorkStatus.PAUSED
     return job
 
 
 def requeue(session: Session, *, job_id: int) -> Job:
     job = get_job(session, job_id=job_id)
-    if job.status not in (JobStatus.PAUSED, JobStatus.FAILED):
+    if job.status not in (WorkStatus.PAUSED, WorkStatus.FAILED):
         raise TransitionError(f"job {job_id} is {job.status}; resume needs paused or failed")
-    job.status, job.error = JobStatus.QUEUED, None
+    job.status, job.error = WorkStatus.QUEUED, None
     return job
 
 
@@ -132,10 +132,10 @@ def extend(session: Session, *, job_id: int, iterations: int) -> Job:
     if iterations < done:
         raise TransitionError(f"iterations must be at least the {done} evaluations already stored, got {iterations}")
     job.spec = {**job.spec, "iterations": iterations}
-    if job.status == JobStatus.FINISHED and iterations > done:
-        job.status = JobStatus.QUEUED
-    elif job.status in (JobStatus.QUEUED, JobStatus.PAUSED) and iterations == done:
-        job.status = JobStatus.FINISHED
+    if job.status == WorkStatus.FINISHED and iterations > done:
+        job.status = WorkStatus.QUEUED
+    elif job.status in (WorkStatus.QUEUED, WorkStatus.PAUSED) and iterations == done:
+        job.status = WorkStatus.FINISHED
     return job
 
 
@@ -161,8 +161,8 @@ def delete_job(session: Session, *, job_id: int, with_its_study: bool = False) -
 def next_claimable(session: Session) -> int | None:
     """The oldest queued job, or one whose runner died (not of a seeds study another runner holds)."""
     now = utcnow()
-    stale = (Job.status == JobStatus.RUNNING) & lease.is_stale(Job, now)
-    query = (select(Job.id).where(or_(Job.status == JobStatus.QUEUED, stale), ~_study_held_by_another(now, None))
+    stale = (Job.status == WorkStatus.RUNNING) & lease.is_stale(Job, now)
+    query = (select(Job.id).where(or_(Job.status == WorkStatus.QUEUED, stale), ~_study_held_by_another(now, None))
              .order_by(Job.id).limit(1))
     return session.scalar(query)
 

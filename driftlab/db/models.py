@@ -5,27 +5,16 @@ changes only through a revision in driftlab/db/migrations (see driftlab.db.schem
 from __future__ import annotations
 
 from datetime import UTC, datetime
-from enum import StrEnum
 from typing import Any
 
 from sqlalchemy import JSON, Float, ForeignKey, Integer, LargeBinary, String, Text, UniqueConstraint
 from sqlalchemy.orm import DeclarativeBase, Mapped, mapped_column, relationship
 
-from driftlab.core.statuses import EpisodeStatus, JobStatus
+from driftlab.core.statuses import EpisodeStatus, WorkStatus
 
 
 def utcnow() -> datetime:
     return datetime.now(UTC)
-
-
-class RescoreStatus(StrEnum):
-    """A rescore's status: queued until a runner takes it, running (leased) until every seed is back."""
-
-    QUEUED = "queued"
-    RUNNING = "running"
-    FINISHED = "finished"
-    FAILED = "failed"
-    CANCELLED = "cancelled"
 
 
 class Base(DeclarativeBase):
@@ -40,7 +29,7 @@ class Job(Base):
     name: Mapped[str] = mapped_column(String(200), unique=True)
     spec: Mapped[dict[str, Any]] = mapped_column(JSON)  # TuningSpec.to_dict()
     seed: Mapped[int] = mapped_column(Integer)
-    status: Mapped[str] = mapped_column(String(20), default=JobStatus.QUEUED)
+    status: Mapped[str] = mapped_column(String(20), default=WorkStatus.QUEUED)
     error: Mapped[str | None] = mapped_column(String(2000), default=None)
     created_at: Mapped[datetime] = mapped_column(default=utcnow)
     updated_at: Mapped[datetime] = mapped_column(default=utcnow, onupdate=utcnow)
@@ -142,7 +131,7 @@ class Study(Base):
     name: Mapped[str] = mapped_column(String(200), unique=True)
     kind: Mapped[str] = mapped_column(String(20))  # "seeds" | "robustness"
     spec: Mapped[dict[str, Any]] = mapped_column(JSON)  # SeedsStudySpec / RobustnessStudySpec .to_dict()
-    status: Mapped[str] = mapped_column(String(20), default=JobStatus.QUEUED)  # robustness only; seeds: its jobs'
+    status: Mapped[str] = mapped_column(String(20), default=WorkStatus.QUEUED)  # robustness only; seeds: its jobs'
     error: Mapped[str | None] = mapped_column(String(2000), default=None)
     runner_id: Mapped[str | None] = mapped_column(String(100), default=None)
     heartbeat_at: Mapped[datetime | None] = mapped_column(default=None)
@@ -187,7 +176,7 @@ class Rescore(Base):
     seeds: Mapped[list[int]] = mapped_column(JSON)  # driftlab.core.robust.rescore_seeds(samples)
     samples: Mapped[list[dict[str, Any]]] = mapped_column(JSON, default=list)  # one per seed back, in any order
     result: Mapped[dict[str, Any] | None] = mapped_column(JSON, default=None)
-    status: Mapped[str] = mapped_column(String(20), default=RescoreStatus.QUEUED)
+    status: Mapped[str] = mapped_column(String(20), default=WorkStatus.QUEUED)
     error: Mapped[str | None] = mapped_column(String(2000), default=None)
     runner_id: Mapped[str | None] = mapped_column(String(100), default=None)
     heartbeat_at: Mapped[datetime | None] = mapped_column(default=None)
@@ -223,7 +212,7 @@ class Calibration(Base):
     progress: Mapped[dict[str, Any] | None] = mapped_column(JSON, default=None)  # the latest progress event
     messages: Mapped[list[str]] = mapped_column(JSON, default=list)  # what the CLI would print, newest last
     profile_ids: Mapped[list[int]] = mapped_column(JSON, default=list)
-    status: Mapped[str] = mapped_column(String(20), default=RescoreStatus.QUEUED)  # a rescore's statuses
+    status: Mapped[str] = mapped_column(String(20), default=WorkStatus.QUEUED)  # a rescore's statuses
     error: Mapped[str | None] = mapped_column(String(2000), default=None)
     runner_id: Mapped[str | None] = mapped_column(String(100), default=None)
     heartbeat_at: Mapped[datetime | None] = mapped_column(default=None)

@@ -9,10 +9,10 @@ from sqlalchemy import func, select, update
 from sqlalchemy.orm import Session
 
 from driftlab.db import lease
-from driftlab.db.models import Rescore, RescoreStatus, utcnow
+from driftlab.db.models import Rescore, WorkStatus
 from driftlab.db.storage import NotFound
 
-ACTIVE = (RescoreStatus.QUEUED, RescoreStatus.RUNNING)
+ACTIVE = (WorkStatus.QUEUED, WorkStatus.RUNNING)
 
 
 class RescoreBusy(Exception):
@@ -31,7 +31,7 @@ def queue(session: Session, *, job_id: int, evaluation_id: int, theta: dict[str,
         raise RescoreBusy(f"job {job_id}: a rescore is {last.status} ({len(last.samples)} / {len(last.seeds)} "
                           f"episodes); cancel it with DELETE /api/jobs/{job_id}/rescore")
     rescore = Rescore(job_id=job_id, evaluation_id=evaluation_id, theta=theta, config=config, seeds=list(seeds),
-                      samples=[], status=RescoreStatus.QUEUED)
+                      samples=[], status=WorkStatus.QUEUED)
     session.add(rescore)
     session.flush()
     return rescore
@@ -48,37 +48,25 @@ def cancel(session: Session, *, job_id: int) -> Rescore:
     last = latest(session, job_id=job_id)
     if last is None or last.status not in ACTIVE:
         raise NotFound(f"job {job_id} has no queued or running rescore")
-    last.status = RescoreStatus.CANCELLED
+    last.status = WorkStatus.CANCELLED
     last.runner_id, last.heartbeat_at = None, None
     return last
-
-
-def next_claimable(session: Session) -> int | None:
-    """The oldest queued rescore, or one whose runner died."""
-    stale = (Rescore.status == RescoreStatus.RUNNING) & lease.is_stale(Rescore, utcnow())
-    return session.scalar(select(Rescore.id).where((Rescore.status == RescoreStatus.QUEUED) | stale)
-                          .order_by(Rescore.id).limit(1))
-
-
-def claim(session: Session, *, rescore_id: int, runner: str) -> bool:
-    return lease.take(session, Rescore, row_id=rescore_id, runner=runner, from_statuses=(RescoreStatus.QUEUED,),
-                      now=utcnow())
 
 
 def add_sample(session: Session, *, rescore_id: int, runner: str, sample: dict[str, Any]) -> bool:
     """Store one seed's result if ``runner`` still holds the rescore (False: cancelled or taken over; stop)."""
     rescore = session.get(Rescore, rescore_id)
-    if rescore is None or rescore.runner_id != runner or rescore.status != RescoreStatus.RUNNING:
+    if rescore is None or rescore.runner_id != runner or rescore.status != WorkStatus.RUNNING:
         return False
     if all(s["seed"] != sample["seed"] for s in rescore.samples):
         rescore.samples = [*rescore.samples, sample]  # a new list: JSON columns track assignment, not mutation
     return True
 
 
-def finish(session: Session, *, rescore_id: int, runner: str, status: RescoreStatus,
+def finish(session: Session, *, rescore_id: int, runner: str, status: WorkStatus,
            result: dict[str, Any] | None = None, error: str | None = None) -> None:
     session.execute(update(Rescore).where(Rescore.id == rescore_id, Rescore.runner_id == runner,
-                                          Rescore.status == RescoreStatus.RUNNING)
+                                          Rescore.status == WorkStatus.RUNNING)
                     .values(result=result).execution_options(synchronize_session=False))
     lease.release(session, Rescore, row_id=rescore_id, runner=runner, status=status, error=error)
 

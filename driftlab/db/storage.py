@@ -30,7 +30,7 @@ from sqlalchemy.orm import Session, sessionmaker
 
 from driftlab.core.statuses import EpisodeStatus
 from driftlab.db import schema
-from driftlab.db.models import Evaluation, Job, JobStatus, Trajectory
+from driftlab.db.models import Evaluation, Job, Trajectory, WorkStatus
 from driftlab.db.trajectory_bytes import PackedTrajectory, unpack
 
 _BUSY_TIMEOUT_MS = 30_000
@@ -159,7 +159,7 @@ def snapshot(factory: sessionmaker[Session]) -> Iterator[Session]:
 # -- jobs --------------------------------------------------------------------------------------------------
 def create_job(session: Session, *, name: str, spec: dict[str, Any], seed: int, study_id: int | None = None,
                profile_id: int | None = None) -> Job:
-    job = Job(name=name, spec=spec, seed=seed, status=JobStatus.QUEUED, study_id=study_id, profile_id=profile_id)
+    job = Job(name=name, spec=spec, seed=seed, status=WorkStatus.QUEUED, study_id=study_id, profile_id=profile_id)
     session.add(job)
     session.flush()
     return job

@@ -17,14 +17,14 @@ from sqlalchemy.orm import Session
 
 from driftlab.core.statuses import StudyKind
 from driftlab.db import lease, lifecycle, storage
-from driftlab.db.lifecycle import JobStatus, TransitionError
+from driftlab.db.lifecycle import TransitionError, WorkStatus
 from driftlab.db.models import Job, Study, StudyCell, utcnow
 
 PENDING = "pending"
 NOT_DRIVABLE = "not_drivable"  # a cell whose plant has no drift at the scenario's radius: not run
 
 
-def create_study(session: Session, *, name: str, kind: str, spec: dict[str, Any], status: str = JobStatus.QUEUED
+def create_study(session: Session, *, name: str, kind: str, spec: dict[str, Any], status: str = WorkStatus.QUEUED
                  ) -> Study:
     study = Study(name=name, kind=kind, spec=spec, status=status)
     session.add(study)
@@ -89,25 +89,21 @@ def study_status(session: Session, study: Study) -> str:
     if study.kind != StudyKind.SEEDS:
         return study.status
     statuses = set(session.scalars(select(Job.status).where(Job.study_id == study.id).distinct()))
-    for status in (JobStatus.RUNNING, JobStatus.QUEUED, JobStatus.PAUSED, JobStatus.FAILED):
+    for status in (WorkStatus.RUNNING, WorkStatus.QUEUED, WorkStatus.PAUSED, WorkStatus.FAILED):
         if status in statuses:
             return str(status)
-    return str(JobStatus.FINISHED)
+    return str(WorkStatus.FINISHED)
 
 
 # -- lifecycle ---------------------------------------------------------------------------------------------
 def next_claimable_study(session: Session) -> int | None:
     """The oldest queued robustness study, or one whose runner died."""
-    stale = (Study.status == JobStatus.RUNNING) & lease.is_stale(Study, utcnow())
-    query = (select(Study.id).where(Study.kind == StudyKind.ROBUSTNESS, or_(Study.status == JobStatus.QUEUED, stale))
-             .order_by(Study.id).limit(1))
-    return session.scalar(query)
+    return lease.next_claimable(session, Study, also=Study.kind == StudyKind.ROBUSTNESS)
 
 
 def claim_study(session: Session, *, study_id: int, runner: str) -> bool:
     """Take the study's lease (from queued, or from a dead runner); False if another runner was quicker."""
-    return lease.take(session, Study, row_id=study_id, runner=runner, from_statuses=(JobStatus.QUEUED,),
-                      now=utcnow(), also=Study.kind == StudyKind.ROBUSTNESS)
+    return lease.claim(session, Study, row_id=study_id, runner=runner, also=Study.kind == StudyKind.ROBUSTNESS)
 
 
 def heartbeat_study(session: Session, *, study_id: int, runner: str) -> bool:
@@ -148,15 +144,16 @@ def pause_study(session: Session, *, study_id: int) -> Study:
     """Pauses a robustness study, or each queued or running job of a seeds study (TransitionError if none)."""
     study = get_study(session, study_id=study_id)
     if study.kind == StudyKind.SEEDS:
-        jobs = [j for j in study_jobs(session, study_id=study_id) if j.status in (JobStatus.QUEUED, JobStatus.RUNNING)]
+        active = (WorkStatus.QUEUED, WorkStatus.RUNNING)
+        jobs = [j for j in study_jobs(session, study_id=study_id) if j.status in active]
         if not jobs:
             raise TransitionError(f"study {study_id} has no queued or running job to pause")
         for job in jobs:
             lifecycle.request_pause(session, job_id=job.id)
         return study
-    if study.status not in (JobStatus.QUEUED, JobStatus.RUNNING):
+    if study.status not in (WorkStatus.QUEUED, WorkStatus.RUNNING):
         raise TransitionError(f"study {study_id} is {study.status}; pause needs queued or running")
-    study.status = JobStatus.PAUSED
+    study.status = WorkStatus.PAUSED
     return study
 
 
@@ -164,15 +161,15 @@ def resume_study(session: Session, *, study_id: int) -> Study:
     """Queues a paused or failed robustness study, or each paused or failed job of a seeds study."""
     study = get_study(session, study_id=study_id)
     if study.kind == StudyKind.SEEDS:
-        jobs = [j for j in study_jobs(session, study_id=study_id) if j.status in (JobStatus.PAUSED, JobStatus.FAILED)]
+        jobs = [j for j in study_jobs(session, study_id=study_id) if j.status in (WorkStatus.PAUSED, WorkStatus.FAILED)]
         if not jobs:
             raise TransitionError(f"study {study_id} has no paused or failed job to resume")
         for job in jobs:
             lifecycle.requeue(session, job_id=job.id)
         return study
-    if study.status not in (JobStatus.PAUSED, JobStatus.FAILED):
+    if study.status not in (WorkStatus.PAUSED, WorkStatus.FAILED):
         raise TransitionError(f"study {study_id} is {study.status}; resume needs paused or failed")
-    study.status, study.error = JobStatus.QUEUED, None
+    study.status, study.error = WorkStatus.QUEUED, None
     return study
 
 

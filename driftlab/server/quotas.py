@@ -10,7 +10,7 @@ from sqlalchemy import func, select
 from sqlalchemy.orm import Session
 
 from driftlab.core.statuses import StudyKind
-from driftlab.db.models import Job, JobStatus, Study
+from driftlab.db.models import Job, Study, WorkStatus
 from driftlab.settings import Settings
 
 
@@ -34,7 +34,7 @@ def check_rescore(settings: Settings, samples: int) -> None:
 
 
 def check_queue(settings: Settings, session: Session, adding: int) -> None:
-    queued = session.scalar(select(func.count()).select_from(Job).where(Job.status == JobStatus.QUEUED)) or 0
+    queued = session.scalar(select(func.count()).select_from(Job).where(Job.status == WorkStatus.QUEUED)) or 0
     if queued + adding > settings.max_queued_jobs:
         raise HTTPException(422, f"jobs: {queued} jobs are queued and this adds {adding}; the limit is "
                                  f"{settings.max_queued_jobs} (DRIFTLAB_MAX_QUEUED_JOBS): wait, or delete some")

@@ -8,7 +8,7 @@ from typing import Annotated, Any, Literal
 
 from pydantic import BaseModel, Field
 
-JobStatusName = Literal["queued", "running", "paused", "finished", "failed"]  # driftlab.db.lifecycle.JobStatus
+JobStatusName = Literal["queued", "running", "paused", "finished", "failed"]  # driftlab.db.lifecycle.WorkStatus
 Timestamp = Annotated[str, Field(description="ISO 8601, UTC")]
 
 

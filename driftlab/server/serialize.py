@@ -9,7 +9,7 @@ from typing import Any
 
 from driftlab.core.config import THETA_KEYS, Theta
 from driftlab.db import storage
-from driftlab.db.models import Evaluation, Job, JobStatus
+from driftlab.db.models import Evaluation, Job, WorkStatus
 from driftlab.services.read_model import compiling
 
 
@@ -42,7 +42,7 @@ def evaluations_csv(rows: list[dict[str, Any]]) -> str:
 def job_dict(session, job: Job) -> dict[str, Any]:
     n_done, best = storage.count_and_best(session, job_id=job.id)
     iterations = job.spec["iterations"]
-    running = job.status == JobStatus.RUNNING
+    running = job.status == WorkStatus.RUNNING
     rate = storage.seconds_per_evaluation(session, job_id=job.id, since=job.started_at) if running else None
     eta = None if rate is None else rate * (iterations - n_done)
     return {"id": job.id, "name": job.name, "status": job.status, "detail": job_detail(job.status, rate),

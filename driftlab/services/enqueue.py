@@ -21,7 +21,7 @@ def enqueue_thetas(session: Session, *, job_id: int, thetas: list[Any], field: s
         or value, named as ``<field>.<n>.<key>``.
     """
     job = storage.get_job(session, job_id=job_id)
-    if job.status == lifecycle.JobStatus.FINISHED:
+    if job.status == lifecycle.WorkStatus.FINISHED:
         raise lifecycle.TransitionError(f"job {job_id} is finished; raise its budget first (PATCH /api/jobs/{job_id} "
                                         "with iterations, or driftlab tune --iterations N)")
     spec = TuningSpec.from_dict(job.spec)

@@ -18,7 +18,7 @@ from driftlab.core.config import config_to_dict
 from driftlab.core.configure import apply_overrides, config_from_dict
 from driftlab.core.drivability import check_drivable, drift_window
 from driftlab.core.errors import ConfigError
-from driftlab.core.statuses import JobStatus
+from driftlab.core.statuses import WorkStatus
 from driftlab.db import storage, studies
 from driftlab.db.lifecycle import TransitionError
 from driftlab.markup import plain
@@ -101,7 +101,7 @@ def job_list(factory: Factory) -> list[tuple[int, str, str]]:
 
 def compiling(status: str) -> bool:
     """Whether a job with this status waits for the simulation's first compile (numba, once after an install)."""
-    return status == JobStatus.RUNNING and episode_kernels_cached() is False
+    return status == WorkStatus.RUNNING and episode_kernels_cached() is False
 
 
 def study_list(factory: Factory) -> list[tuple[int, str, str, str]]:

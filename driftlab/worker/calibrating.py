@@ -13,7 +13,7 @@ from sqlalchemy.orm import Session, sessionmaker
 
 from driftlab.core.errors import ConfigError
 from driftlab.db import calibrations, lease, storage
-from driftlab.db.models import Calibration, RescoreStatus
+from driftlab.db.models import Calibration, WorkStatus
 from driftlab.services.calibration import CalibrationRequest, CalibrationStopped, run_calibration
 from driftlab.worker.executors import EpisodeExecutor, EpisodeOutcome
 from driftlab.worker.slots import EpisodeSlots
@@ -33,12 +33,12 @@ def run_stored_calibration(factory: sessionmaker[Session], calibration_id: int, 
             run_calibration(request, factory, _slotted_batches(episodes, reporter.check), on_event=reporter)
         reporter.flush()
     except CalibrationStopped:
-        return _release(factory, calibration_id, runner, RescoreStatus.QUEUED if should_stop() else None)
+        return _release(factory, calibration_id, runner, WorkStatus.QUEUED if should_stop() else None)
     except ConfigError as exc:
-        return _release(factory, calibration_id, runner, RescoreStatus.FAILED, str(exc))
+        return _release(factory, calibration_id, runner, WorkStatus.FAILED, str(exc))
     except Exception as exc:  # a worker that died mid-episode: the calibration failed, its profiles stay
-        return _release(factory, calibration_id, runner, RescoreStatus.FAILED, f"{type(exc).__name__}: {exc}")
-    return _release(factory, calibration_id, runner, RescoreStatus.FINISHED)
+        return _release(factory, calibration_id, runner, WorkStatus.FAILED, f"{type(exc).__name__}: {exc}")
+    return _release(factory, calibration_id, runner, WorkStatus.FINISHED)
 
 
 class _Reporter:
@@ -98,7 +98,7 @@ def _slotted_batches(episodes: SlottedEpisodes, check: Callable[[], None]):
     return run
 
 
-def _release(factory, calibration_id: int, runner: str, status: RescoreStatus | None,
+def _release(factory, calibration_id: int, runner: str, status: WorkStatus | None,
              error: str | None = None) -> str:
     """Ends the run: ``status`` unless it was cancelled (None: whatever it is now)."""
     with storage.transaction(factory) as session:

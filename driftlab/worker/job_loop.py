@@ -22,7 +22,7 @@ from driftlab.core.robust import RobustScore, SampleResult, aggregate
 from driftlab.core.statuses import EpisodeStatus
 from driftlab.core.tuning import TuningSpec
 from driftlab.db import enqueued, group_commit, lifecycle, storage
-from driftlab.db.lifecycle import JobStatus
+from driftlab.db.lifecycle import WorkStatus
 from driftlab.db.models import Job
 from driftlab.settings import MAX_TRAJECTORIES_PER_JOB
 from driftlab.worker.executors import EpisodeExecutor, EpisodeOutcome
@@ -55,13 +55,13 @@ def is_executor_lost(exc: BaseException) -> bool:
         "CommClosedError", "FutureCancelledError", "SchedulerUnreachable")
 
 
-def interrupted_status(exc: BaseException) -> tuple[JobStatus, str]:
+def interrupted_status(exc: BaseException) -> tuple[WorkStatus, str]:
     """What a run that raised ends as, and its error text: a lost cluster pauses it (resumed when the cluster is
     back), anything else fails it. Either way what is stored stays."""
     text = f"{type(exc).__name__}: {exc}"
     if is_executor_lost(exc):
-        return JobStatus.PAUSED, f"{EXECUTOR_LOST}: {text}"[:2000]
-    return JobStatus.FAILED, text[:2000]
+        return WorkStatus.PAUSED, f"{EXECUTOR_LOST}: {text}"[:2000]
+    return WorkStatus.FAILED, text[:2000]
 
 
 @dataclass
@@ -148,7 +148,7 @@ def _store(factory: sessionmaker[Session], lease: _Lease, evaluation: _PendingEv
 
 
 def claim_job(factory: sessionmaker[Session], job_id: int, runner: str,
-              from_statuses: tuple[JobStatus, ...] = (JobStatus.QUEUED,)) -> None:
+              from_statuses: tuple[WorkStatus, ...] = (WorkStatus.QUEUED,)) -> None:
     """Take the job's lease (raises LeaseHeld or TransitionError, see driftlab.db.lifecycle)."""
     with storage.transaction(factory) as session:
         lifecycle.claim(session, job_id=job_id, runner=runner, from_statuses=from_statuses)
@@ -171,7 +171,7 @@ class _Lease:
     def observe(self, status: str, iterations: int) -> None:
         """What the stored job says now: paused (by a request) means stop; the budget may have changed."""
         self.iterations = iterations
-        if status != JobStatus.RUNNING:
+        if status != WorkStatus.RUNNING:
             self.held = False
 
     def renew_if_due(self, force: bool = False) -> None:
@@ -358,13 +358,13 @@ def _run(factory: sessionmaker[Session], job_id: int, executor: EpisodeExecutor,
         if optimizers is not None:
             optimizer.close()
     if n_done >= lease.iterations or (stop_reason is not None and lease.held):
-        status = JobStatus.FINISHED
+        status = WorkStatus.FINISHED
     elif shutting_down:
-        status = JobStatus.QUEUED  # the runner stops, not the job: the next runner continues it
+        status = WorkStatus.QUEUED  # the runner stops, not the job: the next runner continues it
     else:
-        status = JobStatus.PAUSED
+        status = WorkStatus.PAUSED
     with storage.transaction(factory) as session:
         lifecycle.release(session, job_id=job_id, runner=runner, status=status,
                           stop_reason=stop_reason if n_done < lease.iterations else None)
         job = session.get(Job, job_id)
-        return JobStatus(job.status) if job is not None else status
+        return WorkStatus(job.status) if job is not None else status

@@ -13,12 +13,15 @@ runner once its lease goes stale.
 from __future__ import annotations
 
 import threading
+from collections.abc import Callable
+from typing import Any
 
 from sqlalchemy import select
 from sqlalchemy.orm import Session, sessionmaker
 
-from driftlab.db import calibrations, lifecycle, rescores, storage, studies
-from driftlab.db.models import Job, Study
+from driftlab.core.statuses import StudyKind
+from driftlab.db import lease, lifecycle, storage, studies
+from driftlab.db.models import Calibration, Job, Rescore, Study
 from driftlab.settings import MAX_TRAJECTORIES_PER_JOB
 from driftlab.worker.calibrating import run_stored_calibration
 from driftlab.worker.executors import EpisodeExecutor, open_executor
@@ -109,10 +112,10 @@ class JobRunner:
         if not getattr(self._executor, "connected", True):
             return
         with storage.transaction(self.factory) as session:
-            for job in session.scalars(select(Job).where(Job.status == lifecycle.JobStatus.PAUSED,
+            for job in session.scalars(select(Job).where(Job.status == lifecycle.WorkStatus.PAUSED,
                                                          Job.error.startswith(EXECUTOR_LOST))):
                 lifecycle.requeue(session, job_id=job.id)
-            for study in session.scalars(select(Study).where(Study.status == lifecycle.JobStatus.PAUSED,
+            for study in session.scalars(select(Study).where(Study.status == lifecycle.WorkStatus.PAUSED,
                                                              Study.error.startswith(EXECUTOR_LOST))):
                 studies.resume_study(session, study_id=study.id)
 
@@ -142,40 +145,26 @@ class JobRunner:
 
     def _start_side_tasks(self) -> None:
         """One robustness study, one rescore and one calibration at a time, each on its share of the slots beside
-        the jobs (none waits for the queue)."""
-        self._start_side_task("study", studies.next_claimable_study,
-                              lambda session, row_id: studies.claim_study(session, study_id=row_id,
-                                                                          runner=self.runner_id),
-                              lambda row_id: run_study(self.factory, row_id, self._executor, runner=self.runner_id,
-                                                       slots=self._slots, owner=("study", row_id),
-                                                       should_stop=self._stop.is_set))
-        self._start_side_task("rescore", rescores.next_claimable,
-                              lambda session, row_id: rescores.claim(session, rescore_id=row_id,
-                                                                     runner=self.runner_id),
-                              lambda row_id: run_rescore(self.factory, row_id, self._executor, runner=self.runner_id,
-                                                         slots=self._slots, owner=("rescore", row_id),
-                                                         should_stop=self._stop.is_set))
-        self._start_side_task("calibration", calibrations.next_claimable,
-                              lambda session, row_id: calibrations.claim(session, calibration_id=row_id,
-                                                                         runner=self.runner_id),
-                              lambda row_id: run_stored_calibration(self.factory, row_id, self._executor,
-                                                                    runner=self.runner_id, slots=self._slots,
-                                                                    owner=("calibration", row_id),
-                                                                    should_stop=self._stop.is_set))
+        the jobs (none waits for the queue): the same lease (driftlab.db.lease), the same run signature."""
+        for kind, table, also, run in (("study", Study, Study.kind == StudyKind.ROBUSTNESS, run_study),
+                                       ("rescore", Rescore, True, run_rescore),
+                                       ("calibration", Calibration, True, run_stored_calibration)):
+            self._start_side_task(kind, table, also, run)
 
-    def _start_side_task(self, kind: str, next_claimable, claim, run) -> None:
+    def _start_side_task(self, kind: str, table: Any, also: Any, run: Callable[..., str]) -> None:
         running = self._side_tasks.get(kind)
         if running is not None and running[1].is_alive():
             return
         with storage.transaction(self.factory) as session:
-            row_id = next_claimable(session)
-            if row_id is None or not claim(session, row_id):
+            row_id = lease.next_claimable(session, table, also)
+            if row_id is None or not lease.claim(session, table, row_id=row_id, runner=self.runner_id, also=also):
                 self._side_tasks.pop(kind, None)
                 return
 
         def target() -> None:
             try:
-                run(row_id)
+                run(self.factory, row_id, self._executor, runner=self.runner_id, slots=self._slots,
+                    owner=(kind, row_id), should_stop=self._stop.is_set)
             finally:
                 self._wake.set()
         thread = threading.Thread(target=target, daemon=True, name=f"driftlab-{kind}-{row_id}")

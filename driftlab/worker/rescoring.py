@@ -8,17 +8,16 @@ flight dropped.
 
 from __future__ import annotations
 
-import time
 from collections.abc import Callable, Hashable
 
 from sqlalchemy.orm import Session, sessionmaker
 
 from driftlab.core.robust import SampleResult, summarize
 from driftlab.db import lease, rescores, storage
-from driftlab.db.models import Rescore, RescoreStatus
+from driftlab.db.models import Rescore, WorkStatus
 from driftlab.worker.executors import EpisodeExecutor, EpisodeOutcome
 from driftlab.worker.slots import EpisodeSlots
-from driftlab.worker.slotted import SlottedEpisodes
+from driftlab.worker.slotted import LeaseKept, SlottedEpisodes
 
 
 def run_rescore(factory: sessionmaker[Session], rescore_id: int, executor: EpisodeExecutor, *, runner: str,
@@ -29,7 +28,10 @@ def run_rescore(factory: sessionmaker[Session], rescore_id: int, executor: Episo
         rescore = session.get(Rescore, rescore_id)
         theta, config, seeds = dict(rescore.theta), dict(rescore.config), list(rescore.seeds)
         back = {s["seed"] for s in rescore.samples}
-    lease_kept = _LeaseKept(factory, rescore_id, runner, should_stop)
+    def renew() -> bool:
+        with storage.transaction(factory) as session:
+            return lease.renew(session, Rescore, row_id=rescore_id, runner=runner)
+    lease_kept = LeaseKept(renew, should_stop)
 
     def store(_index: int, outcome: EpisodeOutcome) -> None:
         with storage.transaction(factory) as session:
@@ -39,29 +41,14 @@ def run_rescore(factory: sessionmaker[Session], rescore_id: int, executor: Episo
         with SlottedEpisodes(executor, slots, owner) as episodes:
             episodes.run([(theta, config, seed) for seed in seeds if seed not in back], store, lease_kept)
     except Exception as exc:  # a worker that died mid-episode: the rescore failed, its samples stay
-        return _release(factory, rescore_id, runner, RescoreStatus.FAILED, error=f"{type(exc).__name__}: {exc}")
+        return _release(factory, rescore_id, runner, WorkStatus.FAILED, error=f"{type(exc).__name__}: {exc}")
     if should_stop():
-        return _release(factory, rescore_id, runner, RescoreStatus.QUEUED)
+        return _release(factory, rescore_id, runner, WorkStatus.QUEUED)
     if not lease_kept.held:  # cancelled, or taken over by another runner
         with storage.snapshot(factory) as session:
             rescore = session.get(Rescore, rescore_id)
-            return rescore.status if rescore is not None else RescoreStatus.CANCELLED
+            return rescore.status if rescore is not None else WorkStatus.CANCELLED
     return _finish(factory, rescore_id, runner)
-
-
-class _LeaseKept:
-    """Between results: go on while the runner holds the lease (renewed every HEARTBEAT_S) and is not stopping."""
-
-    def __init__(self, factory, rescore_id: int, runner: str, should_stop: Callable[[], bool]) -> None:
-        self.factory, self.rescore_id, self.runner, self.should_stop = factory, rescore_id, runner, should_stop
-        self.held, self.last_beat = True, time.monotonic()
-
-    def __call__(self) -> bool:
-        if self.held and time.monotonic() - self.last_beat >= lease.HEARTBEAT_S:
-            with storage.transaction(self.factory) as session:
-                self.held = lease.renew(session, Rescore, row_id=self.rescore_id, runner=self.runner)
-            self.last_beat = time.monotonic()
-        return self.held and not self.should_stop()
 
 
 def _finish(factory, rescore_id: int, runner: str) -> str:
@@ -70,11 +57,11 @@ def _finish(factory, rescore_id: int, runner: str) -> str:
         order = {seed: i for i, seed in enumerate(rescore.seeds)}
         samples = sorted(rescore.samples, key=lambda s: order[s["seed"]])
         result = {**summarize([SampleResult.from_dict(s) for s in samples]), "seeds": [s["seed"] for s in samples]}
-        rescores.finish(session, rescore_id=rescore_id, runner=runner, status=RescoreStatus.FINISHED, result=result)
-    return RescoreStatus.FINISHED
+        rescores.finish(session, rescore_id=rescore_id, runner=runner, status=WorkStatus.FINISHED, result=result)
+    return WorkStatus.FINISHED
 
 
-def _release(factory, rescore_id: int, runner: str, status: RescoreStatus, error: str | None = None) -> str:
+def _release(factory, rescore_id: int, runner: str, status: WorkStatus, error: str | None = None) -> str:
     with storage.transaction(factory) as session:
         rescores.finish(session, rescore_id=rescore_id, runner=runner, status=status,
                         error=None if error is None else error[:2000])

@@ -9,6 +9,7 @@ them (the lease, a stop request); submit, wait, give back and drop-on-stop are t
 from __future__ import annotations
 
 import threading
+import time
 from collections.abc import Callable, Hashable, Iterable
 from concurrent.futures import Future
 from typing import Any
@@ -63,3 +64,19 @@ class SlottedEpisodes:
         finally:
             for future in in_flight:
                 future.cancel()
+
+
+class LeaseKept:
+    """A ``go_on`` for :meth:`SlottedEpisodes.run`: go on while the runner still holds the work (``renew()``, one
+    transaction that renews the lease and says whether it was still held, at most every HEARTBEAT_S) and is not
+    stopping. ``held`` may also be set False by what stores a result (the lease was gone when it stored)."""
+
+    def __init__(self, renew: Callable[[], bool], should_stop: Callable[[], bool]) -> None:
+        self.renew, self.should_stop = renew, should_stop
+        self.held, self.last_beat = True, time.monotonic()
+
+    def __call__(self) -> bool:
+        if self.held and time.monotonic() - self.last_beat >= HEARTBEAT_S:
+            self.held = self.renew()
+            self.last_beat = time.monotonic()
+        return self.held and not self.should_stop()

@@ -10,7 +10,6 @@ interrupted continues with the cells still pending.
 
 from __future__ import annotations
 
-import time
 from collections.abc import Callable, Hashable
 from dataclasses import dataclass, field
 from typing import Any
@@ -20,13 +19,13 @@ from sqlalchemy.orm import Session, sessionmaker
 from driftlab.core.drivability import drivable_reason
 from driftlab.core.robust import aggregate
 from driftlab.core.study import RobustnessStudySpec
-from driftlab.db import lifecycle, storage, studies
-from driftlab.db.lifecycle import JobStatus
+from driftlab.db import storage, studies
+from driftlab.db.lifecycle import WorkStatus
 from driftlab.db.models import Study
 from driftlab.worker.executors import EpisodeExecutor, EpisodeOutcome
 from driftlab.worker.job_loop import interrupted_status
 from driftlab.worker.slots import EpisodeSlots
-from driftlab.worker.slotted import SlottedEpisodes
+from driftlab.worker.slotted import LeaseKept, SlottedEpisodes
 
 
 @dataclass
@@ -82,7 +81,10 @@ def run_study(factory: sessionmaker[Session], study_id: int, executor: EpisodeEx
     _store_not_drivable(factory, study_id, runner, [cell_id for cell_id, _ in todo
                                                     if cell_id not in {c.cell_id for c in queue}])
     tasks = [(cell, seed) for cell in queue for seed in seeds]
-    lease_kept = _LeaseKept(factory, study_id, runner, should_stop)
+    def renew() -> bool:
+        with storage.transaction(factory) as session:
+            return studies.heartbeat_study(session, study_id=study_id, runner=runner)
+    lease_kept = LeaseKept(renew, should_stop)
 
     def store(index: int, outcome: EpisodeOutcome) -> None:
         cell = tasks[index][0]
@@ -97,24 +99,9 @@ def run_study(factory: sessionmaker[Session], study_id: int, executor: EpisodeEx
         with storage.transaction(factory) as session:
             studies.release_study(session, study_id=study_id, runner=runner, status=status, error=error)
         return status
-    status = (JobStatus.FINISHED if done and lease_kept.held else JobStatus.QUEUED if should_stop()
-              else JobStatus.PAUSED)
+    status = (WorkStatus.FINISHED if done and lease_kept.held else WorkStatus.QUEUED if should_stop()
+              else WorkStatus.PAUSED)
     with storage.transaction(factory) as session:
         studies.release_study(session, study_id=study_id, runner=runner, status=status)
         study = session.get(Study, study_id)
         return study.status if study is not None else status
-
-
-class _LeaseKept:
-    """Between results: go on while the runner holds the study (renewed every HEARTBEAT_S) and is not stopping."""
-
-    def __init__(self, factory, study_id: int, runner: str, should_stop: Callable[[], bool]) -> None:
-        self.factory, self.study_id, self.runner, self.should_stop = factory, study_id, runner, should_stop
-        self.held, self.last_beat = True, time.monotonic()
-
-    def __call__(self) -> bool:
-        if self.held and time.monotonic() - self.last_beat >= lifecycle.HEARTBEAT_S:
-            with storage.transaction(self.factory) as session:
-                self.held = studies.heartbeat_study(session, study_id=self.study_id, runner=self.runner)
-            self.last_beat = time.monotonic()
-        return self.held and not self.should_stop()

@@ -88,14 +88,14 @@ def test_a_budget_raised_after_the_runners_last_look_queues_the_job_it_would_fin
     with storage.transaction(factory) as session:  # the runner read 2 as its budget; a PATCH raises it to 5
         lifecycle.extend(session, job_id=1, iterations=5)
     with storage.transaction(factory) as session:
-        lifecycle.release(session, job_id=1, runner="r", status=lifecycle.JobStatus.FINISHED)
+        lifecycle.release(session, job_id=1, runner="r", status=lifecycle.WorkStatus.FINISHED)
     with storage.snapshot(factory) as session:
         job = session.get(Job, 1)
         assert (job.status, job.runner_id) == ("queued", None)
     with storage.transaction(factory) as session:  # a budget that is spent finishes it
         lifecycle.claim(session, job_id=1, runner="r2")
         lifecycle.extend(session, job_id=1, iterations=2)
-        lifecycle.release(session, job_id=1, runner="r2", status=lifecycle.JobStatus.FINISHED)
+        lifecycle.release(session, job_id=1, runner="r2", status=lifecycle.WorkStatus.FINISHED)
     with storage.snapshot(factory) as session:
         assert session.get(Job, 1).status == "finished"
 

@@ -7,8 +7,8 @@ from concurrent.futures import ThreadPoolExecutor
 import pytest
 
 from driftlab.core.calibration import VERIFY_SEEDS
-from driftlab.db import calibrations as db_calibrations
-from driftlab.db import storage
+from driftlab.db import lease, storage
+from driftlab.db.models import Calibration
 from driftlab.worker.calibrating import run_stored_calibration
 from driftlab.worker.slots import EpisodeSlots
 from tests.server.conftest import InThreadExecutor
@@ -21,8 +21,8 @@ def _run_queued(api, executor):
     """What the server's runner does with the next queued calibration (driftlab.worker.job_runner)."""
     factory = api.app.state.factory
     with storage.transaction(factory) as session:
-        calibration_id = db_calibrations.next_claimable(session)
-        assert db_calibrations.claim(session, calibration_id=calibration_id, runner="test-runner")
+        calibration_id = lease.next_claimable(session, Calibration)
+        assert lease.claim(session, Calibration, row_id=calibration_id, runner="test-runner")
     return run_stored_calibration(factory, calibration_id, executor, runner="test-runner", slots=EpisodeSlots(1),
                                   owner=("calibration", calibration_id))
 
@@ -103,7 +103,7 @@ def test_a_cancelled_calibration_stops_at_its_next_episode_and_keeps_what_it_sto
     assert state["status"] == "cancelled" and state["profile_ids"] == []
     assert api.delete(f"/api/calibrations/{calibration_id}").status_code == 404  # nothing left to cancel
     with storage.snapshot(api.app.state.factory) as session:
-        assert db_calibrations.next_claimable(session) is None  # no runner takes it up again
+        assert lease.next_claimable(session, Calibration) is None  # no runner takes it up again
     assert api.post("/api/calibrations", json=CAR).status_code == 202  # and another may start
 
 

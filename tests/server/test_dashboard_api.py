@@ -7,8 +7,9 @@ import numpy as np
 
 from driftlab.core.config import Theta
 from driftlab.core.robust import rescore_seeds
+from driftlab.db import lease, storage
 from driftlab.db import rescores as db_rescores
-from driftlab.db import storage
+from driftlab.db.models import Rescore
 from driftlab.worker.rescoring import run_rescore
 from driftlab.worker.slots import EpisodeSlots
 from tests.server.conftest import InThreadExecutor, in_process_client
@@ -129,8 +130,8 @@ def _run_queued(api, executor, should_stop=lambda: False):
     """What the server's runner does with the next queued rescore (driftlab.worker.job_runner)."""
     factory = api.app.state.factory
     with storage.transaction(factory) as session:
-        rescore_id = db_rescores.next_claimable(session)
-        assert db_rescores.claim(session, rescore_id=rescore_id, runner="test-runner")
+        rescore_id = lease.next_claimable(session, Rescore)
+        assert lease.claim(session, Rescore, row_id=rescore_id, runner="test-runner")
     return run_rescore(factory, rescore_id, executor, runner="test-runner", slots=EpisodeSlots(1),
                        owner=("rescore", rescore_id), should_stop=should_stop)
 
@@ -198,7 +199,7 @@ def test_a_rescore_can_be_cancelled_and_then_started_again(api):
     r = api.delete(f"/api/jobs/{job_id}/rescore")
     assert r.status_code == 200 and r.json()["status"] == "cancelled"
     with storage.snapshot(api.app.state.factory) as session:
-        assert db_rescores.next_claimable(session) is None  # no runner takes it
+        assert lease.next_claimable(session, Rescore) is None  # no runner takes it
     assert api.post(f"/api/jobs/{job_id}/rescore", json={"samples": 1}).status_code == 202
 
 

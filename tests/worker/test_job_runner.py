@@ -256,19 +256,21 @@ def test_a_study_a_job_a_rescore_and_a_calibration_run_at_once_on_one_runner(fac
     from driftlab.db.models import Calibration, Rescore
     from driftlab.services.calibration import CalibrationRequest
 
-    job = _job(factory, "job", 4, 40)
+    # Each far longer than the test waits: it ends as soon as the four ran at once (a loaded machine fits the
+    # calibration's model slowly, and it must still meet the others running).
+    job = _job(factory, "job", 4, 400)
     with storage.transaction(factory) as session:
         study_id = start_study(session, doc={"kind": "robustness", "theta": {"k": 0.05}, "robust_samples": 4,
-                                             "grid": {"plant.mass_scale": [0.9 + 0.02 * i for i in range(10)]}}).id
+                                             "grid": {"plant.mass_scale": [0.8 + 0.01 * i for i in range(40)]}}).id
         done = storage.create_job(session, name="done", spec=TuningSpec.from_dict(SPEC).to_dict(), seed=0)
-        done.status = lifecycle.JobStatus.FINISHED  # only its rescore is work
+        done.status = lifecycle.WorkStatus.FINISHED  # only its rescore is work
         best = storage.add_evaluation(session, job_id=done.id, theta={"k": 0.05}, J=-1.0, status="completed",
                                       metrics={"completed_fraction": 1.0}, trigger_points=[], wall_ms=1.0,
                                       columns=["t_s"], trajectory=np.zeros((1, 1)),
                                       seeds=[{"seed": 0, "status": "completed", "J": -1.0}], trajectory_seed=0)
         rescore_id = rescores.queue(session, job_id=done.id, evaluation_id=best.id, theta={"k": 0.05},
-                                    config=done.spec["config"], seeds=list(range(1000, 1030))).id
-        request = CalibrationRequest(plant="commonroad_std", points="0.5@44", iterations=2, seeds=1,
+                                    config=done.spec["config"], seeds=list(range(1000, 1400))).id
+        request = CalibrationRequest(plant="commonroad_std", points="0.5@44", iterations=20, seeds=2,
                                      sets={"plant.model_drive_coupling": False})
         calibration_id = calibrations.queue(session, request=request.as_dict()).id
     cluster = FakeCluster(workers=4, episode_s=0.2, gate_s=0.0)
@@ -283,14 +285,17 @@ def test_a_study_a_job_a_rescore_and_a_calibration_run_at_once_on_one_runner(fac
             together = max(together, len(kinds))
             return together == 4
         _wait(all_four_in_flight, timeout_s=120, what=f"the four kinds in flight at once (seen {seen})")
+
+        def each_stored_a_result():
+            with storage.snapshot(factory) as session:
+                return (any(c.status == "completed" for c in studies.cells(session, study_id=study_id))
+                        and bool(session.get(Rescore, rescore_id).samples) and bool(_indices(factory, job)))
+        _wait(each_stored_a_result, timeout_s=120, what="a cell, a sample and an evaluation stored")
         assert runner.current_study_id == study_id and runner.running_job_ids == [job]
         assert cluster.peak <= cluster.workers  # shared, never oversubscribed (a stop drops what is in flight)
     finally:
         runner.stop()
     with storage.snapshot(factory) as session:
-        assert any(c.status == "completed" for c in studies.cells(session, study_id=study_id))
-        assert session.get(Rescore, rescore_id).samples
         calibration = session.get(Calibration, calibration_id)  # handed back at the stop, what it said kept
-        assert calibration.status == "queued"
+        assert calibration.status in ("queued", "finished")
         assert any(m.startswith("calibrating 0.5 rad @ R 44 m") for m in calibration.messages)
-    assert _indices(factory, job)

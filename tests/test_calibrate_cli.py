@@ -2,6 +2,7 @@
 the reason, the profile is stored and written, and a job of that car started afterwards takes it."""
 
 import json
+import sqlite3
 import subprocess
 import sys
 
@@ -13,6 +14,13 @@ pytestmark = pytest.mark.e2e  # real processes: servers, browsers, Dask, the CLI
 def _run(*args, timeout=600):
     return subprocess.run([sys.executable, "-m", "driftlab.cli", *args], capture_output=True, text=True,
                           timeout=timeout)
+
+
+def _logs(db):
+    """Each stored profile's whole document by id: the profile and its calibration's log (the start, the candidates,
+    the known sets tried, the points skipped), which stays in the database."""
+    with sqlite3.connect(db) as connection:
+        return {pid: json.loads(doc) for pid, doc in connection.execute("SELECT id, document FROM car_profiles")}
 
 
 # What these tests check (points, known sets, rounds, the profile a job takes) does not depend on the candidate
@@ -31,12 +39,13 @@ def test_calibrate_stores_a_profile_that_the_next_job_of_that_car_takes(tmp_path
     profile, = json.loads(out_file.read_text())["profiles"]
     assert profile["command"].startswith("driftlab calibrate --plant commonroad_std --set plant.model_drive_coupling")
     assert "--points 0.5@44,0.2@44" in profile["command"]
-    assert profile["skipped"][0]["sideslip_rad"] == 0.2 and profile["start"]["per_point"][0]["episodes"] == 1
-    assert profile["score"] <= profile["start"]["score"]  # the warm start is among the sets tried
+    assert not {"start", "candidates", "known", "skipped"} & set(profile)  # the file is data; the log is stored
+    log = _logs(db)[1]
+    assert log["skipped"][0]["sideslip_rad"] == 0.2 and log["start"]["per_point"][0]["episodes"] == 1
+    assert profile["score"] == log["score"] <= log["start"]["score"]  # the warm start is among the sets tried
     tune = _run("tune", "--plant", "commonroad_std", "--iterations", "1", "--seed-points", "1",
                 "--robust-samples", "1", "--confirm-samples", "0", "--name", "after", "--db", str(db))
     assert tune.returncode == 0, tune.stderr
-    import sqlite3
 
     with sqlite3.connect(db) as connection:
         profile_id, spec = connection.execute("SELECT profile_id, spec FROM jobs WHERE name = 'after'").fetchone()
@@ -56,12 +65,13 @@ def test_each_point_is_calibrated_on_its_own_from_the_scenarios_drift_outwards(t
     written = json.loads(out_file.read_text())["profiles"]
     # (A point where the 2 sets complete nothing gets a second round: round 1 of each is what this test reads.)
     first, second = (p for p in written if p["round"] == 1)
-    assert [p["sideslip_rad"] for p in first["points"] + second["points"]] == [0.5, 0.45]  # the scenario's first
+    assert [p["sideslip_rad"] for p in first["per_point"] + second["per_point"]] == [0.5, 0.45]  # scenario's first
     assert [p["profile_id"] for p in json.loads(out.stdout)["profiles"]] == list(range(1, len(written) + 1))
     # The second search tried what the first found (when it found other weights than the car's own) right after
     # the car's own, and each known set once.
-    tried_first = second["known"][0]
-    if first["weights"] != first["start"]["weights"]:
+    logs = _logs(db)
+    tried_first = logs[second["profile_id"]]["known"][0]
+    if first["weights"] != logs[first["profile_id"]]["start"]["weights"]:
         assert tried_first["from"] == "profile 1 (0.5 rad @ R 44 m)" and tried_first["weights"] == first["weights"]
     else:
         assert tried_first["from"] == "driftlab's shipped weights"  # (2 iterations: the own set and one more)
@@ -78,7 +88,7 @@ def test_each_point_is_calibrated_on_its_own_from_the_scenarios_drift_outwards(t
     first, second = json.loads(out_file.read_text())["profiles"]
     assert [first["round"], second["round"]] == [1, 2]
     if first["per_point"][0]["completed"]:  # the second round searched around the weights the first found
-        assert second["start"]["weights"] == pytest.approx(first["weights"], rel=1e-9)
+        assert _logs(db)[second["profile_id"]]["start"]["weights"] == pytest.approx(first["weights"], rel=1e-9)
     assert "learned at 0.5 rad @ R 44 m" in rounds.stderr
     bad = _run("calibrate", "--plant", "commonroad_std", "--rounds", "2", "--one-set", "--db", str(db))
     assert bad.returncode == 2 and "--rounds" in bad.stderr and len(bad.stderr.strip().splitlines()) == 1

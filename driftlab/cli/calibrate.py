@@ -60,6 +60,7 @@ def cmd_calibrate(args: argparse.Namespace) -> int:
     from driftlab.core.errors import ConfigError
     from driftlab.db import storage
     from driftlab.services.calibration import run_calibration
+    from driftlab.services.profiles import profiles_file
     from driftlab.worker.executors import open_executor
 
     request = request_from_args(args)
@@ -78,9 +79,9 @@ def cmd_calibrate(args: argparse.Namespace) -> int:
     finally:
         executor.shutdown()
         storage.close_database(factory)
-    if args.out:
+    if args.out:  # the profiles as data; each calibration's log stays in the database (GET /api/profiles/{id})
         with open(args.out, "w") as handle:
-            json.dump(finite({"profiles": documents}), handle, indent=1)
+            handle.write(profiles_file(finite(documents)))
     print(json.dumps(finite({"profiles": [{k: d[k] for k in SUMMARY_KEYS} for d in documents],
                              "wall_s": round(sum(d["wall_s"] for d in documents), 1)})))
     return 0

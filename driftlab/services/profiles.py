@@ -268,6 +268,29 @@ def uncalibrated_warning(session: Session, spec: TuningSpec) -> str | None:
 PROFILE_LIMITS = ("steer_limit_rad",)
 
 
+# What a job reads of a profile, and where it came from (its provenance); the rest of a calibration's document (the
+# start, the candidates, the known sets it tried, the points it skipped) is its log, kept in the database only.
+PROFILE_KEYS = ("plant_model", "vehicle_id", "weights", "theta", "per_point", "window", "score",
+                "completed", "episodes", "round", "seeds", "iterations", "command", "driftlab_version", "wall_s")
+PROFILE_PLANT = ("model_drive_coupling", "wheel_liftoff")  # the plant settings a profile's weights hold for
+
+
+def profile_data(document: dict[str, Any]) -> dict[str, Any]:
+    """A profile as data (what ``driftlab calibrate --out`` writes and DriftLab ships): :data:`PROFILE_KEYS`, the
+    plant settings its weights were found on (:data:`PROFILE_PLANT`) and the controller's limits
+    (:func:`limits_of`), without the calibration's log."""
+    plant = document.get("plant", {})
+    return {**{k: document[k] for k in PROFILE_KEYS if k in document},
+            "plant": {k: plant[k] for k in PROFILE_PLANT if k in plant}, "mpc": limits_of(document)}
+
+
+def profiles_file(documents: list[dict[str, Any]]) -> str:
+    """The text of a profiles file (``driftlab calibrate --out``, ``driftlab/profiles/*.json``): each stored
+    document's :func:`profile_data` with its id, one profile a line."""
+    lines = [json.dumps({"profile_id": d["profile_id"], **profile_data(d)}, allow_nan=False) for d in documents]
+    return '{"profiles": [\n' + ",\n".join(lines) + "\n]}\n"
+
+
 def limits_of(document: dict[str, Any]) -> dict[str, Any]:
     """The controller's limits a profile's weights were found with (what its ``mpc`` stored): weights found for
     0.6 rad of steering do not carry over to the car's whole reach."""

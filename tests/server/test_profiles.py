@@ -272,3 +272,20 @@ def test_weights_are_checked_between_points_and_a_job_there_takes_the_ones_that_
     assert profile_for([ShippedProfile(2, "b", at_064), ShippedProfile(1, "a", at_059)], 0.64, 44.0).id == 2
     assert calibrated_window([at_064, at_059]) == {44.0: [(0.565, 0.64)]}
     assert calibrated_window([at_064]) == {44.0: [(0.64, 0.64)]}  # alone its neighbours fall short: a point
+
+
+def test_the_shipped_profiles_are_the_data_a_job_reads():
+    """A shipped profile is what a job reads (the car, its drift, weights, limits, theta, window) and where it came
+    from; each calibration's log stays in the database it ran on, so the files grow with profiles, not with the
+    square of them."""
+    from importlib import resources
+
+    from driftlab.services.profiles import PROFILE_KEYS, PROFILE_PLANT, shipped_profiles
+
+    files = [e for e in resources.files("driftlab.profiles").iterdir() if e.name.endswith(".json")]
+    assert sum(len(e.read_bytes()) for e in files) <= 40_000
+    for plant_model, vehicle_id in (("commonroad_std", 2), ("commonroad_std", 3), ("commonroad_mb", 2)):
+        profiles = shipped_profiles(plant_model, vehicle_id)
+        assert profiles and all(set(p.document) <= {*PROFILE_KEYS, "plant", "mpc"} for p in profiles)
+        assert all(set(p.document["plant"]) <= set(PROFILE_PLANT) and p.document["weights"] for p in profiles)
+        assert all(p.document["command"].startswith("driftlab calibrate") for p in profiles)

@@ -74,7 +74,7 @@ def _open_study(factory, args: argparse.Namespace, tuning_spec, runner: str) -> 
         return study.id
 
 
-def _run_seeds_jobs(factory, study_id: int, executor, workers: int, runner: str) -> None:
+def _run_seeds_jobs(factory, study_id: int, executor, workers, runner: str) -> None:
     """Runs the study's unfinished jobs at once on the server runner's scheduler (driftlab.worker.job_pool): one
     thread and one optimizer per job, the workers shared fairly, at most as many jobs at once as workers, the next
     one starting when one finishes. Ctrl-C: what is asked completes, then the jobs are paused."""
@@ -123,7 +123,7 @@ def _run_seeds_jobs(factory, study_id: int, executor, workers: int, runner: str)
         raise
 
 
-def _run_cells(factory, study_id: int, executor, workers: int, runner: str) -> None:
+def _run_cells(factory, study_id: int, executor, workers, runner: str) -> None:
     from driftlab.db import lifecycle, storage, studies
     from driftlab.db.lifecycle import WorkStatus
     from driftlab.worker.slots import EpisodeSlots
@@ -169,6 +169,7 @@ def cmd_study(args: argparse.Namespace, tuning_spec, db_url: str, dask_address: 
     from driftlab.db import lifecycle, storage, studies
     from driftlab.services import studies as study_views
     from driftlab.worker.executors import open_executor
+    from driftlab.worker.slots import capacity_of
 
     factory = storage.open_database(db_url)
     if args.kind == "show":
@@ -184,6 +185,7 @@ def cmd_study(args: argparse.Namespace, tuning_spec, db_url: str, dask_address: 
     with storage.transaction(factory) as session:
         kind = studies.get_study(session, study_id=study_id).kind
     executor, workers = open_executor(args.workers, dask_address)
+    workers = capacity_of(executor, args.workers, workers)  # a Dask cluster's worker threads as it grows
     started = time.perf_counter()
     try:
         if kind == StudyKind.SEEDS:

@@ -131,6 +131,7 @@ def cmd_tune(args: argparse.Namespace) -> int:
     from driftlab.db import lifecycle, storage
     from driftlab.worker.executors import open_executor
     from driftlab.worker.job_loop import Progress, run_job
+    from driftlab.worker.slots import EpisodeSlots, capacity_of
 
     stop_on_sigterm()
     factory = storage.open_database(db_url(args.db))
@@ -155,7 +156,8 @@ def cmd_tune(args: argparse.Namespace) -> int:
     if status == lifecycle.WorkStatus.RUNNING:  # ours now
         executor, workers = open_executor(args.workers, dask_address(args))
         try:
-            status = run_job(factory, job_id, executor, runner=runner, workers=workers, on_progress=progress,
+            slots = EpisodeSlots(capacity_of(executor, args.workers, workers))  # a Dask cluster's as it grows
+            status = run_job(factory, job_id, executor, runner=runner, slots=slots, on_progress=progress,
                              max_trajectories=settings().max_trajectories_per_job)
         except KeyboardInterrupt:
             with storage.transaction(factory) as session:

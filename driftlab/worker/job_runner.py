@@ -29,7 +29,7 @@ from driftlab.worker.job_loop import EXECUTOR_LOST, claim_job
 from driftlab.worker.job_pool import JobPool
 from driftlab.worker.optimizer_host import OptimizerHost
 from driftlab.worker.rescoring import run_rescore
-from driftlab.worker.slots import EpisodeSlots
+from driftlab.worker.slots import EpisodeSlots, capacity_of
 from driftlab.worker.study_runner import run_study
 
 # Optimizer processes started with the runner (DRIFTLAB_OPTIMIZER_PROCESS=1): a job beyond them starts its own.
@@ -80,12 +80,13 @@ class JobRunner:
 
     def start(self, executor: EpisodeExecutor | None = None) -> None:
         """Opens the executor (or takes ``executor``, whose capacity is ``workers``) and starts the runner."""
+        given = self.workers
         if executor is None:
             # Below the what-if worker and the web server in priority: a slider must not wait behind a job.
             self._executor, self.workers = open_executor(self.workers, self.dask_address, niceness=10)
         else:
             self._executor, self.workers = executor, self.workers or 1
-        self._slots = EpisodeSlots(self.workers)
+        self._slots = EpisodeSlots(capacity_of(self._executor, given, self.workers))
         self._jobs = JobPool(self.factory, self._executor, self._slots, runner=self.runner_id,
                              should_stop=self._stop.is_set, max_trajectories=self.max_trajectories_per_job,
                              optimizers=self._optimizers, on_done=lambda job_id, status: self._wake.set())

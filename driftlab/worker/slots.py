@@ -10,17 +10,44 @@ joins takes its share as the others' episodes come back (nothing in flight is ca
 from __future__ import annotations
 
 import threading
-from collections.abc import Hashable
+import time
+from collections.abc import Callable, Hashable
+from typing import Any
+
+# How often a capacity that follows the executor (a Dask cluster's worker threads) is read again.
+CAPACITY_READ_EVERY_S = 1.0
+
+
+def capacity_of(executor: Any, workers_given: int | None, workers: int) -> int | Callable[[], int]:
+    """The slots' capacity: the worker count given, fixed; else, where the executor has one, its capacity as it is
+    now (a Dask cluster that grows takes more episodes at once, one that shrinks fewer), else ``workers``."""
+    follow = getattr(executor, "capacity", None)
+    return follow if workers_given is None and callable(follow) else workers
 
 
 class EpisodeSlots:
-    def __init__(self, capacity: int) -> None:
-        self.capacity = max(int(capacity), 1)
+    def __init__(self, capacity: int | Callable[[], int]) -> None:
+        """``capacity``: episodes the executor runs at once, or a function that says how many now (read at most
+        every CAPACITY_READ_EVERY_S)."""
+        self._capacity_now = capacity if callable(capacity) else None
+        self._capacity = max(int(capacity() if callable(capacity) else capacity), 1)
+        self._read_at = time.monotonic()
         self._lock = threading.Lock()
         self._held: dict[Hashable, int] = {}  # episodes in flight per job, in the order the jobs joined
         self._wakes: dict[Hashable, threading.Event] = {}
         self._in_flight = 0
         self.peak = 0  # the most episodes in flight at once so far
+
+    @property
+    def capacity(self) -> int:
+        """Episodes the executor runs at once (now, for a capacity that follows the executor)."""
+        if self._capacity_now is not None and time.monotonic() - self._read_at >= CAPACITY_READ_EVERY_S:
+            self._read_at = time.monotonic()
+            before, self._capacity = self._capacity, max(int(self._capacity_now()), 1)
+            if self._capacity > before:  # more room: whoever waits for a slot may take one now
+                for wake in list(self._wakes.values()):
+                    wake.set()
+        return self._capacity
 
     def join(self, owner: Hashable, wake: threading.Event | None = None) -> None:
         """``owner`` (one running job) takes part; ``wake`` is set whenever a slot it may use becomes free."""

@@ -204,3 +204,41 @@ def test_a_robustness_study_on_dask_stores_the_same_cells_as_the_local_pool(clus
     assert on_dask["status"] == local["status"] == "finished"
     assert [(c["settings"], c["status"], c["J"]) for c in on_dask["cells"]] == [
         (c["settings"], c["status"], c["J"]) for c in local["cells"]]
+
+
+def test_a_job_takes_more_episodes_at_once_when_dask_workers_join_mid_job(tmp_path):
+    """A job started on a one-thread cluster keeps one episode in flight; two workers join mid-job and the same job,
+    never restarted, keeps more in flight at once on the grown cluster (its slots follow the cluster)."""
+    from distributed import Client
+
+    port = _free_port()
+    address = f"tcp://127.0.0.1:{port}"
+    processes = [_scheduler(port), _worker(address)]
+    tune = None
+    try:
+        _wait_workers(address, 1)
+        db = tmp_path / "grow.db"
+        tune = _tune(db, address, "--iterations", "400", "--name", "grow")
+        with Client(address, timeout=30, set_as_default=False) as client:
+            def in_flight():
+                return sum(len(tasks) for tasks in client.processing().values())
+
+            seen_alone = 0
+            deadline = time.time() + 120
+            while _n_done(db, "grow") < 3 and time.time() < deadline:
+                seen_alone = max(seen_alone, in_flight())
+                time.sleep(0.05)
+            assert _n_done(db, "grow") >= 3 and seen_alone == 1  # one worker thread: one episode at a time
+            processes += [_worker(address), _worker(address)]
+            client.wait_for_workers(3, timeout=90)
+            seen_grown, deadline = 0, time.time() + 120
+            while seen_grown < 2 and time.time() < deadline:
+                seen_grown = max(seen_grown, in_flight())
+                time.sleep(0.02)
+            assert seen_grown >= 2, "the job kept one episode in flight on three workers"
+        assert tune.poll() is None  # the same process, never restarted
+    finally:
+        if tune is not None:
+            tune.kill()
+            tune.wait()
+        _kill_all(processes)

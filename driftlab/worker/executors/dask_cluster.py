@@ -41,6 +41,7 @@ class DaskExecutor:
         self.retries = retries
         self._pending: dict[int, Any] = {}
         self._lock = threading.Lock()
+        self._capacity = 1
 
     def _connect(self, timeout_s: float):
         from distributed import Client
@@ -72,6 +73,16 @@ class DaskExecutor:
     def workers(self) -> int:
         """Worker threads in the cluster now (a job's default batch size)."""
         return max(sum(self.client.nthreads().values()), 1)
+
+    def capacity(self) -> int:
+        """Worker threads in the cluster now (one round trip to the scheduler): workers joining (``cluster.adapt``,
+        a ``dask worker`` started) and leaving change it. While the scheduler is away, the last count."""
+        if self.client.status == "running":
+            try:
+                self._capacity = max(sum(self.client.nthreads().values()), 1)
+            except (OSError, TimeoutError):
+                pass
+        return self._capacity
 
     def submit(self, theta: dict[str, float], config_doc: dict[str, Any], seed: int = 0) -> Future[EpisodeOutcome]:
         result: Future[EpisodeOutcome] = Future()

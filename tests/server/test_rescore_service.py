@@ -106,3 +106,49 @@ def test_the_servers_runner_runs_a_calibration_beside_the_jobs(tmp_path):
     finally:
         proc.terminate()
         proc.wait(timeout=60)
+
+
+def test_sigterm_with_a_job_a_rescore_and_a_calibration_running_exits_within_dockers_grace(tmp_path):
+    """`docker stop` sends SIGTERM and kills 10 s later: the server hands back every lease, checkpoints the database
+    and exits before that, the file alone holding every acknowledged evaluation, and a restarted server takes each
+    piece of work up again."""
+    import signal
+
+    db = tmp_path / "driftlab.db"
+    proc, url = start_server(db, free_port(), extra_args=("--workers", "2"))
+    try:
+        tuned = _finished_job(url)
+        job = httpx.post(f"{url}/api/jobs", json={"name": "long", "iterations": 400}).json()["id"]
+        assert httpx.post(f"{url}/api/jobs/{tuned}/rescore", json={"samples": 60}).status_code == 202
+        calibration = httpx.post(f"{url}/api/calibrations", json={
+            "plant": "commonroad_std", "points": "0.5@44", "iterations": 40, "seeds": 2}).json()["id"]
+        wait_for(f"{url}/api/jobs/{job}", lambda j: j["n_done"] >= 2, timeout_s=300)
+        wait_for(f"{url}/api/jobs/{tuned}/rescore", lambda r: r["done"] >= 1, timeout_s=300)
+        wait_for(f"{url}/api/calibrations/{calibration}", lambda c: c["status"] == "running", timeout_s=300)
+        acknowledged = httpx.get(f"{url}/api/jobs/{job}").json()["n_done"]
+        started = time.monotonic()
+        proc.send_signal(signal.SIGTERM)
+        proc.wait(timeout=60)
+        exit_s = time.monotonic() - started
+    finally:
+        if proc.poll() is None:
+            proc.kill()
+            proc.wait()
+    assert exit_s <= 10.0, f"{exit_s:.1f} s to exit"
+    assert not (tmp_path / "driftlab.db-wal").exists() or (tmp_path / "driftlab.db-wal").stat().st_size == 0
+    with sqlite3.connect(db) as connection:
+        (stored,), = connection.execute("SELECT count(*) FROM evaluations WHERE job_id = ?", (job,)).fetchall()
+        statuses = {table: connection.execute(f"SELECT status, runner_id FROM {table}").fetchall()[-1]
+                    for table in ("rescores", "calibrations")}
+        (job_status,), = connection.execute("SELECT status FROM jobs WHERE id = ?", (job,)).fetchall()
+    assert stored >= acknowledged and job_status == "queued"
+    assert statuses == {"rescores": ("queued", None), "calibrations": ("queued", None)}  # handed back
+    proc, url = start_server(db, free_port(), extra_args=("--workers", "2"))
+    try:
+        wait_for(f"{url}/api/jobs/{job}", lambda j: j["n_done"] > stored, timeout_s=300)
+        before = httpx.get(f"{url}/api/jobs/{tuned}/rescore").json()["done"]
+        wait_for(f"{url}/api/jobs/{tuned}/rescore", lambda r: r["done"] > before, timeout_s=300)
+        wait_for(f"{url}/api/calibrations/{calibration}", lambda c: c["status"] == "running", timeout_s=300)
+    finally:
+        proc.terminate()
+        proc.wait(timeout=60)

@@ -98,3 +98,11 @@ def release(session: Session, table: Any, *, row_id: int, runner: str, status: s
                     .values(status=status, error=error).execution_options(synchronize_session=False))
     session.execute(update(table).where(table.id == row_id, table.runner_id == runner)
                     .values(runner_id=None, heartbeat_at=None).execution_options(synchronize_session=False))
+
+
+def hand_back(session: Session, table: Any, *, runner: str) -> int:
+    """Every row of ``table`` that ``runner`` holds goes back to the queue, its lease cleared (a runner that stops
+    before its threads have: the next runner takes the work up, an episode in flight is run again). Returns how many."""
+    return rows_updated(session, update(table).where(table.runner_id == runner, table.status == RUNNING)
+                        .values(status=WorkStatus.QUEUED, runner_id=None, heartbeat_at=None, error=None)
+                        .execution_options(synchronize_session=False))

@@ -295,7 +295,9 @@ def _run(factory: sessionmaker[Session], job_id: int, executor: EpisodeExecutor,
                     break
             lease.renew_if_due()
             shutting_down = shutting_down or should_stop()
-            stopping = shutting_down or not lease.held or stop_reason is not None
+            if shutting_down:  # the runner stops (SIGTERM; Docker kills 10 s later), not the job: what is unfinished
+                break          # is dropped and the next runner asks again (a pause, below, completes what it asked)
+            stopping = not lease.held or stop_reason is not None
             # Deterministic: one evaluation at a time (its seeds still run in parallel), so the optimizer's
             # history never depends on which worker finished first.
             free = not evaluations if spec.deterministic else _may_ask(waiting, evaluations, slots.has_room(owner))
@@ -355,6 +357,8 @@ def _run(factory: sessionmaker[Session], job_id: int, executor: EpisodeExecutor,
             lifecycle.release(session, job_id=job_id, runner=runner, status=status, error=error)
         return status
     finally:
+        for future in episodes:
+            future.cancel()
         if optimizers is not None:
             optimizer.close()
     if n_done >= lease.iterations or (stop_reason is not None and lease.held):

@@ -13,6 +13,7 @@ runner once its lease goes stale.
 from __future__ import annotations
 
 import threading
+import time
 from collections.abc import Callable
 from typing import Any
 
@@ -31,6 +32,10 @@ from driftlab.worker.optimizer_host import OptimizerHost
 from driftlab.worker.rescoring import run_rescore
 from driftlab.worker.slots import EpisodeSlots, capacity_of
 from driftlab.worker.study_runner import run_study
+
+# How long a stop waits for the runner's threads to hand their work back themselves; then it hands back what they
+# still hold and ends the workers: `docker stop` kills 10 s after SIGTERM, and the server has its database to close.
+STOP_WAIT_S = 5.0
 
 # Optimizer processes started with the runner (DRIFTLAB_OPTIMIZER_PROCESS=1): a job beyond them starts its own.
 OPTIMIZER_PROCESSES_AT_START = 8
@@ -51,6 +56,7 @@ class JobRunner:
         self.poll_s, self.busy_poll_s = poll_s, max(poll_s, busy_poll_s)
         self.runner_id = lifecycle.new_runner_id("server")
         self._stop = threading.Event()
+        self._stop_by = float("inf")
         self._wake = threading.Event()
         self._thread: threading.Thread | None = None
         self._executor: EpisodeExecutor | None = None
@@ -99,14 +105,24 @@ class JobRunner:
         self._wake.set()
 
     def stop(self) -> None:
+        """Stops taking work, lets each piece hand itself back for at most STOP_WAIT_S, hands back whatever this
+        runner still holds (queued again, its stored results kept), then ends the workers."""
+        self._stop_by = time.monotonic() + STOP_WAIT_S
         self._stop.set()
         self._wake.set()
         if self._thread is not None:
-            self._thread.join(timeout=30)
+            self._thread.join(timeout=self._left())
+        with storage.transaction(self.factory) as session:
+            for table in (Job, Study, Rescore, Calibration):
+                lease.hand_back(session, table, runner=self.runner_id)
         if self._executor is not None:
             self._executor.shutdown()
         if self._optimizers is not None:
             self._optimizers.shutdown()
+
+    def _left(self) -> float | None:
+        """What is left of the stop's wait (None: no stop asked, the loop ended otherwise)."""
+        return None if self._stop_by == float("inf") else max(self._stop_by - time.monotonic(), 0.0)
 
     def _requeue_jobs_waiting_for_the_cluster(self) -> None:
         """Jobs paused because the cluster went away continue once the executor reaches it again."""
@@ -180,7 +196,7 @@ class JobRunner:
                     continue
                 self._wake.wait(self.busy_poll_s if self.running_job_ids else self.poll_s)
                 self._wake.clear()
-        finally:  # each stops after its episodes in flight (should_stop)
-            self._jobs.join(timeout_s=30)
+        finally:  # each hands itself back at its next look at should_stop; stop() hands back what has not
+            self._jobs.join(timeout_s=self._left())
             for _, thread in list(self._side_tasks.values()):
-                thread.join(timeout=30)
+                thread.join(timeout=self._left())

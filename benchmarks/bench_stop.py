@@ -23,13 +23,14 @@ from tests.server_process import free_port, start_server, wait_for, wait_status 
 def one_stop() -> tuple[float, bool]:
     folder = Path(tempfile.mkdtemp())
     proc, url = start_server(folder / "driftlab.db", free_port(), extra_args=("--workers", "2"))
+    http = httpx.Client(timeout=60)  # a loaded machine answers the first requests slowly
     try:
-        tuned = httpx.post(f"{url}/api/jobs", json={"iterations": 1, "robust_samples": 1,
+        tuned = http.post(f"{url}/api/jobs", json={"iterations": 1, "robust_samples": 1,
                                                     "confirm_samples": 0}).json()["id"]
         wait_status(url, tuned, {"finished"}, timeout_s=300)
-        job = httpx.post(f"{url}/api/jobs", json={"iterations": 400}).json()["id"]
-        httpx.post(f"{url}/api/jobs/{tuned}/rescore", json={"samples": 60})
-        calibration = httpx.post(f"{url}/api/calibrations", json={"plant": "commonroad_std", "points": "0.5@44",
+        job = http.post(f"{url}/api/jobs", json={"iterations": 400}).json()["id"]
+        http.post(f"{url}/api/jobs/{tuned}/rescore", json={"samples": 60})
+        calibration = http.post(f"{url}/api/calibrations", json={"plant": "commonroad_std", "points": "0.5@44",
                                                                   "iterations": 40, "seeds": 2}).json()["id"]
         wait_for(f"{url}/api/jobs/{job}", lambda j: j["n_done"] >= 2, timeout_s=300)
         wait_for(f"{url}/api/calibrations/{calibration}", lambda c: c["status"] == "running", timeout_s=300)
@@ -38,6 +39,7 @@ def one_stop() -> tuple[float, bool]:
         proc.wait(timeout=120)
         return time.monotonic() - started, not (folder / "driftlab.db-wal").exists()
     finally:
+        http.close()
         if proc.poll() is None:
             proc.kill()
             proc.wait()

@@ -45,8 +45,7 @@ class EpisodeSlots:
             self._read_at = time.monotonic()
             before, self._capacity = self._capacity, max(int(self._capacity_now()), 1)
             if self._capacity > before:  # more room: whoever waits for a slot may take one now
-                for wake in list(self._wakes.values()):
-                    wake.set()
+                self._wake_all()
         return self._capacity
 
     def join(self, owner: Hashable, wake: threading.Event | None = None) -> None:
@@ -103,7 +102,7 @@ class EpisodeSlots:
                     self._wake_those_with_room(but=owner)
 
     def _wake_all(self) -> None:
-        for wake in self._wakes.values():
+        for wake in list(self._wakes.values()):  # a copy: the capacity is also read without the lock (JobPool.free)
             wake.set()
 
     def _wake_those_with_room(self, but: Hashable) -> None:

@@ -72,7 +72,7 @@ class DaskExecutor:
     @property
     def workers(self) -> int:
         """Worker threads in the cluster now (a job's default batch size)."""
-        return max(sum(self.client.nthreads().values()), 1)
+        return self.capacity()
 
     def capacity(self) -> int:
         """Worker threads in the cluster now (one round trip to the scheduler): workers joining (``cluster.adapt``,

@@ -45,8 +45,8 @@ def _print_event(event: dict[str, Any]) -> None:
 
 
 def request_from_args(args: argparse.Namespace):
+    from driftlab.core.calibration_run import CalibrationRequest
     from driftlab.core.config import Theta
-    from driftlab.services.calibration import CalibrationRequest
 
     theta = key_values(args.theta.split(",") if args.theta else [], "--theta")
     return CalibrationRequest(
@@ -57,10 +57,10 @@ def request_from_args(args: argparse.Namespace):
 
 
 def cmd_calibrate(args: argparse.Namespace) -> int:
+    from driftlab.core.car_profile import profiles_file
     from driftlab.core.errors import ConfigError
     from driftlab.db import storage
     from driftlab.services.calibration import run_calibration
-    from driftlab.services.profiles import profiles_file
     from driftlab.worker.executors import open_executor
 
     request = request_from_args(args)

@@ -60,7 +60,7 @@ class CalibrationPoint:
         return f"{self.sideslip_rad:g} rad @ R {self.radius_m:g} m"
 
 
-# The default points' spacing across the window: a job's drift lies less than one step (driftlab.services.profiles:
+# The default points' spacing across the window: a job's drift lies less than one step (driftlab.core.car_profile:
 # 0.05 rad) from one of them, so a profile applies to every drift of the window on the scenario's circle.
 POINT_SPACING_RAD = 0.05
 

@@ -53,6 +53,9 @@ DEFAULT_SEED_POINTS = 12
 LOCAL_POINTS = 11
 LOCAL_MODEL_RADIUS = 0.05
 LOCAL_GROWTH = 15
+# The job document's version (TuningSpec.to_dict): 2 states whether its config is fitted to its plant ("fitted");
+# a document without "version" (releases before it) says so by the keys it lacks (driftlab.core.config.config_to_dict).
+JOB_DOCUMENT_VERSION = 2
 # The paper's 500-run learns the paper's four parameters only.
 PAPER_PRESET = {"iterations": 500, "seed_points": 20, "active_set": 400, "model_correction": False}
 
@@ -165,7 +168,11 @@ class TuningSpec:
         return self if not self.config.to_fit else replace(self, config=fitted(self.config))
 
     def to_dict(self) -> dict[str, Any]:
-        out = {"iterations": self.iterations, "seed_points": self.seed_points, "active_set": self.active_set,
+        """The job document: what is stored, what ``GET /api/jobs/{id}`` shows as ``spec``, and what
+        :meth:`from_dict` reads back. ``fitted``: the config is fitted to its plant (the controller's model and the
+        plant's start, driftlab.core.configure.fitted); false until a runner first claims the job."""
+        out = {"version": JOB_DOCUMENT_VERSION, "fitted": not self.config.to_fit,
+               "iterations": self.iterations, "seed_points": self.seed_points, "active_set": self.active_set,
                "seed": self.seed, "robust_samples": self.robust_samples, "confirm_samples": self.confirm_samples,
                "bounds": {k: list(v) for k, v in self.bounds.items()}, "model_correction": self.model_correction,
                "local_phase": self.local_phase, "deterministic": self.deterministic,
@@ -235,13 +242,26 @@ class TuningSpec:
 
     @classmethod
     def from_dict(cls, data: dict[str, Any]) -> TuningSpec:
-        """From a stored or posted document. ``config`` may be nested sections or flat dotted keys."""
-        allowed = {"iterations", "seed_points", "active_set", "seed", "robust_samples", "confirm_samples", "bounds",
+        """From a stored or posted document. ``config`` may be nested sections or flat dotted keys.
+
+        Raises:
+            ConfigError: naming the field (a document of a newer release names its version).
+        """
+        allowed = {"version", "fitted", "iterations", "seed_points", "active_set", "seed", "robust_samples",
+                   "confirm_samples", "bounds",
                    "model_correction", "local_phase", "deterministic", "config", "warm_start", "stop"}
         unknown = set(data) - allowed
         if unknown:
             raise ConfigError(f"unknown field {sorted(unknown)[0]!r}; allowed: {', '.join(sorted(allowed))}")
+        version = data.get("version", 1)
+        if isinstance(version, bool) or version not in range(1, JOB_DOCUMENT_VERSION + 1):
+            raise ConfigError(f"version must be 1 to {JOB_DOCUMENT_VERSION} (a job document of this release or an "
+                              f"earlier one), got {version!r}", field="version")
         config = config_from_document(data.get("config"))
+        if data.get("fitted", False) is True and config.to_fit:
+            lacking = ", ".join(sorted(config.to_fit))
+            raise ConfigError(f"fitted: the document says its config is fitted, but it lacks {lacking} (drop "
+                              "fitted, or give them)", field="fitted")
         scalars = ("iterations", "seed_points", "active_set", "seed", "robust_samples", "confirm_samples")
         kwargs = {k: data[k] for k in scalars if k in data}
         return cls(**kwargs, bounds=data.get("bounds") or {}, config=config,

@@ -11,7 +11,7 @@ from sqlalchemy.orm import Session
 
 from driftlab.db import lease
 from driftlab.db.models import Calibration, WorkStatus
-from driftlab.db.storage import NotFound
+from driftlab.db.storage import NotFound, get_row
 
 ACTIVE = (WorkStatus.QUEUED, WorkStatus.RUNNING)
 MESSAGES_KEPT = 200  # the newest messages a calibration keeps (a 5-point, 5-round run says about 60)
@@ -34,10 +34,7 @@ def queue(session: Session, *, request: dict[str, Any]) -> Calibration:
 
 
 def get(session: Session, *, calibration_id: int) -> Calibration:
-    calibration = session.get(Calibration, calibration_id)
-    if calibration is None:
-        raise NotFound(f"no calibration {calibration_id}")
-    return calibration
+    return get_row(session, Calibration, calibration_id, "calibration")
 
 
 def list_all(session: Session) -> list[Calibration]:
@@ -49,9 +46,7 @@ def cancel(session: Session, *, calibration_id: int) -> Calibration:
     calibration = get(session, calibration_id=calibration_id)
     if calibration.status not in ACTIVE:
         raise NotFound(f"calibration {calibration_id} is {calibration.status}, not queued or running")
-    calibration.status = WorkStatus.CANCELLED
-    calibration.runner_id, calibration.heartbeat_at = None, None
-    return calibration
+    return lease.cancel(calibration)
 
 
 def record(session: Session, *, calibration_id: int, runner: str, progress: dict[str, Any] | None = None,

@@ -27,6 +27,34 @@ from driftlab.db.models import WorkStatus, utcnow
 LEASE_TIMEOUT_S = 15.0  # a runner renews every HEARTBEAT_S; three missed renewals and more mean it is gone
 HEARTBEAT_S = 2.0
 RUNNING = WorkStatus.RUNNING
+ACTIVE = (WorkStatus.QUEUED, WorkStatus.RUNNING)
+
+
+class TransitionError(RuntimeError):
+    """The work is not in a status that allows this (HTTP 409, CLI exit 2)."""
+
+
+def pause(row: Any, what: str) -> Any:
+    """A queued or running row is paused (its runner sees it at its next heartbeat and stops)."""
+    if row.status not in ACTIVE:
+        raise TransitionError(f"{what} is {row.status}; pause needs queued or running")
+    row.status = WorkStatus.PAUSED
+    return row
+
+
+def requeue(row: Any, what: str) -> Any:
+    """A paused or failed row is queued again."""
+    if row.status not in (WorkStatus.PAUSED, WorkStatus.FAILED):
+        raise TransitionError(f"{what} is {row.status}; resume needs paused or failed")
+    row.status, row.error = WorkStatus.QUEUED, None
+    return row
+
+
+def cancel(row: Any) -> Any:
+    """A queued or running row is cancelled, its lease cleared (its runner sees it at its next heartbeat)."""
+    row.status = WorkStatus.CANCELLED
+    row.runner_id, row.heartbeat_at = None, None
+    return row
 
 
 def new_runner_id(kind: str) -> str:

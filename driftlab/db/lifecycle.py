@@ -17,17 +17,13 @@ from sqlalchemy.orm import Session
 
 from driftlab.core.statuses import StudyKind
 from driftlab.db import lease
-from driftlab.db.lease import HEARTBEAT_S, LEASE_TIMEOUT_S, new_runner_id
+from driftlab.db.lease import HEARTBEAT_S, LEASE_TIMEOUT_S, TransitionError, new_runner_id
 from driftlab.db.models import EnqueuedTheta, Evaluation, Job, Rescore, Study, Trajectory, WorkStatus, utcnow
 from driftlab.db.storage import count_evaluations, get_job
 
 __all__ = ["HEARTBEAT_S", "LEASE_TIMEOUT_S", "WorkStatus", "LeaseHeld", "TransitionError", "claim", "delete_job",
            "extend", "heartbeat", "lease_is_live", "new_runner_id", "next_claimable", "release", "request_pause",
            "requeue"]
-
-
-class TransitionError(RuntimeError):
-    """The job is not in a status that allows this (HTTP 409, CLI exit 2)."""
 
 
 class LeaseHeld(TransitionError):
@@ -110,19 +106,11 @@ def release(session: Session, *, job_id: int, runner: str, status: WorkStatus, e
 
 
 def request_pause(session: Session, *, job_id: int) -> Job:
-    job = get_job(session, job_id=job_id)
-    if job.status not in (WorkStatus.QUEUED, WorkStatus.RUNNING):
-        raise TransitionError(f"job {job_id} is {job.status}; pause needs queued or running")
-    job.status = WorkStatus.PAUSED
-    return job
+    return lease.pause(get_job(session, job_id=job_id), f"job {job_id}")
 
 
 def requeue(session: Session, *, job_id: int) -> Job:
-    job = get_job(session, job_id=job_id)
-    if job.status not in (WorkStatus.PAUSED, WorkStatus.FAILED):
-        raise TransitionError(f"job {job_id} is {job.status}; resume needs paused or failed")
-    job.status, job.error = WorkStatus.QUEUED, None
-    return job
+    return lease.requeue(get_job(session, job_id=job_id), f"job {job_id}")
 
 
 def extend(session: Session, *, job_id: int, iterations: int) -> Job:

@@ -21,7 +21,20 @@ class Base(DeclarativeBase):
     pass
 
 
-class Job(Base):
+class LeasedWork:
+    """The columns every kind of leased work shares (jobs, robustness studies, rescores, calibrations): its status
+    (driftlab.core.statuses.WorkStatus), the error it failed with, and the lease, the runner that holds it and its
+    last heartbeat (driftlab.db.lease keeps the contract)."""
+
+    status: Mapped[str] = mapped_column(String(20), default=WorkStatus.QUEUED)
+    error: Mapped[str | None] = mapped_column(String(2000), default=None)
+    runner_id: Mapped[str | None] = mapped_column(String(100), default=None)
+    heartbeat_at: Mapped[datetime | None] = mapped_column(default=None)
+    created_at: Mapped[datetime] = mapped_column(default=utcnow)
+    updated_at: Mapped[datetime] = mapped_column(default=utcnow, onupdate=utcnow)
+
+
+class Job(LeasedWork, Base):
     __tablename__ = "jobs"
     __table_args__ = {"sqlite_autoincrement": True}  # a deleted job's id is never handed out again
 
@@ -29,16 +42,9 @@ class Job(Base):
     name: Mapped[str] = mapped_column(String(200), unique=True)
     spec: Mapped[dict[str, Any]] = mapped_column(JSON)  # TuningSpec.to_dict()
     seed: Mapped[int] = mapped_column(Integer)
-    status: Mapped[str] = mapped_column(String(20), default=WorkStatus.QUEUED)
-    error: Mapped[str | None] = mapped_column(String(2000), default=None)
-    created_at: Mapped[datetime] = mapped_column(default=utcnow)
-    updated_at: Mapped[datetime] = mapped_column(default=utcnow, onupdate=utcnow)
     started_at: Mapped[datetime | None] = mapped_column(default=None)  # when its current (or last) runner claimed it
     run_s: Mapped[float] = mapped_column(Float, default=0.0)  # its runs' wall time before the current one, in all
     stop_reason: Mapped[str | None] = mapped_column(String(500), default=None)  # a stop rule that finished it
-    # The lease (driftlab.db.lifecycle): the runner that holds the job and its last heartbeat.
-    runner_id: Mapped[str | None] = mapped_column(String(100), default=None)
-    heartbeat_at: Mapped[datetime | None] = mapped_column(default=None)
     study_id: Mapped[int | None] = mapped_column(Integer, default=None, index=True)  # a seeds study's job
     notes: Mapped[str] = mapped_column(Text, default="", server_default="")  # a researcher's, free text
     profile_id: Mapped[int | None] = mapped_column(Integer, default=None)  # the car profile its weights came from
@@ -120,9 +126,10 @@ class Meta(Base):
     value: Mapped[str] = mapped_column(String(200))
 
 
-class Study(Base):
+class Study(LeasedWork, Base):
     """A seeds study (its jobs carry its id) or a robustness study (its cells below). A robustness study is run
-    like a job: queued, claimed with a lease, paused, resumed (driftlab.db.study_lifecycle)."""
+    like a job: queued, claimed with a lease, paused, resumed (driftlab.db.studies). A seeds study's own status is
+    not used: its status is its jobs' (driftlab.db.studies.study_status)."""
 
     __tablename__ = "studies"
     __table_args__ = {"sqlite_autoincrement": True}
@@ -131,12 +138,6 @@ class Study(Base):
     name: Mapped[str] = mapped_column(String(200), unique=True)
     kind: Mapped[str] = mapped_column(String(20))  # "seeds" | "robustness"
     spec: Mapped[dict[str, Any]] = mapped_column(JSON)  # SeedsStudySpec / RobustnessStudySpec .to_dict()
-    status: Mapped[str] = mapped_column(String(20), default=WorkStatus.QUEUED)  # robustness only; seeds: its jobs'
-    error: Mapped[str | None] = mapped_column(String(2000), default=None)
-    runner_id: Mapped[str | None] = mapped_column(String(100), default=None)
-    heartbeat_at: Mapped[datetime | None] = mapped_column(default=None)
-    created_at: Mapped[datetime] = mapped_column(default=utcnow)
-    updated_at: Mapped[datetime] = mapped_column(default=utcnow, onupdate=utcnow)
 
     cells: Mapped[list[StudyCell]] = relationship(back_populates="study", order_by="StudyCell.index")
 
@@ -161,7 +162,7 @@ class StudyCell(Base):
     study: Mapped[Study] = relationship(back_populates="cells")
 
 
-class Rescore(Base):
+class Rescore(LeasedWork, Base):
     """A job's stored theta under fresh seeds (POST /api/jobs/{id}/rescore): queued, run by a runner under a lease
     like a job, each seed's result stored as it comes back, so that a restart resumes it where it stopped."""
 
@@ -176,12 +177,6 @@ class Rescore(Base):
     seeds: Mapped[list[int]] = mapped_column(JSON)  # driftlab.core.robust.rescore_seeds(samples)
     samples: Mapped[list[dict[str, Any]]] = mapped_column(JSON, default=list)  # one per seed back, in any order
     result: Mapped[dict[str, Any] | None] = mapped_column(JSON, default=None)
-    status: Mapped[str] = mapped_column(String(20), default=WorkStatus.QUEUED)
-    error: Mapped[str | None] = mapped_column(String(2000), default=None)
-    runner_id: Mapped[str | None] = mapped_column(String(100), default=None)
-    heartbeat_at: Mapped[datetime | None] = mapped_column(default=None)
-    created_at: Mapped[datetime] = mapped_column(default=utcnow)
-    updated_at: Mapped[datetime] = mapped_column(default=utcnow, onupdate=utcnow)
 
 
 class CarProfile(Base):
@@ -199,8 +194,8 @@ class CarProfile(Base):
     created_at: Mapped[datetime] = mapped_column(default=utcnow)
 
 
-class Calibration(Base):
-    """A calibration asked for through the API (``POST /api/calibrations``; driftlab.services.calibration): queued,
+class Calibration(LeasedWork, Base):
+    """A calibration asked for through the API (``POST /api/calibrations``; driftlab.core.calibration_run): queued,
     run by a runner under a lease like a job, its progress and the profiles it stored so far kept as it runs. A
     calibration whose runner died starts over when another takes it (the profiles stored stay)."""
 
@@ -212,9 +207,3 @@ class Calibration(Base):
     progress: Mapped[dict[str, Any] | None] = mapped_column(JSON, default=None)  # the latest progress event
     messages: Mapped[list[str]] = mapped_column(JSON, default=list)  # what the CLI would print, newest last
     profile_ids: Mapped[list[int]] = mapped_column(JSON, default=list)
-    status: Mapped[str] = mapped_column(String(20), default=WorkStatus.QUEUED)  # a rescore's statuses
-    error: Mapped[str | None] = mapped_column(String(2000), default=None)
-    runner_id: Mapped[str | None] = mapped_column(String(100), default=None)
-    heartbeat_at: Mapped[datetime | None] = mapped_column(default=None)
-    created_at: Mapped[datetime] = mapped_column(default=utcnow)
-    updated_at: Mapped[datetime] = mapped_column(default=utcnow, onupdate=utcnow)

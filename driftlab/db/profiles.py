@@ -9,7 +9,7 @@ from sqlalchemy import func, select
 from sqlalchemy.orm import Session
 
 from driftlab.db.models import CarProfile
-from driftlab.db.storage import NotFound
+from driftlab.db.storage import get_row
 
 
 def add_profile(session: Session, *, plant_model: str, vehicle_id: int, document: dict[str, Any]) -> CarProfile:
@@ -34,10 +34,7 @@ def newest_profiles(session: Session) -> list[CarProfile]:
 
 
 def get_profile(session: Session, *, profile_id: int) -> CarProfile:
-    profile = session.get(CarProfile, profile_id)
-    if profile is None:
-        raise NotFound(f"no car profile {profile_id}")
-    return profile
+    return get_row(session, CarProfile, profile_id, "car profile")
 
 
 def list_profiles(session: Session) -> list[CarProfile]:

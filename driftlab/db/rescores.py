@@ -48,9 +48,7 @@ def cancel(session: Session, *, job_id: int) -> Rescore:
     last = latest(session, job_id=job_id)
     if last is None or last.status not in ACTIVE:
         raise NotFound(f"job {job_id} has no queued or running rescore")
-    last.status = WorkStatus.CANCELLED
-    last.runner_id, last.heartbeat_at = None, None
-    return last
+    return lease.cancel(last)
 
 
 def add_sample(session: Session, *, rescore_id: int, runner: str, sample: dict[str, Any]) -> bool:

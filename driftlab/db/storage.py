@@ -165,22 +165,32 @@ def create_job(session: Session, *, name: str, spec: dict[str, Any], seed: int, 
     return job
 
 
+def get_row(session: Session, table: Any, row_id: int, what: str) -> Any:
+    """The row ``row_id`` of ``table`` (raises NotFound: "no <what> <id>")."""
+    row = session.get(table, row_id)
+    if row is None:
+        raise NotFound(f"no {what} {row_id}")
+    return row
+
+
+def find_named(session: Session, table: Any, name: str, what: str | None = None) -> Any:
+    """The row of ``table`` named ``name``: None if there is none, or with ``what`` raises NotFound naming it."""
+    row = session.scalar(select(table).where(table.name == name))
+    if row is None and what is not None:
+        raise NotFound(f"no {what} named {name!r}")
+    return row
+
+
 def get_job(session: Session, *, job_id: int) -> Job:
-    job = session.get(Job, job_id)
-    if job is None:
-        raise NotFound(f"no job with id {job_id}")
-    return job
+    return get_row(session, Job, job_id, "job with id")
 
 
 def find_job(session: Session, *, name: str) -> Job | None:
-    return session.scalar(select(Job).where(Job.name == name))
+    return find_named(session, Job, name)
 
 
 def get_job_by_name(session: Session, *, name: str) -> Job:
-    job = find_job(session, name=name)
-    if job is None:
-        raise NotFound(f"no job named {name!r}")
-    return job
+    return find_named(session, Job, name, "job")
 
 
 def set_notes(session: Session, *, job_id: int, notes: str) -> Job:
@@ -224,12 +234,17 @@ def count_and_best(session: Session, *, job_id: int) -> tuple[int, Evaluation | 
     return n or 0, (session.get(Evaluation, best_id) if best_id is not None else None)
 
 
-def unique_job_name(session: Session, base: str) -> str:
+def unique_name(session: Session, table: Any, base: str) -> str:
+    """``base``, or ``base-2``, ``base-3`` ... : the first name no row of ``table`` has."""
     name, n = base, 1
-    while find_job(session, name=name) is not None:
+    while find_named(session, table, name) is not None:
         n += 1
         name = f"{base}-{n}"
     return name
+
+
+def unique_job_name(session: Session, base: str) -> str:
+    return unique_name(session, Job, base)
 
 
 # -- evaluations -------------------------------------------------------------------------------------------

@@ -38,29 +38,19 @@ def add_cells(session: Session, *, study_id: int, cells: list[dict[str, Any]]) -
 
 
 def get_study(session: Session, *, study_id: int) -> Study:
-    study = session.get(Study, study_id)
-    if study is None:
-        raise storage.NotFound(f"no study with id {study_id}")
-    return study
+    return storage.get_row(session, Study, study_id, "study with id")
 
 
 def find_study(session: Session, *, name: str) -> Study | None:
-    return session.scalar(select(Study).where(Study.name == name))
+    return storage.find_named(session, Study, name)
 
 
 def get_study_by_name(session: Session, *, name: str) -> Study:
-    study = find_study(session, name=name)
-    if study is None:
-        raise storage.NotFound(f"no study named {name!r}")
-    return study
+    return storage.find_named(session, Study, name, "study")
 
 
 def unique_study_name(session: Session, base: str) -> str:
-    name, n = base, 1
-    while find_study(session, name=name) is not None:
-        n += 1
-        name = f"{base}-{n}"
-    return name
+    return storage.unique_name(session, Study, base)
 
 
 def list_studies(session: Session) -> list[Study]:
@@ -144,32 +134,27 @@ def pause_study(session: Session, *, study_id: int) -> Study:
     """Pauses a robustness study, or each queued or running job of a seeds study (TransitionError if none)."""
     study = get_study(session, study_id=study_id)
     if study.kind == StudyKind.SEEDS:
-        active = (WorkStatus.QUEUED, WorkStatus.RUNNING)
-        jobs = [j for j in study_jobs(session, study_id=study_id) if j.status in active]
-        if not jobs:
-            raise TransitionError(f"study {study_id} has no queued or running job to pause")
-        for job in jobs:
-            lifecycle.request_pause(session, job_id=job.id)
-        return study
-    if study.status not in (WorkStatus.QUEUED, WorkStatus.RUNNING):
-        raise TransitionError(f"study {study_id} is {study.status}; pause needs queued or running")
-    study.status = WorkStatus.PAUSED
-    return study
+        return _each_job(session, study, lease.ACTIVE, lifecycle.request_pause, "queued or running", "pause")
+    return lease.pause(study, f"study {study_id}")
 
 
 def resume_study(session: Session, *, study_id: int) -> Study:
     """Queues a paused or failed robustness study, or each paused or failed job of a seeds study."""
     study = get_study(session, study_id=study_id)
     if study.kind == StudyKind.SEEDS:
-        jobs = [j for j in study_jobs(session, study_id=study_id) if j.status in (WorkStatus.PAUSED, WorkStatus.FAILED)]
-        if not jobs:
-            raise TransitionError(f"study {study_id} has no paused or failed job to resume")
-        for job in jobs:
-            lifecycle.requeue(session, job_id=job.id)
-        return study
-    if study.status not in (WorkStatus.PAUSED, WorkStatus.FAILED):
-        raise TransitionError(f"study {study_id} is {study.status}; resume needs paused or failed")
-    study.status, study.error = WorkStatus.QUEUED, None
+        return _each_job(session, study, (WorkStatus.PAUSED, WorkStatus.FAILED), lifecycle.requeue,
+                         "paused or failed", "resume")
+    return lease.requeue(study, f"study {study_id}")
+
+
+def _each_job(session: Session, study: Study, statuses: tuple[WorkStatus, ...], transition: Any, which: str,
+              verb: str) -> Study:
+    """A seeds study's transition: each of its jobs in ``statuses`` takes it (TransitionError if none is)."""
+    jobs = [j for j in study_jobs(session, study_id=study.id) if j.status in statuses]
+    if not jobs:
+        raise TransitionError(f"study {study.id} has no {which} job to {verb}")
+    for job in jobs:
+        transition(session, job_id=job.id)
     return study
 
 

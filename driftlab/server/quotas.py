@@ -58,7 +58,7 @@ def check_study(settings: Settings, session: Session, study: Study) -> None:
 
 # The most points a calibration's default tiling gives (driftlab.core.calibration.default_points: every 0.05 rad of
 # the 0.2-0.8 rad scan on the scenario's circle, and one point on each of two other circles), and the candidate
-# models a point may search (two rear models x two steering limits, driftlab.services.calibration).
+# models a point may search (two rear models x two steering limits, driftlab.core.calibration_run).
 DEFAULT_POINTS_AT_MOST = 15
 CANDIDATES_AT_MOST = 4
 

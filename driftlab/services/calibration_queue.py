@@ -7,10 +7,10 @@ from typing import Any
 
 from sqlalchemy.orm import Session, sessionmaker
 
+from driftlab.core.calibration_run import CalibrationRequest
 from driftlab.db import calibrations, storage
 from driftlab.db.calibrations import CalibrationBusy
 from driftlab.db.models import Calibration
-from driftlab.services.calibration import CalibrationRequest
 
 __all__ = ["CalibrationBusy", "cancel", "document", "listing", "queue", "status"]
 

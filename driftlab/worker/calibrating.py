@@ -11,10 +11,11 @@ from typing import Any
 
 from sqlalchemy.orm import Session, sessionmaker
 
+from driftlab.core.calibration_run import CalibrationRequest, CalibrationStopped
 from driftlab.core.errors import ConfigError
 from driftlab.db import calibrations, lease, storage
 from driftlab.db.models import Calibration, WorkStatus
-from driftlab.services.calibration import CalibrationRequest, CalibrationStopped, run_calibration
+from driftlab.services.calibration import run_calibration
 from driftlab.worker.executors import EpisodeExecutor, EpisodeOutcome
 from driftlab.worker.slots import EpisodeSlots
 from driftlab.worker.slotted import SlottedEpisodes

@@ -11,7 +11,7 @@ import threading
 import time
 from collections.abc import Callable, Hashable
 from concurrent.futures import CancelledError, Future
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 
 from sqlalchemy.orm import Session, sessionmaker
 
@@ -186,18 +186,22 @@ class _Lease:
         self._last = time.monotonic()
 
 
-def _fit_config(factory: sessionmaker[Session], job_id: int) -> None:
-    """A job queued with its config still to be fitted to its plant (parsing does no physics: POST /api/jobs and
-    `driftlab tune` store it so) is fitted once, here, off the server's request path, and stored fitted: what every
-    episode of it runs, and what re-runs it, is the stored config (driftlab.core.configure.fitted)."""
+def _fitted_spec(factory: sessionmaker[Session], job_id: int) -> TuningSpec:
+    """The job's document, parsed once for this run. A job queued with its config still to be fitted to its plant
+    (parsing does no physics: POST /api/jobs and `driftlab tune` store it so) is fitted once, here, off the server's
+    request path, and stored fitted: what every episode of it runs, and what re-runs it, is the stored config
+    (driftlab.core.configure.fitted)."""
     with storage.snapshot(factory) as session:
         spec = TuningSpec.from_dict(storage.get_job(session, job_id=job_id).spec)
     if not spec.config.to_fit:
-        return
-    config = spec.fitted().to_dict()["config"]
+        return spec
+    spec = spec.fitted()
+    document = spec.to_dict()
     with storage.transaction(factory) as session:
         job = storage.get_job(session, job_id=job_id)
-        job.spec = {**job.spec, "config": config}  # a budget raised meanwhile stays
+        # the config and the document's version and "fitted"; a budget raised meanwhile stays
+        job.spec = {**job.spec, **{k: document[k] for k in ("version", "fitted", "config")}}
+        return replace(spec, iterations=int(job.spec["iterations"]))
 
 
 def _may_ask(waiting: list, evaluations: list[_PendingEvaluation], room: bool) -> bool:
@@ -246,7 +250,7 @@ def _run(factory: sessionmaker[Session], job_id: int, executor: EpisodeExecutor,
          on_progress: Callable[[Progress], None] | None, optimizers: OptimizerHost | None,
          max_trajectories: int) -> str:
     try:
-        _fit_config(factory, job_id)
+        spec = _fitted_spec(factory, job_id)
     except ConfigError as exc:  # the car cannot be fitted at this drift after all: the job fails, saying why
         status, error = interrupted_status(exc)
         with storage.transaction(factory) as session:
@@ -254,7 +258,6 @@ def _run(factory: sessionmaker[Session], job_id: int, executor: EpisodeExecutor,
         return status
     with storage.transaction(factory) as session:
         job = storage.get_job(session, job_id=job_id)
-        spec = TuningSpec.from_dict(job.spec)
         stored = storage.evaluations(session, job_id=job_id)
         history = [(e.theta, e.J if e.completed else None, e.J) for e in stored]
         curve = best_so_far([e.J for e in stored], [e.completed for e in stored])  # what the stop rules read

@@ -36,8 +36,8 @@ def test_calibration_seeds_are_neither_tuning_nor_rescore_seeds():
 def test_the_default_points_tile_the_cars_window_on_its_circle():
     """Every drift of the window a job of the BMW is checked against (0.44-0.80 rad at 44 m: both ways countersteer)
     lies less than one step from a default point, so some profile of a default calibration applies to it."""
+    from driftlab.core.car_profile import drift_distance
     from driftlab.core.drivability import drivable_reason
-    from driftlab.services.profiles import drift_distance
 
     config = preset_config("commonroad_std")
     points = default_points(config)

@@ -1,12 +1,13 @@
-"""A candidate controller model that cannot be fitted at a point (driftlab.services.calibration): the workers fit
+"""A candidate controller model that cannot be fitted at a point (driftlab.core.calibration_run): the workers fit
 each point's model with its first episode, so the episodes here are scripted but fitted as a worker fits them."""
 
 import pytest
 
+from driftlab.core.calibration_run import CalibrationRequest
 from driftlab.core.configure import config_from_dict, fitted
 from driftlab.core.errors import ConfigError
 from driftlab.db import storage
-from driftlab.services.calibration import CalibrationRequest, run_calibration
+from driftlab.services.calibration import run_calibration
 
 COMPLETED = ("completed", -1.0, 1.0, 0.3)
 # The VW Vanagon at 0.69 rad, 44 m: inside its window (0.57-0.80 rad), where the paper's rear model fits its drift

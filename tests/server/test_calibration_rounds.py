@@ -1,11 +1,12 @@
-"""A calibration's rounds (driftlab.services.calibration) on a real SQLite file, with scripted episodes: a point
+"""A calibration's rounds (driftlab.core.calibration_run) on a real SQLite file, with scripted episodes: a point
 where nothing completes with the untuned theta gets one round more, each round after the first searches around the
 last one's weights when they completed something, and every round is a stored profile."""
 
 import pytest
 
+from driftlab.core.calibration_run import CalibrationRequest
 from driftlab.db import profiles, storage
-from driftlab.services.calibration import CalibrationRequest, run_calibration
+from driftlab.services.calibration import run_calibration
 
 FAILED = ("spun_out", 8.0, 0.5, None)
 COMPLETED = ("completed", -1.0, 1.0, 0.3)

@@ -113,8 +113,8 @@ def test_points_two_steps_out_search_only_the_model_the_nearest_calibrated_point
     from types import SimpleNamespace
 
     from driftlab.core.calibration import CalibrationPoint
+    from driftlab.core.calibration_run import _model_candidates, _models_for
     from driftlab.core.configure import preset_config
-    from driftlab.services.calibration import _model_candidates, _models_for
 
     given = preset_config("commonroad_std")  # 0.5 rad, 44 m
     run = SimpleNamespace(given=given, request=SimpleNamespace(sets={}))

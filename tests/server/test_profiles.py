@@ -43,7 +43,8 @@ def test_a_profile_brings_the_controllers_model_it_was_calibrated_with(tmp_path)
 
 
 def test_a_profile_brings_the_steering_limit_its_weights_were_found_with(tmp_path):
-    from driftlab.services.profiles import profile_for, shipped_profiles
+    from driftlab.core.car_profile import profile_for
+    from driftlab.services.profiles import shipped_profiles
 
     beyond = {**CAR, "scenario.sideslip_rad": 0.7, "scenario.left_radius_m": 30.0, "scenario.right_radius_m": 30.0}
     assert profile_for(shipped_profiles("commonroad_std", 2), 0.7, 30.0) is None  # a step from every shipped point
@@ -125,7 +126,7 @@ def test_a_job_takes_the_profile_that_drove_its_own_drift_best(tmp_path):
 def test_weights_are_taken_no_further_than_a_step_from_where_they_were_calibrated():
     from types import SimpleNamespace
 
-    from driftlab.services.profiles import profile_for
+    from driftlab.core.car_profile import profile_for
 
     at_05 = SimpleNamespace(id=1, document={"per_point": [_record(0.5, 44.0, 4, 0.2)]})
     old = SimpleNamespace(id=2, document={"weights": {}})  # stored before profiles had their record
@@ -136,7 +137,8 @@ def test_weights_are_taken_no_further_than_a_step_from_where_they_were_calibrate
 
 
 def test_a_fresh_database_takes_the_shipped_profile_for_the_jobs_drift_and_keeps_one_copy(tmp_path):
-    from driftlab.services.profiles import SHIPPED_KEY, profile_for, shipped_profiles
+    from driftlab.core.car_profile import profile_for
+    from driftlab.services.profiles import SHIPPED_KEY, shipped_profiles
 
     shipped = shipped_profiles("commonroad_std", 2)
     assert shipped and all(p.document["command"].startswith("driftlab calibrate --plant commonroad_std")
@@ -187,7 +189,7 @@ def test_a_profile_found_for_a_learned_theta_has_its_jobs_ask_that_theta_first(t
 def test_weights_that_completed_every_episode_of_their_point_beat_nearer_ones_that_did_not():
     from types import SimpleNamespace
 
-    from driftlab.services.profiles import profile_for
+    from driftlab.core.car_profile import profile_for
 
     own = SimpleNamespace(id=3, document={"per_point": [_record(0.69, 44.0, 1, 0.9)]})
     beside = SimpleNamespace(id=1, document={"per_point": [_record(0.69, 52.0, 4, 0.3)]})  # 0.91 steps away
@@ -202,7 +204,8 @@ def test_a_job_beyond_its_cars_calibrated_drifts_is_told_the_nearest_and_how_to_
     """0.7 rad on 30 m circles lies a step from every shipped BMW point: the job is accepted with the car's default
     weights and a warning naming the nearest calibrated drift (and how it did there); a job at a calibrated drift,
     or one that sets its own weights, is told nothing."""
-    from driftlab.services.profiles import drift_distance, shipped_profiles
+    from driftlab.core.car_profile import drift_distance
+    from driftlab.services.profiles import shipped_profiles
 
     beyond = {**CAR, "scenario.sideslip_rad": 0.7, "scenario.left_radius_m": 30.0, "scenario.right_radius_m": 30.0}
     with in_process_client(tmp_path / "warned.db") as client:
@@ -230,7 +233,7 @@ def test_the_calibrated_window_is_where_the_weights_complete_their_fresh_seeds()
     """Per radius, the points whose weights complete at least 9 of 10 fresh seeds (the best of a point's rounds),
     neighbours joined: a point whose search completed 3 of 3 but whose weights complete 8 of 10 fresh seeds is
     outside; a radius with no such point is printed as none."""
-    from driftlab.services.profiles import calibrated_window, window_text
+    from driftlab.core.car_profile import calibrated_window, window_text
 
     documents = [{"per_point": [_checked(0.45, 44.0, 10)]}, {"per_point": [_checked(0.5, 44.0, 9)]},
                  {"per_point": [_checked(0.55, 44.0, 8)]}, {"per_point": [_checked(0.6, 44.0, 4)]},
@@ -244,7 +247,8 @@ def test_the_calibrated_window_is_where_the_weights_complete_their_fresh_seeds()
 
 
 def test_a_job_takes_the_profile_whose_weights_completed_their_fresh_seeds_over_a_luckier_search():
-    from driftlab.services.profiles import ShippedProfile, profile_for
+    from driftlab.core.car_profile import profile_for
+    from driftlab.services.profiles import ShippedProfile
 
     lucky = ShippedProfile(1, "a", {"per_point": [_checked(0.5, 44.0, 6, search=(3, 3))]})
     steady = ShippedProfile(2, "b", {"per_point": [_checked(0.5, 44.0, 10, search=(2, 3))]})
@@ -262,7 +266,8 @@ def test_weights_are_checked_between_points_and_a_job_there_takes_the_ones_that_
     """The VW Vanagon's weights found at 0.64 rad, 44 m complete 10 of 10 there and 4 of 10 at 0.62; those found at
     0.59 complete 10 of 10 at 0.59, 0.62 and 0.64. A job at 0.62 takes the 0.59 profile (its check half a step from
     0.64 is what says so), and the window runs through 0.615 only because some profile held there."""
-    from driftlab.services.profiles import ShippedProfile, calibrated_window, profile_for
+    from driftlab.core.car_profile import calibrated_window, profile_for
+    from driftlab.services.profiles import ShippedProfile
 
     at_064 = {"per_point": [{**_checked(0.64, 44.0, 10), "verified_around": [_around(0.615, 44.0, 4),
                                                                              _around(0.665, 44.0, 0)]}]}
@@ -280,7 +285,8 @@ def test_the_shipped_profiles_are_the_data_a_job_reads():
     square of them."""
     from importlib import resources
 
-    from driftlab.services.profiles import PROFILE_KEYS, PROFILE_PLANT, shipped_profiles
+    from driftlab.core.car_profile import PROFILE_KEYS, PROFILE_PLANT
+    from driftlab.services.profiles import shipped_profiles
 
     files = [e for e in resources.files("driftlab.profiles").iterdir() if e.name.endswith(".json")]
     assert sum(len(e.read_bytes()) for e in files) <= 40_000

@@ -238,12 +238,15 @@ def test_a_runner_fits_a_cars_model_when_it_claims_the_job_and_stores_it_fitted(
                                  "config": {"plant.model": "commonroad_std", "scenario.sideslip_rad": 0.52}})
     with storage.transaction(factory) as session:
         job_id = storage.create_job(session, name="car", spec=spec.to_dict(), seed=0).id
-        assert "vehicle" not in storage.get_job(session, job_id=job_id).spec["config"]
+        queued = storage.get_job(session, job_id=job_id).spec
+        assert "vehicle" not in queued["config"] and queued["fitted"] is False and queued["version"] == 2
     claim_job(factory, job_id, "runner")
     executor = RecordingExecutor()
     assert run_job(factory, job_id, executor, runner="runner", workers=2) == "finished"
     with storage.snapshot(factory) as session:
-        stored = storage.get_job(session, job_id=job_id).spec["config"]
+        document = storage.get_job(session, job_id=job_id).spec
+    stored = document["config"]
+    assert document["fitted"] is True and TuningSpec.from_dict(document).config.to_fit == frozenset()
     expected = config_to_dict(fitted(spec.config))
     assert stored == expected and stored["vehicle"]["steer_offset_rad"] != 0.0
     assert len(executor.documents) == 3 and all(doc == expected for doc in executor.documents)
@@ -273,3 +276,18 @@ def test_a_job_whose_car_cannot_be_fitted_fails_saying_why(tmp_path, monkeypatch
         assert "needs a scenario.sideslip_rad in" not in job.error  # no range that holds the refused sideslip
         assert storage.evaluations(session, job_id=job_id) == [] and "vehicle" not in job.spec["config"]
     assert executor.documents == []
+
+
+def test_a_job_document_states_its_version_and_refuses_one_it_cannot_read_or_a_fitted_claim_it_lacks():
+    """A stored job's document is versioned (a document of a release before versions is version 1 and re-runs as
+    it did); "fitted" true with the controller's model missing is refused, naming the field."""
+    document = TuningSpec.from_dict({"iterations": 3, "config": {"plant.model": "commonroad_std"}}).to_dict()
+    assert document["version"] == 2 and document["fitted"] is False
+    old = {k: v for k, v in document.items() if k not in ("version", "fitted")}
+    assert TuningSpec.from_dict(old) == TuningSpec.from_dict(document)
+    with pytest.raises(ConfigError, match="version must be 1 to 2") as refused:
+        TuningSpec.from_dict({**document, "version": 3})
+    assert refused.value.field == "version"
+    with pytest.raises(ConfigError, match="fitted: the document says its config is fitted, but it lacks") as lacks:
+        TuningSpec.from_dict({**document, "fitted": True})
+    assert lacks.value.field == "fitted"

@@ -76,7 +76,7 @@ class PlantType(ABC):
 
     def steering_reach_rad(self, config: PlantConfig) -> float | None:
         """How far the car ``config`` sets steers either way [rad], where the plant says (None: unknown). A
-        calibration also searches with the controller steering that far (driftlab.services.calibration)."""
+        calibration also searches with the controller steering that far (driftlab.core.calibration_run)."""
         return None
 
     def model_reason(self, vehicle: VehicleParams, radius_m: float, sideslip_rad: float, circle: str) -> str | None:

@@ -9,6 +9,7 @@ from fastapi import APIRouter, Depends, HTTPException, Path, Request, Response
 from pydantic import BaseModel, ConfigDict, Field
 from sqlalchemy.orm import Session, sessionmaker
 
+from driftlab.core.calibration_run import LIMITS, CalibrationRequest
 from driftlab.core.config import dotted_config
 from driftlab.core.configure import PLANT_PRESETS
 from driftlab.core.plants import installed_names
@@ -17,7 +18,6 @@ from driftlab.server.responses import Calibration, ProfileSummary, errors
 from driftlab.server.routes.deps import factory, require_token, wake_runner
 from driftlab.server.schemas import check_document_types
 from driftlab.services import calibration_queue
-from driftlab.services.calibration import LIMITS, CalibrationRequest
 from driftlab.services.profiles import list_profile_summaries, profile_document
 
 router = APIRouter(tags=["calibration"])

@@ -1,5 +1,5 @@
 """What a calibration's chosen weights do on fresh seeds, at each point and half a step either side of it: the
-records a profile keeps and the calibrated window is made of (driftlab.services.profiles.calibrated_window)."""
+records a profile keeps and the calibrated window is made of (driftlab.core.car_profile.calibrated_window)."""
 
 from __future__ import annotations
 

@@ -6,8 +6,6 @@ import sys
 
 import pytest
 
-from driftlab.reports.export import read_csv_metadata
-
 pytestmark = pytest.mark.e2e  # real processes: servers, browsers, Dask, the CLI
 
 EPISODE_KEYS = {"status", "J", "theta", "seed", "completed_fraction", "mean_abs_e_m", "max_abs_e_m",
@@ -92,8 +90,8 @@ def test_episode_json_has_the_documented_keys(tmp_path):
     data = json.loads(out.stdout)
     assert EPISODE_KEYS <= set(data)
     assert data["status"] == "completed"
-    lines = csv_file.read_text().splitlines()
-    meta = read_csv_metadata(csv_file.read_text())
+    lines = ["(the CSV holds no metadata line)", *csv_file.read_text().splitlines()]
+    meta = json.loads((tmp_path / "traj.json").read_text())["metadata"]  # beside it: FILE.csv -> FILE.json
     assert meta["J"] == data["J"] and meta["seed"] == 0 and meta["theta"] == data["theta"]
     assert meta["config"]["plant"]["friction_spread"] == 0.0  # the nominal plant, as run
     assert lines[1].startswith("t_s,x_m,y_m") and len(lines) > 500

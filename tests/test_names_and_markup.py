@@ -1,16 +1,11 @@
 """Names that read as typed: what a name may hold (driftlab.names, the API's 422 and the CLI's exit 2), how the view
 and the reports escape one for markdown (driftlab.markup), and a name in a trajectory CSV (no formula cell)."""
 
-import csv
-import io
-import json
 
-import numpy as np
 import pytest
 
 from driftlab.markup import plain
 from driftlab.names import name_problem
-from driftlab.reports.export import read_csv_metadata, trajectory_csv
 from tests.server.conftest import in_process_client
 
 
@@ -48,15 +43,6 @@ def test_the_api_refuses_such_a_name_naming_the_field(tmp_path):
                                               "spec": {"iterations": 1}})
         assert r.status_code == 422 and r.json()["errors"][0]["field"] == "name"
         assert client.get("/api/jobs").json() == []  # nothing stored
-
-
-def test_a_name_in_a_trajectory_csv_never_starts_a_cell_of_its_own():
-    metadata = {"job": "x,=cmd|' /C calc'!A0", "note": "+1, -2, @SUM(A1)"}
-    text = trajectory_csv(["t_s", "x_m"], np.zeros((2, 2)), metadata)
-    first_row = next(csv.reader(io.StringIO(text)))
-    assert not any(cell.lstrip('"').startswith(("=", "+", "-", "@")) for cell in first_row), first_row
-    assert read_csv_metadata(text) == metadata  # reads back exactly
-    assert json.loads(text.split("\n", 1)[0][len("# driftlab: "):]) == metadata
 
 
 def test_the_access_log_never_holds_the_token():

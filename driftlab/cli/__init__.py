@@ -65,7 +65,8 @@ def build_parser() -> argparse.ArgumentParser:
     ep.add_argument("--set", action="append", metavar="KEY=VALUE", help="config override, e.g. mpc.q_sideslip=400")
     ep.add_argument("--seed", type=int, default=0, help="episode seed: the plant's per-episode variation, start and "
                     "sensor noise (default 0; the nominal plant has none)")
-    ep.add_argument("--csv", help="write the trajectory to this CSV file")
+    ep.add_argument("--csv", help="write the trajectory to this CSV file (pandas.read_csv reads it as it is), and its "
+                    "metadata (theta, seed, J, the config as run) beside it: FILE.csv -> FILE.json")
     ep.add_argument("--plot", help="write the paper's figures to this PNG file")
     ep.set_defaults(func=cmd_episode)
     tu = sub.add_parser("tune", help="run (or resume) a Bayesian-optimization tuning job headless")

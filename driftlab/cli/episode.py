@@ -17,6 +17,7 @@ from driftlab.core.errors import ConfigError, NoEquilibriumError
 from driftlab.core.plants import entry_of
 from driftlab.core.track import tiled_radii
 from driftlab.core.vehicle import pack_params
+from driftlab.reports.export import metadata_path
 
 DEFAULT_RADIUS_M = 44.0
 
@@ -68,7 +69,8 @@ def cmd_episode(args: argparse.Namespace) -> int:
 
     config = episode_config(args)
     theta = Theta.from_mapping(key_values(args.theta.split(",") if args.theta else [], "--theta"))
-    for option, path in (("--csv", args.csv), ("--plot", args.plot)):  # before the episode runs, not after
+    sidecar = metadata_path(args.csv) if args.csv else None
+    for option, path in (("--csv", args.csv), ("--csv", sidecar), ("--plot", args.plot)):  # before the episode runs
         check_output_file(option, path)
     if args.plot and os.path.splitext(args.plot)[1].lower() not in PLOT_SUFFIXES:
         raise ConfigError(f"--plot {args.plot}: the file name must end in one of {', '.join(PLOT_SUFFIXES)}")
@@ -77,13 +79,15 @@ def cmd_episode(args: argparse.Namespace) -> int:
     result = run_episode(theta, config, seed=args.seed)
     print(json.dumps(finite(result.summary())))
     if args.csv:
-        from driftlab.reports.export import trajectory_csv, with_lap_column
+        from driftlab.reports.export import metadata_json, trajectory_csv, with_lap_column
 
         metadata = {"theta": theta.as_dict(), "seed": args.seed, "J_episode": result.J, "episode_status": result.status,
                     "J": result.J, "status": result.status, "n_seeds": 1, "config": config_to_dict(config)}
         with open(args.csv, "w", newline="") as handle:
             track = FigureEight(config.scenario.left_radius_m, config.scenario.right_radius_m, config.scenario.laps)
-            handle.write(trajectory_csv(*with_lap_column(list(COLUMNS), result.trajectory, track), metadata))
+            handle.write(trajectory_csv(*with_lap_column(list(COLUMNS), result.trajectory, track)))
+        with open(str(sidecar), "w") as handle:
+            handle.write(metadata_json(metadata))
     if args.plot:
         from driftlab.reports.plotting import plot_episode
 

@@ -1,10 +1,12 @@
 """Trajectory files, CSV and JSON, that say what they are: the API's downloads and `driftlab episode --csv`.
 
-Each carries its metadata (the evaluation and job, theta, the seed of the episode and that episode's J beside the
-evaluation's mean, the config): JSON as a ``metadata`` object beside ``columns`` and ``rows``; CSV as one comment
-line before the header, ``# driftlab: {...JSON...}`` (``pandas.read_csv(f, comment="#")`` and
-``numpy.loadtxt`` skip it). Integer columns stay integers; floats are written with ``repr`` (they read back as
-the same doubles).
+The metadata (the evaluation and job, theta, the seed of the episode and that episode's J beside the evaluation's
+mean, the config) is the JSON's ``metadata`` object beside ``columns`` and ``rows``. The CSV is the header and the
+rows alone, so that the first line a person types, ``pandas.read_csv(file)``, gives the trajectory's columns; its
+metadata is the JSON download's (the API) or a sidecar JSON file beside it (`driftlab episode --csv`,
+:func:`metadata_path`). Integer columns stay integers; floats are written with ``repr`` (they read back as the same
+doubles). A CSV of a release before this one has its metadata as a first line ``# driftlab: {...}``
+(``pandas.read_csv(f, comment="#")`` skips it).
 """
 
 from __future__ import annotations
@@ -12,7 +14,7 @@ from __future__ import annotations
 import csv
 import io
 import json
-import re
+import os
 from typing import Any
 
 import numpy as np
@@ -44,26 +46,22 @@ def trajectory_json(columns: list[str], rows: np.ndarray, metadata: dict[str, An
     return json.dumps({"metadata": metadata, "columns": list(columns), "rows": _typed_rows(list(columns), rows)})
 
 
-_JSON_STRING = re.compile(r'"(?:[^"\\]|\\.)*"')
-
-
-def one_cell_json(value: Any) -> str:
-    """JSON whose string literals hold no comma (written as the escape \\u002c, which reads back the same): a
-    spreadsheet that splits the metadata line at commas keeps it in one cell starting with '#', so a name such
-    as '=cmd|...' never becomes a formula cell of its own (OWASP's CSV injection)."""
-    return _JSON_STRING.sub(lambda m: m.group(0).replace(",", "\\u002c"), json.dumps(value))
-
-
-def trajectory_csv(columns: list[str], rows: np.ndarray, metadata: dict[str, Any]) -> str:
+def trajectory_csv(columns: list[str], rows: np.ndarray) -> str:
+    """The header and one row per control step: nothing else, so that any CSV reader takes it as it is."""
     buffer = io.StringIO()
-    buffer.write("# driftlab: " + one_cell_json(metadata) + "\n")
     writer = csv.writer(buffer, lineterminator="\n")
     writer.writerow(columns)
     writer.writerows(_typed_rows(list(columns), rows))
     return buffer.getvalue()
 
 
-def read_csv_metadata(text: str) -> dict[str, Any]:
-    """The metadata of a trajectory CSV written by :func:`trajectory_csv` ({} for a file without it)."""
-    first = text.split("\n", 1)[0]
-    return json.loads(first[len("# driftlab: "):]) if first.startswith("# driftlab: ") else {}
+def metadata_path(csv_path: str) -> str:
+    """Where `driftlab episode --csv FILE` writes the CSV's metadata: FILE with ``.json`` for its suffix
+    (``run.csv`` -> ``run.json``; ``run`` -> ``run.json``)."""
+    stem, suffix = os.path.splitext(csv_path)
+    return (stem if suffix.lower() == ".csv" else csv_path) + ".json"
+
+
+def metadata_json(metadata: dict[str, Any]) -> str:
+    """The sidecar's text: ``{"metadata": {...}}``, the JSON download's object without its rows."""
+    return json.dumps({"metadata": metadata}, indent=1) + "\n"

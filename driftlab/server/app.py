@@ -18,6 +18,7 @@ from starlette.routing import Match
 from driftlab.core.errors import ConfigError
 from driftlab.db import lifecycle, storage
 from driftlab.server.docs_page import add_docs_page
+from driftlab.server.drift_check import DriftCheck
 from driftlab.server.edge import EdgeGuard
 from driftlab.server.evaluation_pages import EvaluationPages
 from driftlab.server.heavy_reads import HeavyReads
@@ -83,6 +84,7 @@ def create_app(db_url: str, *, workers: int | None = 2, start_worker: bool = Tru
         if start_view:
             _start_view(app, factory, settings)
         if start_worker:
+            app.state.drift_check.warm_in_background()
             runner.start()
         # What startup made (modules, compiled kernels, the view's scene) lives as long as the server: out of the
         # collector's sight, a full collection no longer walks it (it stopped every request for ~270 ms).
@@ -97,6 +99,7 @@ def create_app(db_url: str, *, workers: int | None = 2, start_worker: bool = Tru
     app = FastAPI(title="DriftLab", version="0.1.0", lifespan=lifespan, docs_url=None, redoc_url=None,
                   description="Learning-based inertia drift: tuning jobs, evaluations, trajectories.")
     app.state.settings = settings
+    app.state.drift_check = DriftCheck()
     # Outermost: hosts, origins, the token and the body size are checked before anything else runs.
     app.add_middleware(EdgeGuard, token=settings.token, allowed_hosts=settings.allowed_host_names(),
                        max_body_bytes=settings.max_body_bytes, public_reads=settings.public_reads,

@@ -51,7 +51,7 @@ class TrajectoryDocuments:
         track = FigureEight.of_scenario(job.spec.get("config", {}).get("scenario", {}))
         columns, data = with_lap_column(columns, data, track)
         metadata = trajectory_metadata(evaluation, job)
-        text = (trajectory_json if format == "json" else trajectory_csv)(columns, data, metadata)
+        text = trajectory_json(columns, data, metadata) if format == "json" else trajectory_csv(columns, data)
         self._keep(key, text)
         return text
 

@@ -17,6 +17,7 @@ from sqlalchemy.orm import Session, sessionmaker
 
 from driftlab.core.config import Theta
 from driftlab.core.convergence import best_so_far
+from driftlab.core.drivability import check_drivable
 from driftlab.core.errors import ConfigError
 from driftlab.core.robust import RobustScore, SampleResult, aggregate
 from driftlab.core.statuses import EpisodeStatus
@@ -193,6 +194,9 @@ def _fitted_spec(factory: sessionmaker[Session], job_id: int) -> TuningSpec:
     (driftlab.core.configure.fitted)."""
     with storage.snapshot(factory) as session:
         spec = TuningSpec.from_dict(storage.get_job(session, job_id=job_id).spec)
+        first_run = storage.count_evaluations(session, job_id=job_id) == 0
+    if first_run:  # a job posted while the server compiled its check was stored unchecked (server/drift_check.py)
+        check_drivable(spec.config)
     if not spec.config.to_fit:
         return spec
     spec = spec.fitted()

@@ -8,7 +8,6 @@ import httpx
 import pytest
 
 from driftlab.core.config import THETA_KEYS, Theta
-from driftlab.reports.export import read_csv_metadata
 from tests.server_process import free_port as _free_port
 from tests.server_process import start_server as _start
 from tests.server_process import wait_released
@@ -112,21 +111,22 @@ def test_trajectory_downloads_parse(server):
     evaluation = httpx.get(f"{url}/api/jobs/{job['id']}/best").json()
     r = httpx.get(f"{url}/api/evaluations/{evaluation['id']}/trajectory", params={"format": "csv"})
     assert r.status_code == 200 and "attachment" in r.headers["content-disposition"]
-    meta = read_csv_metadata(r.text)
+    described = r.headers["link"].split(";")[0].strip("<>")  # the metadata: the JSON download's
+    js = httpx.get(f"{url}{described}").json()
+    meta = js["metadata"]
     seed = evaluation["trajectory_seed"]
     assert meta["evaluation_id"] == evaluation["id"] and meta["job_id"] == job["id"] and meta["seed"] == seed
     assert meta["theta"] == {**Theta().as_dict(), **evaluation["theta"]} and meta["J"] == evaluation["J"]
     assert meta["J_episode"] == next(s["J"] for s in evaluation["seeds"] if s["seed"] == seed)
     assert meta["n_seeds"] == len(evaluation["seeds"]) and meta["config"] == job["spec"]["config"]
     assert meta["phases"] == evaluation["metrics"]["phases"] and meta["phases"][0]["phase"] == "left_drift"
-    rows = list(csv.reader(io.StringIO(r.text)))[1:]
+    rows = list(csv.reader(io.StringIO(r.text)))
     header, body = rows[0], rows[1:]
     assert "beta_rad" in header and "t_s" in header
     t = [float(row[header.index("t_s")]) for row in body]
     assert len(t) > 10 and t[0] == 0.0
     assert all(abs(b - a - 0.05) < 1e-9 for a, b in zip(t, t[1:], strict=False))  # one row per 0.05 s control step
     assert {row[header.index("phase")] for row in body} <= {"0", "1", "2", "3", "4", "5"}  # integers, not 2.0
-    js = httpx.get(f"{url}/api/evaluations/{evaluation['id']}/trajectory", params={"format": "json"}).json()
     assert js["columns"] == header and len(js["rows"]) == len(body) and js["metadata"] == meta
     assert all(isinstance(row[header.index("phase")], int) for row in js["rows"])
 

@@ -79,3 +79,31 @@ def test_an_enqueued_theta_names_at_least_one_value(api):
     assert r.status_code == 422 and r.json()["errors"][0]["field"].startswith("thetas.1"), r.text
     assert api.post(f"/api/jobs/{job['id']}/enqueue", json={"thetas": [{"k": 0.05}]}).status_code == 202
     api.delete(f"/api/jobs/{job['id']}")
+
+
+def test_a_job_posted_while_the_drift_check_compiles_is_stored_at_once_and_checked_when_it_starts(tmp_path):
+    """A fresh install compiles the drift check the first time it runs (~20 s of a core): a job posted meanwhile is
+    answered 201 with a warning saying its drift is checked when it starts, and a runner that claims it fails it
+    naming the plant's missing drift (the 422 the post would have given)."""
+    from driftlab.db import storage
+    from driftlab.server.drift_check import DEFERRED
+    from driftlab.worker.job_loop import claim_job, run_job
+    from tests.server.conftest import InThreadExecutor
+
+    with in_process_client(tmp_path / "deferred.db") as client:
+        client.app.state.drift_check.ready.clear()  # as while warm_in_background compiles
+        body = {"iterations": 2, "config": {"plant.friction_scale": 1.15}}  # no drift at 44 m (test_drivability)
+        posted = client.post("/api/jobs", json=body)
+        assert posted.status_code == 201 and DEFERRED in posted.json()["warning"]
+        client.app.state.drift_check.ready.set()
+        refused = client.post("/api/jobs", json=body)
+        assert refused.status_code == 422 and "the plant" in refused.json()["detail"]
+    factory = storage.open_database(f"sqlite:///{tmp_path / 'deferred.db'}")
+    job_id = posted.json()["id"]
+    claim_job(factory, job_id, "runner")
+    executor = InThreadExecutor(pool=None)
+    assert run_job(factory, job_id, executor, runner="runner", workers=1) == "failed"
+    assert executor.submitted == 0
+    with storage.snapshot(factory) as session:
+        error = storage.get_job(session, job_id=job_id).error
+    assert "the plant" in error and "left circle" in error and "44 m" in error

@@ -11,7 +11,7 @@ from driftlab.core.closed_loop import COLUMNS
 from driftlab.core.track import FigureEight
 from driftlab.db import lifecycle, storage
 from driftlab.db.models import Trajectory
-from driftlab.reports.export import read_csv_metadata, trajectory_csv, trajectory_json, with_lap_column
+from driftlab.reports.export import trajectory_csv, trajectory_json, with_lap_column
 from driftlab.server.serialize import trajectory_metadata
 from driftlab.server.trajectory_documents import TrajectoryDocuments
 
@@ -33,7 +33,8 @@ def _encoded(factory, evaluation_id, fmt):
         e = storage.get_evaluation(session, evaluation_id=evaluation_id)
         job = storage.get_job(session, job_id=e.job_id)
         columns, data = with_lap_column(columns, data, FigureEight.of_scenario({}))
-        return (trajectory_json if fmt == "json" else trajectory_csv)(columns, data, trajectory_metadata(e, job))
+        return (trajectory_json(columns, data, trajectory_metadata(e, job)) if fmt == "json"
+                else trajectory_csv(columns, data))
 
 
 def _document(factory, documents, evaluation_id, fmt):
@@ -62,7 +63,22 @@ def test_a_renamed_job_gets_its_new_name_in_the_metadata(factory):
     with storage.transaction(factory) as session:
         storage.get_job(session, job_id=job_id).name = "after"
     assert json.loads(_document(factory, documents, ids[0], "json"))["metadata"]["job_name"] == "after"
-    assert read_csv_metadata(_document(factory, documents, ids[0], "csv"))["job_name"] == "after"
+
+
+def test_plain_pandas_read_csv_of_a_download_gives_the_trajectorys_columns(factory, tmp_path):
+    """The first line a person types: ``pd.read_csv("evaluation-N.csv")``, no option, gives one column per
+    trajectory column with its numbers (integers for the phase and lap), the rows the JSON download has."""
+    import pandas as pd
+
+    _, ids = _job_with_evaluations(factory)
+    documents = TrajectoryDocuments()
+    path = tmp_path / f"evaluation-{ids[0]}.csv"
+    path.write_text(_document(factory, documents, ids[0], "csv"))
+    frame = pd.read_csv(path)
+    document = json.loads(_document(factory, documents, ids[0], "json"))
+    assert list(frame.columns) == document["columns"] == [*COLUMNS, "lap"]
+    assert frame.to_numpy().tolist() == document["rows"]
+    assert frame["phase"].dtype.kind == "i" and frame["lap"].dtype.kind == "i" and frame["t_s"].dtype.kind == "f"
 
 
 def test_a_dropped_trajectory_or_a_deleted_job_is_not_found_though_it_was_read_before(factory):

@@ -26,13 +26,16 @@ def get_evaluation(evaluation_id: EvaluationId, db: Factory) -> dict[str, Any]:
 
 
 @router.get("/{evaluation_id}/trajectory", response_model=TrajectoryDocument, responses={
-    **media("text/csv", {"type": "string"}, "format=csv (the default): a '# driftlab: {metadata}' line, then a "
-            "header and one row per control step; format=json: the document below"), **errors(404, 422, 503)})
+    **media("text/csv", {"type": "string"}, "format=csv (the default): a header and one row per control step, "
+            "nothing else (pandas.read_csv reads it as it is); format=json: the document below, with the metadata"),
+    **errors(404, 422, 503)})
 def trajectory(evaluation_id: EvaluationId, db: Factory, documents: Documents,
                format: str = Query("csv", pattern="^(csv|json)$")) -> Response:  # noqa: A002
-    """The stored episode (its seed: the evaluation's ``trajectory_seed``), one row per control step, with its
-    metadata: a ``metadata`` object in JSON, a ``# driftlab: {...}`` first line in CSV."""
+    """The stored episode (its seed: the evaluation's ``trajectory_seed``), one row per control step; the JSON also
+    holds its metadata (a ``metadata`` object), which a CSV response names in a ``Link`` header (rel="describedby")."""
     with storage.snapshot(db) as session:
         text = documents.document(session, evaluation_id=evaluation_id, format="json" if format == "json" else "csv")
     headers = {"Content-Disposition": f'attachment; filename="evaluation-{evaluation_id}.{format}"'}
+    if format == "csv":
+        headers["Link"] = f'</api/evaluations/{evaluation_id}/trajectory?format=json>; rel="describedby"'
     return Response(text, media_type="application/json" if format == "json" else "text/csv", headers=headers)

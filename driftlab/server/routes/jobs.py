@@ -7,7 +7,6 @@ from typing import Annotated, Any
 from fastapi import APIRouter, Depends, HTTPException, Query, Request, Response
 from sqlalchemy.orm import Session, sessionmaker
 
-from driftlab.core.drivability import check_drivable
 from driftlab.core.tuning import TuningSpec
 from driftlab.db import lifecycle, storage
 from driftlab.server import quotas
@@ -44,7 +43,7 @@ def create_job(body: JobCreate, db: Factory, request: Request) -> dict[str, Any]
     if "bounds" in doc:
         doc["bounds"] = {k: list(v) for k, v in doc["bounds"].items()}
     spec = TuningSpec.from_dict(doc)  # ConfigError -> 422 naming the field
-    check_drivable(spec.config)  # NotDrivableError (a ConfigError) -> 422 with the reason
+    deferred = request.app.state.drift_check.check(spec.config)  # NotDrivableError (a ConfigError) -> 422
     settings = request.app.state.settings
     quotas.check_job(settings, spec.to_dict())
     with storage.transaction(db) as session:
@@ -55,6 +54,7 @@ def create_job(body: JobCreate, db: Factory, request: Request) -> dict[str, Any]
         spec, profile_id = with_profile(session, spec, doc.get("config"))
         warning = None if profile_id is not None or gives_weights(doc.get("config")) else uncalibrated_warning(
             session, spec)
+        warning = "; ".join(w for w in (deferred, warning) if w) or None
         if body.warm_start_from:
             spec = with_warm_start(session, spec, body.warm_start_from)
         out = job_dict(session, storage.create_job(session, name=name, spec=spec.to_dict(), seed=spec.seed,

@@ -221,3 +221,35 @@ def test_tune_presets_set_the_bo_budget_and_explicit_options_win(preset, extra, 
     args = build_parser().parse_args(["tune", "--preset", preset, *extra])
     spec = tuning_spec(args).to_dict()
     assert {k: spec[k] for k in expected} == expected
+
+
+def test_tune_enqueue_hands_a_theta_to_the_job_a_server_runs(tmp_path):
+    """`driftlab tune --name N --enqueue ...` while a server runs job N: the CLI runs nothing, the server evaluates
+    the theta next (stored marked as enqueued)."""
+    import time
+
+    import httpx
+
+    from tests.server_process import free_port, start_server
+
+    db = tmp_path / "served.db"
+    proc, url = start_server(db, free_port(), extra_args=("--workers", "1"))
+    try:
+        job = httpx.post(f"{url}/api/jobs", json={"name": "served", "iterations": 5000, "seed_points": 12,
+                                                  "robust_samples": 1, "confirm_samples": 0}).json()
+        deadline = time.time() + 180
+        while httpx.get(f"{url}/api/jobs/{job['id']}").json()["n_done"] < 1 and time.time() < deadline:
+            time.sleep(0.3)
+        out = _run("tune", "--name", "served", "--db", str(db), "--enqueue", "k=0.071,dV=0.05")
+        assert out.returncode == 0, out.stderr
+        assert "enqueued to job served" in out.stderr and "evaluated next" in out.stderr
+        picked = []
+        while not picked and time.time() < deadline:
+            evaluations = httpx.get(f"{url}/api/jobs/{job['id']}/evaluations").json()
+            picked = [e for e in evaluations if e["theta"]["k"] == 0.071]
+            time.sleep(0.3)
+        assert picked and picked[0]["enqueued"] is True and picked[0]["theta"]["dV"] == 0.05
+        assert httpx.get(f"{url}/api/jobs/{job['id']}").json()["status"] == "running"  # still the server's
+    finally:
+        proc.terminate()
+        proc.wait(timeout=30)

@@ -161,7 +161,8 @@ def add_job_options(parser: argparse.ArgumentParser) -> None:
                              "last N evaluations, e.g. 40:0.01")
     parser.add_argument("--enqueue", action="append", metavar="THETA",
                         help="a hand-picked theta to evaluate next, e.g. k=0.06,dV=0.1 (the keys not given "
-                             "untuned; inside the job's box); repeat it for more, in order")
+                             "untuned; inside the job's box); repeat it for more, in order. To a job a server "
+                             "runs (same --db): handed to that server, which evaluates it next")
     parser.add_argument("--warm-start-from", metavar="IDS",
                         help="start from these stored jobs' evaluations, e.g. 3,4 (job ids): told to the optimizer "
                              "where a job ran the same config, else its best thetas are asked first")

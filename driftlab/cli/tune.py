@@ -80,9 +80,11 @@ def enqueue_texts(session, job_id: int, texts: list[str]) -> None:
     enqueue_thetas(session, job_id=job_id, thetas=thetas, field="enqueue")
 
 
-def open_tuning_job(factory, args: argparse.Namespace, runner: str) -> tuple[int, str]:
+def open_tuning_job(factory, args: argparse.Namespace, runner: str) -> tuple[int, str, bool]:
     """Create the job, or take up the stored one of that name (its settings win; a given --iterations extends
-    it); then claim its lease. A job another live runner holds is refused (LeaseHeld: exit 2)."""
+    it); then claim its lease: (id, name, True). A job another live runner holds is refused (LeaseHeld: exit 2),
+    unless only ``--enqueue`` is given: its thetas go to that runner's queue, evaluated next, and nothing runs
+    here (id, name, False)."""
     from driftlab.db import lifecycle, storage
     from driftlab.db.lifecycle import WorkStatus
 
@@ -108,6 +110,12 @@ def open_tuning_job(factory, args: argparse.Namespace, runner: str) -> tuple[int
             job = storage.create_job(session, name=name, spec=spec.to_dict(), seed=spec.seed, profile_id=profile_id)
             message = f"job {job.name} (id {job.id}): {spec.iterations} iterations"
         else:
+            if lifecycle.lease_is_live(job) and args.enqueue and args.iterations is None:
+                # the runner that holds it (a server's) evaluates them next: this process runs nothing
+                enqueue_texts(session, job.id, args.enqueue)
+                sys.stderr.write(f"{len(args.enqueue)} theta(s) enqueued to job {job.name} (id {job.id}), which "
+                                 f"{job.runner_id} runs: evaluated next\n")
+                return job.id, job.name, False
             if lifecycle.lease_is_live(job):  # refuse before changing anything
                 lifecycle.claim(session, job_id=job.id, runner=runner)
             if args.iterations is not None and args.iterations != job.spec["iterations"]:
@@ -123,7 +131,7 @@ def open_tuning_job(factory, args: argparse.Namespace, runner: str) -> tuple[int
             lifecycle.claim(session, job_id=job_id, runner=runner,
                             from_statuses=(WorkStatus.QUEUED, WorkStatus.PAUSED, WorkStatus.FAILED))
     sys.stderr.write(message + "\n")
-    return job_id, name
+    return job_id, name, True
 
 
 def cmd_tune(args: argparse.Namespace) -> int:
@@ -136,7 +144,9 @@ def cmd_tune(args: argparse.Namespace) -> int:
     stop_on_sigterm()
     factory = storage.open_database(db_url(args.db))
     runner = lifecycle.new_runner_id("tune")
-    job_id, name = open_tuning_job(factory, args, runner)
+    job_id, name, ours = open_tuning_job(factory, args, runner)
+    if not ours:
+        return 0
 
     def progress(p: Progress) -> None:
         best = f"{p.best_J:.3f}" if p.best_J is not None else "-"

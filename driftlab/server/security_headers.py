@@ -20,6 +20,7 @@ PAGE_POLICY = f"{_COMMON}; script-src 'self'"
 VIEWER_POLICY = (_COMMON.replace("connect-src 'self'", "connect-src 'self' blob: data:")
                  + "; script-src 'self' 'unsafe-inline' 'wasm-unsafe-eval' blob:")
 VIEWER_PREFIX = "/viser/"
+REPLAY_SUFFIX = "/replay.html"  # viser's standalone player, opened from the dashboard (driftlab.server.view)
 # The Swagger UI page loads its bundle from jsDelivr, pinned with integrity (driftlab.server.docs_page), and starts
 # it from an inline script.
 DOCS_PATHS = frozenset({"/docs"})
@@ -34,7 +35,7 @@ def policy_for(path: str) -> str:
     """The Content-Security-Policy of the page or response at ``path``."""
     if path in DOCS_PATHS:
         return DOCS_POLICY
-    return VIEWER_POLICY if path.startswith(VIEWER_PREFIX) else PAGE_POLICY
+    return VIEWER_POLICY if path.startswith(VIEWER_PREFIX) or path.endswith(REPLAY_SUFFIX) else PAGE_POLICY
 
 
 class SecurityHeaders:

@@ -120,9 +120,11 @@ def add_view_routes(app: FastAPI, upstream_port: Callable[[], int | None], recor
              dependencies=[Depends(heavy_read)], responses={
         **media("text/html", {"type": "string"}, "a page that replays the episode"), **errors(404, 422, 503)})
     def replay(evaluation_id: EvaluationId) -> Response:
-        """A standalone HTML page that replays the episode with no server."""
+        """A standalone HTML page that replays the episode with no server (shown in the browser; saved, it plays
+        offline): the job, the evaluation, its J and theta, the plant and the seed beside the 3D player and the
+        state plots."""
         return Response(recordings.get(evaluation_id, "html"), media_type="text/html",
-                        headers={"Content-Disposition": f'attachment; filename="evaluation-{evaluation_id}.html"'})
+                        headers={"Content-Disposition": f'inline; filename="evaluation-{evaluation_id}.html"'})
 
 
 async def relay(websocket: WebSocket, port: int | None) -> None:

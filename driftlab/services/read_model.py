@@ -48,6 +48,8 @@ class StoredEpisode:
     n_seeds: int
     failure_reason: str
     metrics: dict[str, Any]
+    job: str  # "job 3 · name"
+    plant: str  # the plant it ran on: "commonroad_std, CommonRoad vehicle 2 (BMW 320i)"
 
     @property
     def column_index(self) -> dict[str, int]:
@@ -70,7 +72,21 @@ def stored_episode(factory: Factory, evaluation_id: int) -> StoredEpisode:
                              theta=dict(e.theta), status=e.status, J=float(e.J), seed=e.shown_seed,
                              episode_J=float(e.shown_episode["J"]), n_seeds=max(len(e.seeds or ()), 1),
                              failure_reason=str((e.metrics or {}).get("failure_reason") or ""),
-                             metrics=dict(e.metrics or {}))
+                             metrics=dict(e.metrics or {}), job=f"job {e.job.id} · {e.job.name}",
+                             plant=plant_label(e.job.spec))
+
+
+def plant_label(spec: dict[str, Any]) -> str:
+    """The plant a job runs, as a played episode names it: its ``plant.model``, and its car where the plant has
+    several (a CommonRoad parameter set)."""
+    from driftlab.core.plants import plant_type
+
+    plant = spec.get("config", {}).get("plant", {})
+    model = str(plant.get("model", "default"))
+    entry = plant_type(model)
+    if entry is None or not hasattr(entry, "car_name") or "commonroad_vehicle" not in plant:
+        return model
+    return f"{model}, {entry.car_name(int(plant['commonroad_vehicle']))}"
 
 
 @dataclass(frozen=True)

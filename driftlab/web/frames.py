@@ -44,6 +44,8 @@ class EpisodeFrames:
     n_seeds: int = 1  # how many episodes J averages
     plant: dict[str, float] = field(default_factory=dict)  # plant settings a what-if episode changed
     failure_reason: str = ""  # why an episode stopped before its first step (its metrics')
+    job: str = ""  # the stored evaluation's job: "job 3 · name"
+    car: str = ""  # the plant it ran on (driftlab.services.read_model.plant_label)
 
     def __post_init__(self) -> None:
         if self.rows.ndim != 2 or self.rows.shape[1] != len(self.columns):
@@ -92,7 +94,8 @@ class EpisodeFrames:
         """Which episode: the API's evaluation id first (what the URLs use), the job's index beside it."""
         if self.evaluation_id is None:
             return "what-if episode"
-        return f"evaluation id {self.evaluation_id} (index {self.index} in its job)"
+        job = f"{self.job} · " if self.job else ""
+        return f"{job}evaluation id {self.evaluation_id} (index {self.index} in its job)"
 
     def j_text(self) -> str:
         """What J is: one episode on its seed, or a mean over seeds with the drawn episode's own J beside it."""
@@ -105,4 +108,5 @@ class EpisodeFrames:
     def caption(self) -> str:
         theta = ", ".join(f"{k} {v:.4g}" for k, v in self.theta.items())  # full precision: the downloads and the API
         plant = " | plant: " + ", ".join(f"{k} {v:.4g}" for k, v in self.plant.items()) if self.plant else ""
-        return f"{self.name()}: {self.status}, {self.j_text()} | {theta}{plant}"
+        car = f" | on {self.car}" if self.car else ""
+        return f"{self.name()}: {self.status}, {self.j_text()} | {theta}{plant}{car}"

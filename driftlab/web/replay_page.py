@@ -8,6 +8,7 @@ viser writes; it needs no server and no script.
 from __future__ import annotations
 
 import html
+import re
 
 import numpy as np
 
@@ -66,7 +67,8 @@ def replay_panel_html(frames: EpisodeFrames) -> str:
     triggers = ", ".join(f"{p['t_s']:.2f} s" for p in frames.trigger_points) or "none"
     return (f'<aside id="driftlab-panel"><h1>{html.escape(frames.name())}</h1>'
             f'<p class="j">{html.escape(frames.status)} · {html.escape(frames.j_text())}</p>'
-            f'<p>triggers at {triggers} · duration {frames.duration_s:.4g} s</p>'
+            + (f'<p>plant: {html.escape(frames.car)}</p>' if frames.car else "")
+            + f'<p>triggers at {triggers} · duration {frames.duration_s:.4g} s</p>'
             f'<table><tr><th colspan="2">theta</th></tr>{theta}'
             + (f'<tr><th colspan="2">plant (changed)</th></tr>{plant}' if plant else "")
             + f"</table>{plots}</aside>")
@@ -84,6 +86,7 @@ _STYLE = (f"<style>#root{{position:fixed;left:0;top:0;bottom:0;right:{PANEL_WIDT
 def with_panel(viser_html: str, frames: EpisodeFrames) -> str:
     """viser's standalone page with the panel on the right and the 3D player beside it."""
     head_end = viser_html.index("</head>")
-    page = viser_html[:head_end] + _STYLE + viser_html[head_end:]
+    title = f"<title>{html.escape(frames.name())}, J {frames.J:.4g} · DriftLab replay</title>"
+    page = re.sub(r"<title>.*?</title>", "", viser_html[:head_end], flags=re.S) + title + _STYLE + viser_html[head_end:]
     body = page.index("<body>") + len("<body>")
     return page[:body] + replay_panel_html(frames) + page[body:]

@@ -20,7 +20,7 @@ def frames_of_evaluation(factory: read_model.Factory, evaluation_id: int) -> Epi
     e = read_model.stored_episode(factory, evaluation_id)
     return EpisodeFrames(e.columns, e.rows, e.trigger_points, evaluation_id=e.evaluation_id, index=e.index,
                          theta=e.theta, status=e.status, J=e.J, seed=e.seed, episode_J=e.episode_J,
-                         n_seeds=e.n_seeds, failure_reason=e.failure_reason)
+                         n_seeds=e.n_seeds, failure_reason=e.failure_reason, job=e.job, car=e.plant)
 
 
 def frames_of_outcome(outcome: Any, plant: dict[str, float] | None = None) -> EpisodeFrames:

@@ -10,7 +10,7 @@ from playwright.sync_api import expect
 
 from tests.server_process import free_port, start_server, wait_released
 from tests.web.chromium import click_until_shown
-from tests.web.test_view_browser import SCREENSHOT_DIR, ConsoleLog
+from tests.web.test_view_browser import SCREENSHOT_DIR
 
 pytestmark = pytest.mark.e2e  # real processes: servers, browsers, Dask, the CLI
 
@@ -236,11 +236,21 @@ def test_a_clicked_point_selects_its_evaluation_plays_it_and_an_enqueued_theta_r
     expect(page.locator("#trials-table tr.picked")).to_have_attribute("data-eval-id", str(picked))
     expect(page.locator("#trial-picked")).to_contain_text(f"evaluation id {picked} ")
     link = page.locator("#trial-3d")
-    assert link.get_attribute("href") == f"/viser/?playbackPath=/api/evaluations/{picked}/recording.viser"
-    view = browser.new_page(viewport={"width": 1200, "height": 800})
-    log = ConsoleLog(view)
+    assert link.get_attribute("href") == f"/api/evaluations/{picked}/replay.html"
+    # What it plays names itself: the job, the evaluation, its J and theta, the plant, in the panel and the tab's
+    # title (two such tabs are told apart), beside the state plots.
+    evaluation = httpx.get(f"{server}/api/evaluations/{picked}").json()
+    view = browser.new_page(viewport={"width": 1400, "height": 800})
     view.goto(f"{server}{link.get_attribute('href')}")
-    log.wait_for("File loaded!")
+    panel = view.locator("#driftlab-panel")
+    expect(panel.locator("h1")).to_have_text(f"job {job['id']} · trials · evaluation id {picked} "
+                                             f"(index {evaluation['index']} in its job)")
+    expect(panel).to_contain_text(f"J {evaluation['J']:.4g}")
+    expect(panel).to_contain_text("plant: driftlab")
+    for key, value in evaluation["theta"].items():
+        expect(panel.locator("tr", has_text=key).first).to_contain_text(f"{value:.4g}")
+    assert panel.locator("svg").count() >= 3  # the state plots
+    assert f"evaluation id {picked}" in view.title() and f"job {job['id']}" in view.title()
     view.close()
 
     # Sorted by J: the completed evaluations first, lowest J on top.

@@ -195,6 +195,8 @@ def test_recording_plays_back_from_storage(server, browser, job):
     assert recording.status_code == 200 and len(recording.content) > 10_000
     html = httpx.get(f"{server}/api/evaluations/{best['id']}/replay.html")
     assert html.status_code == 200 and "__VISER_EMBED_DATA__" in html.text
+    assert f"<h1>job {job['id']} · {job['name']} · evaluation id {best['id']} " in html.text  # the job, the plant
+    assert "<p>plant: driftlab</p>" in html.text and f"<title>job {job['id']}" in html.text
     page, log = _open(browser, f"{server}/viser/?playbackPath=/api/evaluations/{best['id']}/recording.viser")
     log.wait_for("File loaded!")
     deadline = time.time() + WAIT_S  # the player fades the scene in over the first seconds (longer under load)

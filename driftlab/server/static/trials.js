@@ -89,7 +89,8 @@ function renderPicked(state) {
     `${e.status}, J ${fmt(e.J)}, theta ${Object.entries(e.theta).map(([k, v]) => `${k} ${fmt(v)}`).join(", ")}` +
     reason;
   link.hidden = false;
-  link.href = `/viser/?playbackPath=/api/evaluations/${e.id}/recording.viser`;
+  // The replay page names what it plays (job, evaluation, J, theta, plant, seed) beside the state plots.
+  link.href = `/api/evaluations/${e.id}/replay.html`;
 }
 
 /** Select an evaluation everywhere: its table page and row, its ring in the plots (``redraw``). */

@@ -53,8 +53,10 @@ DEFAULT_SEED_POINTS = 12
 LOCAL_POINTS = 11
 LOCAL_MODEL_RADIUS = 0.05
 LOCAL_GROWTH = 15
-# The job document's version (TuningSpec.to_dict): 2 states whether its config is fitted to its plant ("fitted");
-# a document without "version" (releases before it) says so by the keys it lacks (driftlab.core.config.config_to_dict).
+# The job document's version (TuningSpec.to_dict). 2: it states whether its config is fitted to its plant ("fitted";
+# version 1 said so by the keys it lacked, driftlab.core.config.config_to_dict), and a warm start that continues a job
+# of its own config refines near that job's best (BayesianOptimizer's prior_points). A posted document without one is
+# of this release; the documents stored before it were stamped 1 (migration 0017) and re-run as they ran.
 JOB_DOCUMENT_VERSION = 2
 # The paper's 500-run learns the paper's four parameters only.
 PAPER_PRESET = {"iterations": 500, "seed_points": 20, "active_set": 400, "model_correction": False}
@@ -130,6 +132,7 @@ class TuningSpec:
     deterministic: bool = False
     warm_start: WarmStart | None = None
     stop: StopRules = field(default_factory=StopRules)
+    version: int = JOB_DOCUMENT_VERSION
 
     def __post_init__(self) -> None:
         for name in ("iterations", "seed_points", "active_set", "seed", "robust_samples"):
@@ -171,7 +174,7 @@ class TuningSpec:
         """The job document: what is stored, what ``GET /api/jobs/{id}`` shows as ``spec``, and what
         :meth:`from_dict` reads back. ``fitted``: the config is fitted to its plant (the controller's model and the
         plant's start, driftlab.core.configure.fitted); false until a runner first claims the job."""
-        out = {"version": JOB_DOCUMENT_VERSION, "fitted": not self.config.to_fit,
+        out = {"version": self.version, "fitted": not self.config.to_fit,
                "iterations": self.iterations, "seed_points": self.seed_points, "active_set": self.active_set,
                "seed": self.seed, "robust_samples": self.robust_samples, "confirm_samples": self.confirm_samples,
                "bounds": {k: list(v) for k, v in self.bounds.items()}, "model_correction": self.model_correction,
@@ -203,6 +206,10 @@ class TuningSpec:
         if self.local_phase and self.model_correction:
             options.update(local_points=min(LOCAL_POINTS, self.seed_points - 1), local_growth=LOCAL_GROWTH,
                            local_radius={name: LOCAL_MODEL_RADIUS for name in MODEL_BOUNDS})
+        if self.warm_start is not None and self.warm_start.told and self.version >= 2:
+            # a continuation of jobs of its own config refines near their best (jobs stored before version 2
+            # re-run as they ran)
+            options["prior_points"] = len(self.warm_start.told)
         if self.model_correction:  # a theta whose corrected model has no drift is refused before it is asked
             from driftlab.core.episode import runs
 
@@ -253,7 +260,7 @@ class TuningSpec:
         unknown = set(data) - allowed
         if unknown:
             raise ConfigError(f"unknown field {sorted(unknown)[0]!r}; allowed: {', '.join(sorted(allowed))}")
-        version = data.get("version", 1)
+        version = data.get("version", JOB_DOCUMENT_VERSION)
         if isinstance(version, bool) or version not in range(1, JOB_DOCUMENT_VERSION + 1):
             raise ConfigError(f"version must be 1 to {JOB_DOCUMENT_VERSION} (a job document of this release or an "
                               f"earlier one), got {version!r}", field="version")
@@ -268,4 +275,5 @@ class TuningSpec:
                    model_correction=data.get("model_correction", True), local_phase=data.get("local_phase"),
                    deterministic=data.get("deterministic", False),
                    warm_start=None if data.get("warm_start") is None else WarmStart.from_dict(data["warm_start"]),
-                   stop=StopRules() if data.get("stop") is None else StopRules.from_dict(data["stop"]))
+                   stop=StopRules() if data.get("stop") is None else StopRules.from_dict(data["stop"]),
+                   version=version)

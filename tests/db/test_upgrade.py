@@ -83,8 +83,9 @@ def test_schema_1_database_upgrades_and_its_results_still_reproduce(tmp_path):
     with storage.transaction(factory) as session:
         job = session.get(Job, 1)
         evaluation = session.get(Evaluation, 1)
-        assert session.get(Meta, "schema_version").value == "16"
+        assert session.get(Meta, "schema_version").value == "17"
         spec = TuningSpec.from_dict(job.spec)
+        assert job.spec["version"] == 1 and spec.version == 1  # stamped by 0017: it re-runs as it ran
         assert spec.robust_samples == 1 and spec.confirm_samples == 0 and not spec.config.plant.varies
         assert not spec.config.mpc.feedback_in_model and spec.config.mpc.estimator_hold_s == 0.0  # pinned by 0005
         assert spec.config.mpc.qp_solver == "osqp"  # pinned by 0007
@@ -101,7 +102,7 @@ def test_schema_1_database_upgrades_and_its_results_still_reproduce(tmp_path):
 
 def test_a_new_database_is_created_at_the_head_revision(tmp_path):
     factory = storage.open_database(f"sqlite:///{tmp_path / 'new.db'}")
-    assert schema.current_revision(storage.engine_of(factory)) == schema.head_revision() == "0016"
+    assert schema.current_revision(storage.engine_of(factory)) == schema.head_revision() == "0017"
     with storage.transaction(factory) as session:
         job = storage.create_job(session, name="fresh", spec=TuningSpec().to_dict(), seed=0)
         assert job.runner_id is None and job.heartbeat_at is None
@@ -151,7 +152,7 @@ def test_revision_0006_adds_studies_to_a_database_with_jobs(tmp_path):
         assert [c.settings for c in studies.cells(session, study_id=study.id)] == [{"plant.mass_scale": 1.0},
                                                                                   {"plant.mass_scale": 1.1}]
         assert [j.name for j in studies.study_jobs(session, study_id=study.id)] == ["member"]
-        assert session.get(Meta, "schema_version").value == "16"
+        assert session.get(Meta, "schema_version").value == "17"
 
 
 def _insert_old_rows(connection, rows) -> None:

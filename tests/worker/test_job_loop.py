@@ -279,12 +279,13 @@ def test_a_job_whose_car_cannot_be_fitted_fails_saying_why(tmp_path, monkeypatch
 
 
 def test_a_job_document_states_its_version_and_refuses_one_it_cannot_read_or_a_fitted_claim_it_lacks():
-    """A stored job's document is versioned (a document of a release before versions is version 1 and re-runs as
-    it did); "fitted" true with the controller's model missing is refused, naming the field."""
+    """A stored job's document is versioned (a document stored before versions was stamped 1 and re-runs as it
+    did); "fitted" true with the controller's model missing is refused, naming the field."""
     document = TuningSpec.from_dict({"iterations": 3, "config": {"plant.model": "commonroad_std"}}).to_dict()
     assert document["version"] == 2 and document["fitted"] is False
-    old = {k: v for k, v in document.items() if k not in ("version", "fitted")}
-    assert TuningSpec.from_dict(old) == TuningSpec.from_dict(document)
+    posted = {k: v for k, v in document.items() if k not in ("version", "fitted")}
+    assert TuningSpec.from_dict(posted) == TuningSpec.from_dict(document)  # a posted document is of this release
+    assert TuningSpec.from_dict({**document, "version": 1}).to_dict()["version"] == 1  # kept as stored
     with pytest.raises(ConfigError, match="version must be 1 to 2") as refused:
         TuningSpec.from_dict({**document, "version": 3})
     assert refused.value.field == "version"

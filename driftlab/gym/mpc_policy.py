@@ -32,6 +32,7 @@ class MpcPolicy:
         self.env = unwrapped
         self._run: EpisodeRun | None = None
         self._out = np.zeros(2)
+        self._kernel: Any = None  # resolved at the first episode: every episode passes the same types
 
     def _begin(self, run: EpisodeRun) -> None:
         model, s, loop, out = run.model, run.settings, run.loop, self._out
@@ -40,7 +41,9 @@ class MpcPolicy:
         qa_left, qa_right = model.left_qp.arrays, model.right_qp.arrays
         self._qa = {LEFT: qa_left, RIGHT: qa_right}
         args = (s, loop, qa_left, qa_right, model.params, out)
-        commands = _compiled(mpc_commands, *args)
+        if self._kernel is None:
+            self._kernel = _compiled(mpc_commands, *args)
+        commands = self._kernel
         self._commands = lambda: commands(*args)
 
     def __call__(self, observation: Any = None) -> np.ndarray:

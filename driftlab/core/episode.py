@@ -13,7 +13,12 @@ from typing import Any
 import numpy as np
 
 from driftlab.core.blas_threads import with_one_blas_thread
-from driftlab.core.closed_loop import (
+from driftlab.core.closed_loop import finish_step, run_until_constrained
+from driftlab.core.config import EpisodeConfig, Theta
+from driftlab.core.configure import fitted
+from driftlab.core.controller import ControllerModel, build_controller_model, has_drift, no_drift_reason
+from driftlab.core.errors import ConfigError, NoEquilibriumError
+from driftlab.core.loop_state import (
     COL,
     COLUMNS,
     DONE,
@@ -26,14 +31,8 @@ from driftlab.core.closed_loop import (
     STATUSES,
     LoopSettings,
     LoopState,
-    finish_step,
     new_loop_state,
-    run_until_constrained,
 )
-from driftlab.core.config import EpisodeConfig, Theta
-from driftlab.core.configure import fitted
-from driftlab.core.controller import ControllerModel, build_controller_model, has_drift, no_drift_reason
-from driftlab.core.errors import ConfigError, NoEquilibriumError
 from driftlab.core.metrics import EpisodeMetrics, compute_metrics
 from driftlab.core.mpc import QpSession
 from driftlab.core.planner import Phase, initial_plan_state

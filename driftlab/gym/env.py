@@ -17,12 +17,12 @@ import gymnasium as gym
 import numpy as np
 from numba import typeof
 
-from driftlab.core.closed_loop import I_STATUS, I_STEP, RUNNING, STALLED, STATUSES
 from driftlab.core.config import EpisodeConfig, Theta
 from driftlab.core.configure import apply_overrides, fitted, preset_config
 from driftlab.core.drivability import check_drivable
 from driftlab.core.episode import EpisodeResult, EpisodeRun, episode_result, start_episode
 from driftlab.core.errors import ConfigError, NoEquilibriumError
+from driftlab.core.loop_state import I_STATUS, I_STEP, RUNNING, STALLED, STATUSES
 from driftlab.core.metrics import objective_of_costs
 from driftlab.core.plant import PLANT_EXTERNAL
 from driftlab.core.variation import MAX_SEED

@@ -5,7 +5,8 @@ from __future__ import annotations
 
 from numba import njit
 
-from driftlab.core.closed_loop import (
+from driftlab.core.closed_loop import control, controller_commands, observe, send_commands, step_plant
+from driftlab.core.loop_state import (
     C_BETA,
     C_BETA_REF,
     C_DPSI,
@@ -18,11 +19,6 @@ from driftlab.core.closed_loop import (
     F_SEEN_E,
     I_DIRECTION,
     I_ROWS,
-    control,
-    controller_commands,
-    observe,
-    send_commands,
-    step_plant,
 )
 from driftlab.core.metrics import stage_cost
 from driftlab.core.plant import DRIVE, SIDESLIP, SPEED, STEER, YAW_RATE

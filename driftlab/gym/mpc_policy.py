@@ -13,8 +13,9 @@ from typing import Any
 import numpy as np
 
 from driftlab.core.blas_threads import one_blas_thread
-from driftlab.core.closed_loop import I_DIRECTION, I_STATUS, SOLVER_FAILED, send_commands
+from driftlab.core.closed_loop import send_commands
 from driftlab.core.episode import EpisodeRun
+from driftlab.core.loop_state import I_DIRECTION, I_STATUS, SOLVER_FAILED
 from driftlab.core.mpc import QpSession
 from driftlab.core.track import LEFT, RIGHT
 from driftlab.gym.env import FigureEightEnv, _compiled

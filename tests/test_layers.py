@@ -6,7 +6,7 @@ from pathlib import Path
 
 PACKAGE = Path(__file__).resolve().parent.parent / "driftlab"
 OUTER = ("driftlab.db", "driftlab.server", "driftlab.web", "driftlab.worker", "driftlab.cli", "driftlab.services",
-         "driftlab.reports")
+         "driftlab.reports", "driftlab.gym")
 # Where the DRIFTLAB_* environment is read: the command line (once per command) and the app (its default).
 SETTINGS_ENTRY_POINTS = {"cli/options.py", "server/app.py"}
 
@@ -28,6 +28,14 @@ def test_core_imports_nothing_of_the_outer_layers():
     wrong = [(name, module) for name, tree in _modules() if name.startswith("core/")
              for module in _imported(tree) if module.startswith(OUTER)]
     assert wrong == []
+
+
+def test_the_gym_package_imports_only_core_and_gymnasium():
+    """driftlab.gym sits at the edge: the computation it steps is core's, and it needs no storage, service or view."""
+    imported = {module for name, tree in _modules() if name.startswith("gym/") for module in _imported(tree)}
+    driftlab = {module for module in imported if module.startswith("driftlab")}
+    assert driftlab and all(module.startswith(("driftlab.core", "driftlab.gym")) for module in driftlab), driftlab
+    assert "gymnasium" in imported
 
 
 def test_settings_are_built_only_at_entry_points():

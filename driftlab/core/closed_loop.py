@@ -7,14 +7,17 @@ formed. Where the unconstrained minimizer violates a limit, :func:`run_until_con
 which solves the QP with OSQP and hands the increments to :func:`finish_step`; the loop then goes on. Between
 those returns (about one control step in twenty) no Python runs.
 
+A step is two halves, each a function: :func:`observe` (sensors, planner, row, failure rules: the world's half)
+and :func:`control` with :func:`controller_commands` (the controller's half), the commands then sent and the plant
+stepped (:func:`send_commands`, :func:`step_plant`). The episode runner (driftlab.core.episode) runs both halves;
+the Gymnasium environment (driftlab.gym) runs the world's half with commands that a policy chose.
+
 The arithmetic is that of the former step-by-step Python loop, operation for operation (``np.dot`` is the same
 BLAS call as numpy's ``@``; :func:`driftlab.core.track.hypot` rounds as CPython does), so stored episodes
 reproduce bit for bit (``tests/db/test_upgrade.py``).
 """
 
 from __future__ import annotations
-
-from typing import NamedTuple
 
 import numpy as np
 from numba import njit
@@ -28,6 +31,60 @@ from driftlab.core.controller import (
     mirror,
     predict_one_step,
 )
+from driftlab.core.loop_state import (
+    C_BETA,
+    C_BETA_REF,
+    C_C,
+    C_DELTA,
+    C_DELTA_CMD,
+    C_DELTA_MPC,
+    C_DELTA_REF,
+    C_DPSI,
+    C_E,
+    C_FXR,
+    C_FXR_CMD,
+    C_FXR_REF,
+    C_OSQP,
+    C_PHASE,
+    C_PSI,
+    C_R,
+    C_R_REF,
+    C_T,
+    C_V,
+    C_V_REF,
+    C_X,
+    C_Y,
+    COMPLETED,
+    DIVERGED,
+    DONE,
+    F_GRIPUP_SINCE_S,
+    F_LAST_TRIGGER_S,
+    F_SEEN_C,
+    F_SEEN_DPSI,
+    F_SEEN_E,
+    GRIPPED_UP,
+    I_DIRECTION,
+    I_EVENTS,
+    I_GRIPUP,
+    I_HAS_LAST,
+    I_HOLD_LEFT,
+    I_LAST_DIRECTION,
+    I_PLANT_DUE,
+    I_ROWS,
+    I_STATUS,
+    I_STEP,
+    I_UPDATES,
+    LEFT_TRACK,
+    MAX_EVENTS,
+    N_SENSED,
+    NEEDS_PLANT,
+    NEEDS_QP,
+    PHASE_FINISHED,
+    RUNNING,
+    SOLVER_FAILED,
+    SPUN_OUT,
+    STALLED,
+)
 from driftlab.core.mpc import (
     KN,
     N_PER_KN,
@@ -40,7 +97,7 @@ from driftlab.core.mpc import (
     unconstrained_increments,
     update_estimate,
 )
-from driftlab.core.planner import PLAN_LAST_FRACTION, PLAN_PHASE, Phase, advance_phase, phase_direction
+from driftlab.core.planner import PLAN_LAST_FRACTION, PLAN_PHASE, advance_phase, phase_direction
 from driftlab.core.plant import (
     DRIVE,
     HEADING,
@@ -54,7 +111,6 @@ from driftlab.core.plant import (
     YAW_RATE,
     plant_step,
 )
-from driftlab.core.statuses import EpisodeStatus
 from driftlab.core.track import LEFT, TWO_PI, circle_errors
 from driftlab.core.variation import (
     NOISE_HEADING,
@@ -64,107 +120,6 @@ from driftlab.core.variation import (
     NOISE_Y,
     NOISE_YAW_RATE,
 )
-
-# Trajectory columns recorded at the controller rate, with units.
-COLUMNS = (
-    "t_s", "x_m", "y_m", "psi_rad", "V_mps", "beta_rad", "r_radps", "delta_cmd_rad", "delta_rad", "delta_mpc_rad",
-    "Fxr_cmd_n", "Fxr_n", "e_m", "dpsi_rad", "c", "phase", "V_ref_mps", "beta_ref_rad", "r_ref_radps",
-    "delta_ref_rad", "Fxr_ref_n", "osqp",
-)
-COL = {name: i for i, name in enumerate(COLUMNS)}
-(C_T, C_X, C_Y, C_PSI, C_V, C_BETA, C_R, C_DELTA_CMD, C_DELTA, C_DELTA_MPC, C_FXR_CMD, C_FXR, C_E, C_DPSI, C_C,
- C_PHASE, C_V_REF, C_BETA_REF, C_R_REF, C_DELTA_REF, C_FXR_REF, C_OSQP) = range(len(COLUMNS))
-
-
-STATUSES = tuple(EpisodeStatus)
-(COMPLETED, SPUN_OUT, LEFT_TRACK, STALLED, GRIPPED_UP, SOLVER_FAILED, DIVERGED, REFUSED, INVALID) = range(
-    len(STATUSES))
-RUNNING = -1
-
-# What run_until_constrained returns.
-DONE, NEEDS_QP, NEEDS_PLANT = 0, 1, 2
-
-# Integer loop state: step, rows written, controller's direction and last direction, hold steps left,
-# whether a previous measurement exists, status, trigger events, the grip-up clock's state.
-(I_STEP, I_ROWS, I_DIRECTION, I_LAST_DIRECTION, I_HOLD_LEFT, I_HAS_LAST, I_STATUS, I_EVENTS, I_GRIPUP,
- I_UPDATES, I_PLANT_DUE) = range(11)
-# Float loop state: last trigger time, grip-up start, the seen errors of the step waiting for OSQP.
-F_LAST_TRIGGER_S, F_GRIPUP_SINCE_S, F_SEEN_E, F_SEEN_DPSI = range(4)
-MAX_EVENTS = 40  # 4 phase changes a lap, MAX_LAPS laps, and the finish
-
-PHASE_FINISHED = int(Phase.FINISHED)  # a plain int: a compile-time constant in the kernels
-
-
-class LoopSettings(NamedTuple):
-    """The episode's constants the compiled loop reads (theta, scenario, controller, failure rules)."""
-
-    dt_s: float
-    n_steps: int
-    speed_offset_left_mps: float  # dV on each circle (scaled by its drift speed where the radii differ)
-    speed_offset_right_mps: float
-    speed_change_accel_mps2: float  # > 0: the planned speed change before a flick (see _approach_offset_mps)
-    feedback_gain_radpm: float
-    lookahead_m: float
-    steer_limit_rad: float
-    disturbance_gain: float
-    disturbance_start_gain: float
-    hold_steps: int
-    estimator_uses_actuators: bool
-    estimator_linear: bool
-    model_steer_lag_s: float
-    c_lr: float
-    c_rl: float
-    settle_tolerance_rad: float
-    left_circle: tuple[float, float, float]  # centre x, centre y, radius [m]
-    right_circle: tuple[float, float, float]
-    max_sideslip_rad: float
-    max_yaw_rate_radps: float
-    max_lateral_error_m: float
-    min_speed_mps: float
-    gripup_sideslip_rad: float
-    gripup_time_s: float
-    gripup_grace_s: float
-    substep_s: float
-    noisy: bool
-    plant_kind: int  # PLANT_DRIFTLAB or PLANT_COMMONROAD_STD (stepped in the kernel) or PLANT_EXTERNAL
-
-
-class LoopState(NamedTuple):
-    """Everything that changes during an episode, as arrays the compiled loop updates in place."""
-
-    ints: np.ndarray
-    floats: np.ndarray
-    plant: np.ndarray  # the plant state (driftlab.core.plant layout)
-    plan: np.ndarray  # the planner's state (driftlab.core.planner layout)
-    estimate: np.ndarray  # disturbance estimate on (Vdot, betadot, rdot), left-hand form
-    last_mpc: np.ndarray  # the MPC's last commands [delta rad, Fxr N]
-    last_applied: np.ndarray  # the last commands sent [delta rad, Fxr N]
-    last_measured: np.ndarray  # the last measured [V, beta, r]
-    last_actuators: np.ndarray  # the last measured actuator positions [delta rad, Fxr N]
-    ref_key: np.ndarray  # (2, 5): the reference each side's cached terms belong to
-    ref_gain: np.ndarray  # (2, 2 Nc): cached reference terms per side (index 0 left, 1 right)
-    ref_linear: np.ndarray
-    ref_valid: np.ndarray
-    rows: np.ndarray  # (n_steps + 1, len(COLUMNS))
-    events: np.ndarray  # (MAX_EVENTS, 4): t s, phase, x m, y m of each phase change
-    pending: np.ndarray  # the step waiting for OSQP: [u_prev (2)]
-    qp_q: np.ndarray  # OSQP's terms of that step
-    qp_lower: np.ndarray
-    qp_upper: np.ndarray
-
-
-def new_loop_state(plant_state: np.ndarray, plan: np.ndarray, start_inputs: np.ndarray, n_steps: int,
-                   n_increments: int) -> LoopState:
-    ints = np.zeros(11, dtype=np.int64)
-    ints[I_DIRECTION] = ints[I_LAST_DIRECTION] = LEFT
-    ints[I_STATUS] = RUNNING
-    return LoopState(ints=ints, floats=np.zeros(4), plant=plant_state.copy(), plan=plan, estimate=np.zeros(3),
-                     last_mpc=start_inputs.copy(), last_applied=start_inputs.copy(), last_measured=np.zeros(3),
-                     last_actuators=np.zeros(2), ref_key=np.zeros((2, 5)), ref_gain=np.zeros((2, n_increments)),
-                     ref_linear=np.zeros((2, n_increments)), ref_valid=np.zeros(2, dtype=np.int64),
-                     rows=np.zeros((n_steps + 1, len(COLUMNS))), events=np.zeros((MAX_EVENTS, 4)),
-                     pending=np.zeros(N_U), qp_q=np.zeros(n_increments), qp_lower=np.zeros(2 * n_increments),
-                     qp_upper=np.zeros(2 * n_increments))
 
 
 @njit(cache=True)
@@ -271,110 +226,161 @@ def _sensed(cfg, s, noise_row):
 
 
 @njit(cache=True)
-def run_until_constrained(cfg, st, qa_left, qa_right, model_params, plant_params, actuator_params, noise):
-    """Steps the loop until the episode ends (returns DONE, the status in ``st.ints[I_STATUS]``) or a step's
-    QP has an active limit (returns NEEDS_QP with OSQP's terms in ``st.qp_*``; call :func:`finish_step`)."""
+def observe(cfg, st, qa_left, qa_right, noise):
+    """The sensing half of a control step (paper Algorithm 1, inner loop): the sensors read the plant, the planner
+    advances its phase, the trajectory row is written from the true state and the failure rules judge it.
+
+    Leaves what the controller reads in ``st.sensed`` and ``st.floats[F_SEEN_*]``. Returns RUNNING, a failure
+    status, COMPLETED (the 8 finished) or, past ``cfg.n_steps``, STALLED (out of time); the status is also set in
+    ``st.ints[I_STATUS]`` unless RUNNING."""
     ints, floats = st.ints, st.floats
-    while ints[I_STEP] <= cfg.n_steps:
-        step = ints[I_STEP]
-        t = step * cfg.dt_s
-        s = st.plant
-        sensed = _sensed(cfg, s, noise[step])
-        phase = int(st.plan[PLAN_PHASE])
+    if ints[I_STEP] > cfg.n_steps:
+        ints[I_STATUS] = STALLED  # out of time before finishing the 8
+        return STALLED
+    step = ints[I_STEP]
+    t = step * cfg.dt_s
+    s = st.plant
+    sensed = _sensed(cfg, s, noise[step])
+    phase = int(st.plan[PLAN_PHASE])
+    direction = phase_direction(phase)
+    seen = _errors(cfg, direction, sensed[X_POS], sensed[Y_POS], sensed[HEADING] + sensed[SIDESLIP])
+    ref = _reference(cfg, *_sides(qa_left, qa_right, direction), st, direction)
+    phase, changed = advance_phase(st.plan, seen[3], sensed[SIDESLIP] - ref[1], cfg.c_lr, cfg.c_rl,
+                                   cfg.settle_tolerance_rad)
+    if changed and ints[I_EVENTS] < MAX_EVENTS:
+        event = st.events[ints[I_EVENTS]]
+        event[0], event[1], event[2], event[3] = t, phase, sensed[X_POS], sensed[Y_POS]
+        ints[I_EVENTS] += 1
+    if phase != PHASE_FINISHED and phase_direction(phase) != direction:
         direction = phase_direction(phase)
         seen = _errors(cfg, direction, sensed[X_POS], sensed[Y_POS], sensed[HEADING] + sensed[SIDESLIP])
         ref = _reference(cfg, *_sides(qa_left, qa_right, direction), st, direction)
-        phase, changed = advance_phase(st.plan, seen[3], sensed[SIDESLIP] - ref[1], cfg.c_lr, cfg.c_rl,
-                                       cfg.settle_tolerance_rad)
-        if changed and ints[I_EVENTS] < MAX_EVENTS:
-            event = st.events[ints[I_EVENTS]]
-            event[0], event[1], event[2], event[3] = t, phase, sensed[X_POS], sensed[Y_POS]
-            ints[I_EVENTS] += 1
-        if phase != PHASE_FINISHED and phase_direction(phase) != direction:
-            direction = phase_direction(phase)
-            seen = _errors(cfg, direction, sensed[X_POS], sensed[Y_POS], sensed[HEADING] + sensed[SIDESLIP])
-            ref = _reference(cfg, *_sides(qa_left, qa_right, direction), st, direction)
-            floats[F_LAST_TRIGGER_S] = t
-        errors = _errors(cfg, direction, s[X_POS], s[Y_POS], s[HEADING] + s[SIDESLIP]) if cfg.noisy else seen
-        row = st.rows[ints[I_ROWS]]
-        row[C_T] = t
-        row[C_X], row[C_Y], row[C_PSI] = s[X_POS], s[Y_POS], s[HEADING]
-        row[C_V], row[C_BETA], row[C_R] = s[SPEED], s[SIDESLIP], s[YAW_RATE]
-        row[C_DELTA], row[C_FXR] = s[STEER], s[DRIVE]
-        row[C_E], row[C_DPSI], row[C_C] = errors[0], errors[1], errors[3]
-        row[C_PHASE] = phase
-        row[C_V_REF], row[C_BETA_REF], row[C_R_REF] = ref[0], ref[1], ref[2]
-        row[C_DELTA_REF], row[C_FXR_REF] = ref[3], ref[4] * N_PER_KN
-        ints[I_ROWS] += 1
-        failure = _failure(cfg, st, t, s, errors[0], ref[1])
-        if failure != RUNNING:
-            ints[I_STATUS] = failure
-            return DONE
-        if phase == PHASE_FINISHED:
-            ints[I_STATUS] = COMPLETED
-            return DONE
-        in_flick = not (phase == 0 or phase == 2 or phase == 4)
-        frozen, ints[I_HOLD_LEFT] = hold_estimate(in_flick, ints[I_HOLD_LEFT], cfg.hold_steps)
-        # The controller's step: disturbance, reference, unconstrained increments.
-        measured = np.array([sensed[SPEED], sensed[SIDESLIP], sensed[YAW_RATE]])
-        actuators = np.array([s[STEER], s[DRIVE]])
-        ints[I_LAST_DIRECTION] = ints[I_DIRECTION]
-        ints[I_DIRECTION] = direction
-        qa_last = qa_left if ints[I_LAST_DIRECTION] == LEFT else qa_right
-        disturbance = _update_disturbance(cfg, st, qa_last, model_params, measured, actuators, direction, frozen)
-        qa = qa_left if direction == LEFT else qa_right
-        side = 0 if direction == LEFT else 1
-        z_now = pack_state(qa.path_states, qa.models_lag, measured, np.array([seen[0], seen[1]]),
-                           np.array([actuators[0], actuators[1] * KN]),
-                           np.array([st.last_mpc[0], st.last_mpc[1] * KN]))
-        z_ref = _reference(cfg, *_sides(qa_left, qa_right, direction), st, direction)
-        if st.ref_valid[side] == 0 or np.any(st.ref_key[side] != z_ref):  # the reference changes rarely
-            st.ref_gain[side], st.ref_linear[side] = reference_terms(qa, z_ref)
-            st.ref_key[side] = z_ref
-            st.ref_valid[side] = 1
-        du, dz, offset, within = unconstrained_increments(qa, z_now, st.ref_gain[side], disturbance)
-        st.last_measured[:] = measured
-        st.last_actuators[:] = actuators
-        ints[I_HAS_LAST] = 1
-        floats[F_SEEN_E], floats[F_SEEN_DPSI] = seen[0], seen[1]
-        st.pending[:] = z_now[-N_U:]
-        if not within:
-            q, lower, upper = constrained_terms(qa, dz, disturbance, st.ref_linear[side], offset)
-            st.qp_q[:], st.qp_lower[:], st.qp_upper[:] = q, lower, upper
-            return NEEDS_QP
-        finish_step(cfg, st, qa, plant_params, actuator_params, du, True, False)
-        if ints[I_STATUS] != RUNNING:
-            return DONE
-        if ints[I_PLANT_DUE] == 1:
-            return NEEDS_PLANT
-    ints[I_STATUS] = STALLED  # out of time before finishing the 8
-    return DONE
+        floats[F_LAST_TRIGGER_S] = t
+    errors = _errors(cfg, direction, s[X_POS], s[Y_POS], s[HEADING] + s[SIDESLIP]) if cfg.noisy else seen
+    row = st.rows[ints[I_ROWS]]
+    row[C_T] = t
+    row[C_X], row[C_Y], row[C_PSI] = s[X_POS], s[Y_POS], s[HEADING]
+    row[C_V], row[C_BETA], row[C_R] = s[SPEED], s[SIDESLIP], s[YAW_RATE]
+    row[C_DELTA], row[C_FXR] = s[STEER], s[DRIVE]
+    row[C_E], row[C_DPSI], row[C_C] = errors[0], errors[1], errors[3]
+    row[C_PHASE] = phase
+    row[C_V_REF], row[C_BETA_REF], row[C_R_REF] = ref[0], ref[1], ref[2]
+    row[C_DELTA_REF], row[C_FXR_REF] = ref[3], ref[4] * N_PER_KN
+    ints[I_ROWS] += 1
+    st.sensed[:] = sensed[:N_SENSED]
+    floats[F_SEEN_E], floats[F_SEEN_DPSI], floats[F_SEEN_C] = seen[0], seen[1], seen[3]
+    failure = _failure(cfg, st, t, s, errors[0], ref[1])
+    if failure != RUNNING:
+        ints[I_STATUS] = failure
+        return failure
+    if phase == PHASE_FINISHED:
+        ints[I_STATUS] = COMPLETED
+        return COMPLETED
+    return RUNNING
 
 
 @njit(cache=True)
-def finish_step(cfg, st, qa, plant_params, actuator_params, du, ok, used_osqp):
-    """The rest of a control step once its increments are known: commands, the paper's steering feedback
-    delta_f = delta_mpc + k e_la (eq. 11), and the plant's step."""
-    ints = st.ints
+def control(cfg, st, qa_left, qa_right, model_params):
+    """The controller's half of a control step, after :func:`observe`: the disturbance estimate, the reference and
+    the MPC's unconstrained increments. Returns (du, within); where ``within`` is False a limit is active and
+    OSQP's terms of the step are in ``st.qp_*`` (the increments are then the QP's solution, :func:`finish_step`)."""
+    ints, floats = st.ints, st.floats
+    s, sensed = st.plant, st.sensed
+    phase = int(st.plan[PLAN_PHASE])
+    direction = phase_direction(phase)
+    in_flick = not (phase == 0 or phase == 2 or phase == 4)
+    frozen, ints[I_HOLD_LEFT] = hold_estimate(in_flick, ints[I_HOLD_LEFT], cfg.hold_steps)
+    measured = np.array([sensed[SPEED], sensed[SIDESLIP], sensed[YAW_RATE]])
+    actuators = np.array([s[STEER], s[DRIVE]])
+    ints[I_LAST_DIRECTION] = ints[I_DIRECTION]
+    ints[I_DIRECTION] = direction
+    qa_last = qa_left if ints[I_LAST_DIRECTION] == LEFT else qa_right
+    disturbance = _update_disturbance(cfg, st, qa_last, model_params, measured, actuators, direction, frozen)
+    qa = qa_left if direction == LEFT else qa_right
+    side = 0 if direction == LEFT else 1
+    z_now = pack_state(qa.path_states, qa.models_lag, measured, np.array([floats[F_SEEN_E], floats[F_SEEN_DPSI]]),
+                       np.array([actuators[0], actuators[1] * KN]),
+                       np.array([st.last_mpc[0], st.last_mpc[1] * KN]))
+    z_ref = _reference(cfg, *_sides(qa_left, qa_right, direction), st, direction)
+    if st.ref_valid[side] == 0 or np.any(st.ref_key[side] != z_ref):  # the reference changes rarely
+        st.ref_gain[side], st.ref_linear[side] = reference_terms(qa, z_ref)
+        st.ref_key[side] = z_ref
+        st.ref_valid[side] = 1
+    du, dz, offset, within = unconstrained_increments(qa, z_now, st.ref_gain[side], disturbance)
+    st.last_measured[:] = measured
+    st.last_actuators[:] = actuators
+    ints[I_HAS_LAST] = 1
+    st.pending[:] = z_now[-N_U:]
+    if not within:
+        q, lower, upper = constrained_terms(qa, dz, disturbance, st.ref_linear[side], offset)
+        st.qp_q[:], st.qp_lower[:], st.qp_upper[:] = q, lower, upper
+    return du, within
+
+
+@njit(cache=True)
+def run_until_constrained(cfg, st, qa_left, qa_right, model_params, plant_params, actuator_params, noise):
+    """Steps the loop until the episode ends (returns DONE, the status in ``st.ints[I_STATUS]``) or a step's
+    QP has an active limit (returns NEEDS_QP with OSQP's terms in ``st.qp_*``; call :func:`finish_step`)."""
+    while True:
+        if observe(cfg, st, qa_left, qa_right, noise) != RUNNING:
+            return DONE
+        du, within = control(cfg, st, qa_left, qa_right, model_params)
+        if not within:
+            return NEEDS_QP
+        qa = qa_left if st.ints[I_DIRECTION] == LEFT else qa_right
+        finish_step(cfg, st, qa, plant_params, actuator_params, du, True, False)
+        if st.ints[I_STATUS] != RUNNING:
+            return DONE
+        if st.ints[I_PLANT_DUE] == 1:
+            return NEEDS_PLANT
+
+
+@njit(cache=True)
+def controller_commands(cfg, st, qa, du, used_osqp):
+    """(steer rad, drive N) the controller sends once its increments are known: the MPC's commands and the paper's
+    steering feedback delta_f = delta_mpc + k e_la (eq. 11); notes the MPC's own in the row."""
     steer_mpc, drive_kn = next_commands(qa, st.pending, du)
     drive_n = drive_kn / KN
     st.last_mpc[0], st.last_mpc[1] = steer_mpc, drive_n
     e_la = lookahead_error_m(st.floats[F_SEEN_E], st.floats[F_SEEN_DPSI], cfg.lookahead_m)
     steer = clip(steer_mpc + cfg.feedback_gain_radpm * e_la, -cfg.steer_limit_rad, cfg.steer_limit_rad)
-    st.last_applied[0], st.last_applied[1] = steer, drive_n
-    row = st.rows[ints[I_ROWS] - 1]
-    row[C_DELTA_CMD], row[C_DELTA_MPC], row[C_FXR_CMD] = steer, steer_mpc, drive_n
+    row = st.rows[st.ints[I_ROWS] - 1]
+    row[C_DELTA_MPC] = steer_mpc
     row[C_OSQP] = 1.0 if used_osqp else 0.0
-    if not ok:
-        ints[I_STATUS] = SOLVER_FAILED
-        return
+    return steer, drive_n
+
+
+@njit(cache=True)
+def send_commands(st, steer_rad, drive_n):
+    """The commands sent this step, noted in the loop and its row."""
+    st.last_applied[0], st.last_applied[1] = steer_rad, drive_n
+    row = st.rows[st.ints[I_ROWS] - 1]
+    row[C_DELTA_CMD], row[C_FXR_CMD] = steer_rad, drive_n
+
+
+@njit(cache=True)
+def step_plant(cfg, st, plant_params, actuator_params):
+    """The plant's step under the commands sent (zero-order hold over dt); the loop moves to the next step."""
+    steer, drive_n = st.last_applied[0], st.last_applied[1]
     if cfg.plant_kind == PLANT_COMMONROAD_STD:  # stepped here: a return to Python per step costs it 1.5x
         st.plant[:] = std_plant_step(st.plant, steer, drive_n, cfg.dt_s, cfg.substep_s, plant_params,
                                      actuator_params)
     elif cfg.plant_kind == PLANT_EXTERNAL:
         # Another plant (CommonRoad's MB, a registered one): the caller steps it with st.last_applied. Kept out of
         # this kernel, so that its first compile does not grow with every plant (MB's derivatives alone ~10 s).
-        ints[I_PLANT_DUE] = 1
+        st.ints[I_PLANT_DUE] = 1
     else:
         st.plant[:] = plant_step(st.plant, steer, drive_n, cfg.dt_s, cfg.substep_s, plant_params, actuator_params)
-    ints[I_STEP] += 1
+    st.ints[I_STEP] += 1
+
+
+@njit(cache=True)
+def finish_step(cfg, st, qa, plant_params, actuator_params, du, ok, used_osqp):
+    """The rest of a control step once its increments are known: commands (:func:`controller_commands`) and the
+    plant's step; a failed solve ends the episode before the plant moves."""
+    steer, drive_n = controller_commands(cfg, st, qa, du, used_osqp)
+    send_commands(st, steer, drive_n)
+    if not ok:
+        st.ints[I_STATUS] = SOLVER_FAILED
+        return
+    step_plant(cfg, st, plant_params, actuator_params)

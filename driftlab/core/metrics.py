@@ -46,7 +46,19 @@ class EpisodeMetrics:
 def objective_j(e_m: np.ndarray, dpsi_rad: np.ndarray, beta_err_rad: np.ndarray) -> float:
     """J = log(mean_k(|e_k| + 5 |dpsi_k| + |beta_k - beta_eq|)) (paper eq. 12)."""
     cost = np.abs(e_m) + COURSE_WEIGHT * np.abs(dpsi_rad) + SIDESLIP_WEIGHT * np.abs(beta_err_rad)
-    return float(math.log(max(float(np.mean(cost)), 1e-12)))
+    return objective_of_costs(cost)
+
+
+def objective_of_costs(stage_costs: np.ndarray | list[float]) -> float:
+    """J from the stage costs of every step (:func:`stage_cost`, in order): log of their mean (paper eq. 12)."""
+    return float(math.log(max(float(np.mean(stage_costs)), 1e-12)))
+
+
+@njit(cache=True)
+def stage_cost(e_m, dpsi_rad, beta_err_rad):
+    """One step's term of J: |e| + 5 |dpsi| + |beta - beta_eq| (paper eq. 12), rounded as :func:`objective_j`
+    rounds it."""
+    return abs(e_m) + COURSE_WEIGHT * abs(dpsi_rad) + SIDESLIP_WEIGHT * abs(beta_err_rad)
 
 
 def cumulative_progress_m(traj: np.ndarray, track: FigureEight, col: dict[str, int]) -> np.ndarray:

@@ -7,7 +7,7 @@ import numpy as np
 import pytest
 from sqlalchemy import delete
 
-from driftlab.core.closed_loop import COLUMNS
+from driftlab.core.loop_state import COLUMNS
 from driftlab.core.track import FigureEight
 from driftlab.db import lifecycle, storage
 from driftlab.db.models import Trajectory

@@ -17,7 +17,7 @@ from typing import Any
 import numpy as np
 from numba import njit
 
-from driftlab.core.closed_loop import DONE, I_PLANT_DUE, I_STATUS, INVALID, NEEDS_PLANT, run_until_constrained
+from driftlab.core.closed_loop import run_until_constrained
 from driftlab.core.commonroad.mb import (
     MB_LIFTOFF,
     N_MB,
@@ -28,6 +28,7 @@ from driftlab.core.commonroad.mb import (
 )
 from driftlab.core.commonroad.mb import M as MB_MASS
 from driftlab.core.commonroad.plant import _rate
+from driftlab.core.loop_state import DONE, I_PLANT_DUE, I_STATUS, INVALID, NEEDS_PLANT
 from driftlab.core.plant import (
     A_DRIVE_LAG,
     A_DRIVE_RATE,

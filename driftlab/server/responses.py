@@ -123,10 +123,12 @@ class EnqueuedTheta(BaseModel):
 
 
 class Enqueued(BaseModel):
-    """The thetas a request enqueued (their ids) and all those still waiting for the job, next first."""
+    """The thetas a request enqueued (their ids), how many wait for the job in all, and a page of them, next first
+    (at most 100; ``GET .../enqueue?after=<last id>`` reads the next page)."""
 
     job_id: int
     enqueued: list[int]
+    n_waiting: int
     waiting: list[EnqueuedTheta]
 
 

@@ -27,6 +27,8 @@ Limit = Annotated[int, Query(ge=1, le=MAX_PAGE, description="at most this many e
 JOBS_PAGE = 100  # a job's summary carries its spec (~12 kB): 100 of them are ~1 MB
 JobsAfter = Annotated[int, Query(ge=0, le=MAX_ID, description="only jobs with a larger id")]
 JobsLimit = Annotated[int, Query(ge=1, le=MAX_PAGE, description="at most this many jobs")]
+WaitingAfter = Annotated[int, Query(ge=0, le=MAX_ID, description="only enqueued thetas with a larger id")]
+WaitingLimit = Annotated[int, Query(ge=1, le=MAX_PAGE, description="at most this many enqueued thetas")]
 
 
 def _checked_name(name: str) -> str:

@@ -11,6 +11,11 @@ from driftlab.core.tuning import TuningSpec
 from driftlab.db import enqueued, lifecycle, storage
 from driftlab.db.models import EnqueuedTheta
 
+# Thetas a job may have waiting at once, whatever its budget: a queue nobody reads to its end is a mistake, and each
+# waiting row is read by the dashboard and the API. Ten requests of the most one may enqueue (schemas.MAX_ENQUEUED).
+MAX_WAITING = 1000
+WAITING_PAGE = 100  # waiting thetas a response lists (GET .../enqueue?after=ID pages through the rest)
+
 
 def enqueue_thetas(session: Session, *, job_id: int, thetas: list[Any], field: str = "thetas"
                    ) -> list[EnqueuedTheta]:
@@ -28,7 +33,11 @@ def enqueue_thetas(session: Session, *, job_id: int, thetas: list[Any], field: s
     picked = [spec.picked_theta(theta, f"{field}.{n}") for n, theta in enumerate(thetas)]
     # The queue is bounded by what the job will evaluate: a theta beyond its budget would wait for ever.
     left = spec.iterations - storage.count_evaluations(session, job_id=job_id)
-    waiting = len(enqueued.waiting(session, job_id=job_id))
+    waiting = enqueued.count_waiting(session, job_id=job_id)
+    if waiting + len(picked) > MAX_WAITING:
+        raise lifecycle.TransitionError(
+            f"{field}: job {job_id} has {waiting} thetas waiting, and a job holds at most {MAX_WAITING} waiting: at "
+            f"most {MAX_WAITING - waiting} more until some are evaluated")
     if waiting + len(picked) > left:
         raise lifecycle.TransitionError(
             f"{field}: job {job_id} has {left} evaluations left and {waiting} thetas waiting: at most "
@@ -37,7 +46,11 @@ def enqueue_thetas(session: Session, *, job_id: int, thetas: list[Any], field: s
     return enqueued.enqueue(session, job_id=job_id, thetas=picked)
 
 
-def waiting_document(session: Session, *, job_id: int, added: list[EnqueuedTheta] = ()) -> dict[str, Any]:
-    """What the API answers: the ids just enqueued and every theta still waiting, next first."""
+def waiting_document(session: Session, *, job_id: int, added: list[EnqueuedTheta] = (), after: int = 0,
+                     limit: int = WAITING_PAGE) -> dict[str, Any]:
+    """What the API answers: the ids just enqueued, how many thetas wait in all (``n_waiting``), and a page of them,
+    next first: at most ``limit`` with an id above ``after``."""
+    page = enqueued.waiting(session, job_id=job_id, after=after, limit=limit)
     return {"job_id": job_id, "enqueued": [row.id for row in added],
-            "waiting": [{"id": row.id, "theta": row.theta} for row in enqueued.waiting(session, job_id=job_id)]}
+            "n_waiting": enqueued.count_waiting(session, job_id=job_id),
+            "waiting": [{"id": row.id, "theta": row.theta} for row in page]}

@@ -93,7 +93,7 @@ def _next_evaluation(lease: _Lease, spec: TuningSpec, optimizer, in_flight: list
     if lease.enqueued:
         taken = {e.enqueued_id for e in in_flight if e.enqueued_id is not None}
         with storage.snapshot(lease.factory) as session:
-            row = next(iter(enqueued.waiting(session, job_id=lease.job_id, taken=taken)), None)
+            row = next(iter(enqueued.waiting(session, job_id=lease.job_id, taken=taken, limit=1)), None)
             if row is not None:
                 theta = Theta.filled(row.theta)
                 return _PendingEvaluation({k: float(theta[k]) for k in spec.bounds}, seeds, enqueued_id=row.id)

@@ -57,3 +57,23 @@ def test_the_queue_holds_no_more_than_the_job_will_evaluate(tmp_path):
         assert api.post(url, json={"thetas": [{"k": 0.06}]}).status_code == 202  # the last one fits
         assert api.patch(f"/api/jobs/{job['id']}", json={"iterations": 7}).status_code == 200
         assert api.post(url, json={"thetas": [{"k": 0.07}, {"k": 0.08}]}).status_code == 202  # a larger budget
+
+
+def test_sixty_requests_of_a_hundred_fill_the_cap_and_the_rest_is_refused_naming_it(tmp_path):
+    """A 5000-evaluation job: at most MAX_WAITING thetas wait at once (a 409 names the cap and stores nothing), each
+    answer lists a page of them with the count in all, and GET pages through the rest by id."""
+    from driftlab.services.enqueue import MAX_WAITING, WAITING_PAGE
+
+    with in_process_client(tmp_path / "capped.db") as api:
+        job = api.post("/api/jobs", json={"iterations": 5000}).json()
+        url = f"/api/jobs/{job['id']}/enqueue"
+        answers = [api.post(url, json={"thetas": [{"k": 0.001 * (n % 100)} for n in range(100)]})
+                   for _ in range(60)]
+        accepted = [a for a in answers if a.status_code == 202]
+        assert len(accepted) == MAX_WAITING // 100
+        assert all(a.status_code == 409 and f"at most {MAX_WAITING} waiting" in a.text for a in answers[10:])
+        last = accepted[-1].json()
+        assert last["n_waiting"] == MAX_WAITING and len(last["waiting"]) == WAITING_PAGE  # a page, not the queue
+        first = api.get(url).json()
+        second = api.get(url, params={"after": first["waiting"][-1]["id"]}).json()
+        assert second["waiting"][0]["id"] > first["waiting"][-1]["id"] and second["n_waiting"] == MAX_WAITING

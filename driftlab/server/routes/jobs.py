@@ -23,10 +23,12 @@ from driftlab.server.schemas import (
     JobsAfter,
     JobsLimit,
     Limit,
+    WaitingAfter,
+    WaitingLimit,
     check_document_types,
 )
 from driftlab.server.serialize import evaluation_dict, evaluations_csv, job_dict
-from driftlab.services.enqueue import enqueue_thetas, waiting_document
+from driftlab.services.enqueue import WAITING_PAGE, enqueue_thetas, waiting_document
 from driftlab.services.profiles import gives_weights, uncalibrated_warning, with_profile
 from driftlab.services.warm_start import with_warm_start
 
@@ -103,11 +105,13 @@ def enqueue(job_id: JobId, body: EnqueueRequest, db: Factory, request: Request) 
 
 
 @router.get("/{job_id}/enqueue", response_model=Enqueued, responses=errors(404, 422, 503))
-def enqueued_thetas(job_id: JobId, db: Factory) -> dict[str, Any]:
-    """The thetas enqueued for the job and not yet stored as its evaluations, next first."""
+def enqueued_thetas(job_id: JobId, db: Factory, after: WaitingAfter = 0, limit: WaitingLimit = WAITING_PAGE
+                    ) -> dict[str, Any]:
+    """The thetas enqueued for the job and not yet stored as its evaluations, next first: at most ``limit`` with an
+    id above ``after`` (the last id of the page before), and how many wait in all."""
     with storage.snapshot(db) as session:
         storage.get_job(session, job_id=job_id)
-        return waiting_document(session, job_id=job_id)
+        return waiting_document(session, job_id=job_id, after=after, limit=limit)
 
 
 @router.post("/{job_id}/resume", dependencies=Mutating, response_model=Job, responses=errors(404, 409, 422, 503))

@@ -148,7 +148,7 @@ export function wireTrials(state, { api, act, say, redraw }) {
     act(async () => {
       const theta = parseTheta($("enqueue-form").elements.theta.value);
       const out = await api("POST", `/api/jobs/${state.selected}/enqueue`, { thetas: [theta] });
-      $("enqueue-text").textContent = `enqueued (${out.waiting.length} waiting); it is evaluated next`;
+      $("enqueue-text").textContent = `enqueued (${out.n_waiting} waiting); it is evaluated next`;
       say(`job ${state.selected}: theta enqueued`, true);
     });
   };

@@ -2,15 +2,13 @@
 
 A source job (the job default: six dimensions, its local phase, ``--robust-samples`` seeded episodes an evaluation,
 confirmation seeds off so that every evaluation costs the same episodes) runs ``--source-evaluations``
-evaluations once. Then, per BO seed, three jobs of the same config run ``--evaluations`` evaluations each:
+evaluations once. Then, per BO seed, two jobs of the same config run ``--evaluations`` evaluations each:
 
 - ``cold``: no warm start;
-- ``warm``: the source's evaluations told first (driftlab.core.warm_start, as ``warm_start_from`` does), the
-  proposals refining near the source's best (job document version 2, BayesianOptimizer's ``prior_points``);
-- ``warm-v1``: the same, as job documents of version 1 ran it (the source's evaluations told, no refinement).
+- ``warm``: the source's evaluations told first (driftlab.core.warm_start, as ``warm_start_from`` does).
 
 Printed per method: the median over BO seeds of the best completed J among the job's own evaluations after each
-checkpoint (lower is better), its quartiles, and, for the warm starts, the best J the job shows counting the
+checkpoint (lower is better), its quartiles, and, for the warm start, the best J the job shows counting the
 source's best it starts from. Each job's own evaluations run on its own episode seeds (driftlab.core.robust
 .tuning_seeds of its seed), as the jobs would.
 
@@ -53,11 +51,11 @@ def _objective(robust_samples: int, job_seed: int):
     return evaluate
 
 
-def _spec(seed: int, robust_samples: int, told=(), version: int = 2):
+def _spec(seed: int, robust_samples: int, told=()):
     from driftlab.core.tuning import TuningSpec
     from driftlab.core.warm_start import Observation, WarmStart
 
-    spec = TuningSpec(seed=seed, robust_samples=robust_samples, confirm_samples=0, version=version)
+    spec = TuningSpec(seed=seed, robust_samples=robust_samples, confirm_samples=0)
     if told:
         spec = replace(spec, warm_start=WarmStart({0: "told"}, tuple(Observation(t, v, j) for t, v, j in told)))
     return spec
@@ -83,8 +81,7 @@ def _run_job(spec, evaluations: int) -> tuple[list[tuple[dict, float | None, flo
 def _compare(args: tuple[int, int, int, list]) -> tuple[int, dict[str, list[float]]]:
     seed, evaluations, robust_samples, told = args
     traces = {"cold": _run_job(_spec(seed, robust_samples), evaluations)[1],
-              "warm": _run_job(_spec(seed, robust_samples, told), evaluations)[1],
-              "warm-v1": _run_job(_spec(seed, robust_samples, told, version=1), evaluations)[1]}
+              "warm": _run_job(_spec(seed, robust_samples, told), evaluations)[1]}
     return seed, traces
 
 
@@ -111,10 +108,10 @@ def main() -> None:
                                            for s in range(args.seeds)]))
     print(f"median best J of the job's own evaluations over {args.seeds} BO seeds [quartiles]; lower is better")
     print(f"{'method':10}" + "".join(f"{'after ' + str(c):>28}" for c in checkpoints))
-    for method in ("cold", "warm", "warm-v1"):
+    for method in ("cold", "warm"):
         cells = [_quantiles([results[s][method][c - 1] for s in results]) for c in checkpoints]
         print(f"{method:10}" + "".join(f"{cell:>28}" for cell in cells))
-    for method in ("warm", "warm-v1"):
+    for method in ("warm",):
         cells = [_quantiles([min(results[s][method][c - 1], source_best) for s in results]) for c in checkpoints]
         print(f"{method + '*':10}" + "".join(f"{cell:>28}" for cell in cells))
     print("*: the best the job shows, counting the source's best it starts from")

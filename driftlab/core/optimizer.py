@@ -72,12 +72,6 @@ class BayesianOptimizer:
         local_growth: after the seed points, the GP's proposals stay in that local box, which grows linearly to
             the whole box over this many evaluations (0: the whole box at once): a trust region around the
             configuration known to work, widened as the models learn where the rest of the box fails.
-        prior_points: the first this many evaluations told are another run's of the same problem (a warm start that
-            continues a finished job): after them the GP's proposals stay in a box of half-width ``prior_radius``
-            (unit widths) around their best success, grown to the whole box over ``prior_growth`` of this run's
-            own evaluations, as the run that made them would have narrowed in on it; without it a continuation
-            inherits the whole box its source had grown to, and its first proposals are the box's corners, where the
-            GP knows least.
         active_set: most successful observations the GP is fit on.
         seed: random seed (Latin hypercube, candidate sets).
         refit_every: hyperparameter refit period in observations.
@@ -90,8 +84,7 @@ class BayesianOptimizer:
     def __init__(self, bounds: Mapping[str, tuple[float, float]], *, seed_points: int = 20, active_set: int = 400,
                  seed: int = 0, refit_every: int = 10, initial_points: Sequence[Mapping[str, float]] = (),
                  local_points: int = 0, local_radius: float | Mapping[str, float] = 0.15,
-                 local_growth: int = 0, feasible: Callable[[dict[str, float]], bool] | None = None,
-                 prior_points: int = 0, prior_radius: float = 0.15, prior_growth: int = 15) -> None:
+                 local_growth: int = 0, feasible: Callable[[dict[str, float]], bool] | None = None) -> None:
         if not bounds:
             raise ConfigError("bounds must name at least one parameter")
         for name, pair in bounds.items():
@@ -118,7 +111,6 @@ class BayesianOptimizer:
                         if isinstance(local_radius, Mapping) else np.full(self.dim, float(local_radius)))
         self._centre = initial[0] if initial and (local or local_growth) else None
         self.local_growth = local_growth
-        self.prior_points, self.prior_radius, self.prior_growth = prior_points, prior_radius, prior_growth
         if local:  # its own stream: the global design stays what it was without a local phase
             around = qmc.LatinHypercube(d=self.dim, seed=np.random.default_rng([seed, 1])).random(local)
             low, high = self._region(self._radius)
@@ -195,22 +187,10 @@ class BayesianOptimizer:
 
     def _search_box(self) -> tuple[np.ndarray, np.ndarray]:
         """Where the GP's proposals may go now: the growing trust region, or the whole unit box."""
-        prior_best = self._prior_best()
-        if prior_best is not None:
-            grown = min((len(self.x) - self.prior_points) / max(self.prior_growth, 1), 1.0)
-            radius = self.prior_radius + (1.0 - self.prior_radius) * grown
-            return np.clip(prior_best - radius, 0.0, 1.0), np.clip(prior_best + radius, 0.0, 1.0)
         if self._centre is None or self.local_growth <= 0:
             return np.zeros(self.dim), np.ones(self.dim)
         grown = min(max(len(self.x) - self.seed_points, 0) / self.local_growth, 1.0)
         return self._region(self._radius + (1.0 - self._radius) * grown)
-
-    def _prior_best(self) -> np.ndarray | None:
-        """The best success among the prior evaluations (``prior_points``), once they are all told."""
-        if not self.prior_points or len(self.x) < self.prior_points:
-            return None
-        ok = [(v, i) for i, v in enumerate(self.y[:self.prior_points]) if v is not None]
-        return self.x[min(ok)[1]] if ok else None
 
     def _rng(self) -> np.random.Generator:
         return np.random.default_rng([self.seed, len(self.x), len(self.pending)])

@@ -54,9 +54,8 @@ LOCAL_POINTS = 11
 LOCAL_MODEL_RADIUS = 0.05
 LOCAL_GROWTH = 15
 # The job document's version (TuningSpec.to_dict). 2: it states whether its config is fitted to its plant ("fitted";
-# version 1 said so by the keys it lacked, driftlab.core.config.config_to_dict), and a warm start that continues a job
-# of its own config refines near that job's best (BayesianOptimizer's prior_points). A posted document without one is
-# of this release; the documents stored before it were stamped 1 (migration 0017) and re-run as they ran.
+# version 1 said so by the keys it lacked, driftlab.core.config.config_to_dict). A posted document without one is of
+# this release; the documents stored before it were stamped 1 (migration 0017).
 JOB_DOCUMENT_VERSION = 2
 # The paper's 500-run learns the paper's four parameters only.
 PAPER_PRESET = {"iterations": 500, "seed_points": 20, "active_set": 400, "model_correction": False}
@@ -206,10 +205,6 @@ class TuningSpec:
         if self.local_phase and self.model_correction:
             options.update(local_points=min(LOCAL_POINTS, self.seed_points - 1), local_growth=LOCAL_GROWTH,
                            local_radius={name: LOCAL_MODEL_RADIUS for name in MODEL_BOUNDS})
-        if self.warm_start is not None and self.warm_start.told and self.version >= 2:
-            # a continuation of jobs of its own config refines near their best (jobs stored before version 2
-            # re-run as they ran)
-            options["prior_points"] = len(self.warm_start.told)
         if self.model_correction:  # a theta whose corrected model has no drift is refused before it is asked
             from driftlab.core.episode import runs
 

@@ -1,8 +1,8 @@
 """The job document's version: a stored job says which release's document it is.
 
 Revision 17 stamps "version": 1 on every job document stored before it (a document without one is a new one, of
-this release: driftlab.core.tuning.JOB_DOCUMENT_VERSION). What version 2 changes (a warm start that continues a job
-of its own config refines near that job's best) applies to new jobs only: the stored ones re-run bit for bit.
+this release: driftlab.core.tuning.JOB_DOCUMENT_VERSION): what a later version changes in how a job runs applies to
+new jobs only, and the stored ones re-run bit for bit.
 
 Revision ID: 0017
 Revises: 0016

@@ -72,6 +72,16 @@ class WarmStart:
         return WarmStart({**self.from_jobs, **other.from_jobs}, self.told + other.told, tuple(points),
                          self.from_profile if other.from_profile is None else other.from_profile)
 
+    def best_told(self) -> dict[str, Any] | None:
+        """The best completed evaluation it told (a job continued from jobs of its own config starts from it, and
+        shows it as its best told): {"theta", "J", "from_jobs"}; None if it told none that completed."""
+        done = [o for o in self.told if o.value is not None]
+        if not done:
+            return None
+        best = min(done, key=lambda o: o.stored_j)
+        return {"theta": best.theta, "J": best.stored_j,
+                "from_jobs": [job_id for job_id, used in self.from_jobs.items() if used == "told"]}
+
     def check(self, bounds: Mapping[str, tuple[float, float]]) -> None:
         """Raise ConfigError unless every theta it holds names each key of ``bounds``, each initial point inside."""
         for observation in self.told:

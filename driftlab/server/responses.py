@@ -87,6 +87,15 @@ class BestSummary(BaseModel):
     trajectory_seed: int | None
 
 
+class BestTold(BaseModel):
+    """The best completed evaluation a warm start told the job (from jobs of its own config: the job continues
+    them); its J is the source's, on the source's seeds."""
+
+    theta: dict[str, float]
+    J: float
+    from_jobs: list[int]
+
+
 class Job(BaseModel):
     id: int
     name: str
@@ -99,6 +108,8 @@ class Job(BaseModel):
     eta_s: float | None
     error: str | None
     best: BestSummary | None
+    best_told: BestTold | None = Field(default=None, description="where a warm start continued jobs of the same "
+                                       "config: the best of their evaluations it told, the job's start")
     runner_id: str | None
     study_id: int | None
     profile_id: int | None = Field(default=None, description="the car profile (driftlab calibrate) whose MPC weights "

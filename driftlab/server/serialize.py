@@ -8,6 +8,8 @@ from datetime import UTC
 from typing import Any
 
 from driftlab.core.config import THETA_KEYS, Theta
+from driftlab.core.errors import ConfigError
+from driftlab.core.warm_start import WarmStart
 from driftlab.db import storage
 from driftlab.db.models import Evaluation, Job, WorkStatus
 from driftlab.services.read_model import compiling
@@ -48,11 +50,22 @@ def job_dict(session, job: Job) -> dict[str, Any]:
     return {"id": job.id, "name": job.name, "status": job.status, "detail": job_detail(job.status, rate),
             "seed": job.seed, "n_done": n_done,
             "iterations": iterations, "progress": n_done / iterations, "eta_s": eta, "error": job.error,
-            "best": storage.best_summary(best),
+            "best": storage.best_summary(best), "best_told": best_told(job.spec),
             "runner_id": job.runner_id, "study_id": job.study_id, "profile_id": job.profile_id, "spec": job.spec,
             "run_s": job.run_s or 0.0, "stop_reason": job.stop_reason,
             "notes": job.notes or "",
             "created_at": job.created_at.replace(tzinfo=UTC).isoformat()}
+
+
+def best_told(spec: dict[str, Any]) -> dict[str, Any] | None:
+    """The best evaluation a warm start told the job from jobs of its own config (driftlab.core.warm_start)."""
+    warm = spec.get("warm_start")
+    if not warm:
+        return None
+    try:
+        return WarmStart.from_dict(warm).best_told()
+    except ConfigError:  # a document no release wrote: nothing to show
+        return None
 
 
 COMPILING = "compiling the simulation (numba, once after an install; no evaluation until it is done)"

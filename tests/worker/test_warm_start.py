@@ -55,8 +55,15 @@ def test_the_same_configs_evaluations_are_told_before_the_jobs_own(source):
     optimizer = restore_optimizer(spec, [])
     assert len(optimizer.x) == len(evaluations)  # the design is skipped: the GP proposes from the start
     assert optimizer.best[1] == min(e.J for e in evaluations if e.completed)
-    _, warm = _run(factory, spec, "continued")
+    warm_id, warm = _run(factory, spec, "continued")
     assert warm[0].theta not in [e.theta for e in evaluations]
+    # The continuation shows where it started: the source's best, told, beside its own best.
+    from driftlab.server.serialize import job_dict
+
+    with storage.snapshot(factory) as session:
+        shown = job_dict(session, storage.get_job(session, job_id=warm_id))
+    source_best = min((e for e in evaluations if e.completed), key=lambda e: e.J)
+    assert shown["best_told"] == {"theta": source_best.theta, "J": source_best.J, "from_jobs": [source_id]}
 
 
 def test_an_unknown_source_is_refused_naming_the_field(source, tmp_path):

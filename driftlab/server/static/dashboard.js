@@ -139,7 +139,10 @@ function renderJob() {
   const j = state.job;
   $("job-panel").hidden = false;
   $("job-title").textContent = `${j.id} · ${j.name}`;
-  const best = j.best ? `best J ${fmt(j.best.J)} (evaluation id ${j.best.id})` : "no completed evaluation yet";
+  const own = j.best ? `best J ${fmt(j.best.J)} (evaluation id ${j.best.id})` : "no completed evaluation yet";
+  const told = j.best_told;  // a continuation starts from the best it was told
+  const best = told && (!j.best || told.J < j.best.J)
+    ? `best J ${fmt(told.J)} (told, from job ${told.from_jobs.join(", ")}); its own: ${own}` : own;
   const eta = j.eta_s !== null && j.eta_s !== undefined ? `, about ${duration(j.eta_s)} left` : "";
   const stopped = j.stop_reason ? ` · stopped by its rule: ${j.stop_reason}` : "";
   $("job-status").textContent = `status: ${j.status}${j.detail ? ` (${j.detail})` : ""} · ${j.n_done} / ` +

@@ -216,7 +216,8 @@ def test_a_reading_command_refuses_a_database_file_that_does_not_exist_and_creat
     ("paper", ["--seed-points", "7", "--iterations", "30"], {"iterations": 30, "seed_points": 7, "active_set": 400}),
 ])
 def test_tune_presets_set_the_bo_budget_and_explicit_options_win(preset, extra, expected):
-    from driftlab.cli import build_parser, tuning_spec
+    from driftlab.cli import build_parser
+    from driftlab.cli.tune import tuning_spec
 
     args = build_parser().parse_args(["tune", "--preset", preset, *extra])
     spec = tuning_spec(args).to_dict()
@@ -253,3 +254,18 @@ def test_tune_enqueue_hands_a_theta_to_the_job_a_server_runs(tmp_path):
     finally:
         proc.terminate()
         proc.wait(timeout=30)
+
+
+@pytest.mark.parametrize("argv", [["tune", "--iterations", "abc"], ["tune", "--robust-samples", "99"],
+                                  ["episode", "--seed", "x"], ["serve", "--port", "0"], ["--help"]])
+def test_a_bad_argument_is_refused_before_the_simulation_is_imported(argv):
+    """One line (or the help) from the parser alone: neither numba, the solvers nor SQLAlchemy are imported first
+    (they take seconds on a loaded machine)."""
+    code = ("import sys\nfrom driftlab.cli import main\ntry:\n    main(sys.argv[1:])\nexcept SystemExit:\n    pass\n"
+            "heavy = [m for m in ('numba', 'scipy', 'sqlalchemy', 'osqp', 'driftlab.core.configure')\n"
+            "         if m in sys.modules]\n"
+            "print('HEAVY', heavy)")
+    out = subprocess.run([sys.executable, "-c", code, *argv], capture_output=True, text=True, timeout=60)
+    assert "HEAVY []" in out.stdout, out.stdout + out.stderr
+    if argv != ["--help"]:
+        assert len(out.stderr.strip().splitlines()) == 1 and "driftlab: error:" in out.stderr

@@ -9,11 +9,12 @@ from __future__ import annotations
 import argparse
 import sys
 
-from driftlab.cli.episode import cmd_episode, cmd_equilibrium
 from driftlab.cli.options import (
     DASK_HELP,
     DB_HELP,
     PLANT_CHOICES,
+    PLANT_HELP,
+    PLANT_METAVAR,
     Parser,
     add_job_options,
     dask_address,
@@ -22,13 +23,49 @@ from driftlab.cli.options import (
     name_text,
     stored_db_url,
 )
-from driftlab.cli.serve import cmd_serve
-from driftlab.cli.tune import cmd_report, cmd_rescore, cmd_tune, tuning_spec
 from driftlab.core.errors import ConfigError
+
+
+# Each command's module is imported when it runs: the parser refuses a bad argument without them.
+def cmd_equilibrium(args: argparse.Namespace) -> int:
+    from driftlab.cli.episode import cmd_equilibrium
+
+    return cmd_equilibrium(args)
+
+
+def cmd_episode(args: argparse.Namespace) -> int:
+    from driftlab.cli.episode import cmd_episode
+
+    return cmd_episode(args)
+
+
+def cmd_tune(args: argparse.Namespace) -> int:
+    from driftlab.cli.tune import cmd_tune
+
+    return cmd_tune(args)
+
+
+def cmd_rescore(args: argparse.Namespace) -> int:
+    from driftlab.cli.tune import cmd_rescore
+
+    return cmd_rescore(args)
+
+
+def cmd_report(args: argparse.Namespace) -> int:
+    from driftlab.cli.tune import cmd_report
+
+    return cmd_report(args)
+
+
+def cmd_serve(args: argparse.Namespace) -> int:
+    from driftlab.cli.serve import cmd_serve
+
+    return cmd_serve(args)
 
 
 def cmd_study(args: argparse.Namespace) -> int:
     from driftlab.cli.study import cmd_study
+    from driftlab.cli.tune import tuning_spec
 
     dask = dask_address(args) if hasattr(args, "dask") else None
     url = stored_db_url(args.db) if args.kind == "show" else db_url(args.db)
@@ -48,8 +85,9 @@ def build_parser() -> argparse.ArgumentParser:
     eq.add_argument("--radius", type=float, action="append", metavar="R",
                     help="path radius R [m] (default 44; with --window, repeat it for several circles)")
     eq.add_argument("--beta", type=float, default=-0.4, help="sideslip [rad]; < 0 left-hand drift")
-    eq.add_argument("--plant", choices=PLANT_CHOICES, help="also solve this plant's own equilibrium (for a CommonRoad "
-                    "plant its drift family: every steady drift, and whether the main one countersteers)")
+    eq.add_argument("--plant", choices=PLANT_CHOICES, metavar=PLANT_METAVAR,
+                    help="also solve this plant's own equilibrium (for a CommonRoad plant its drift family: every "
+                         "steady drift, and whether the main one countersteers)")
     eq.add_argument("--set", action="append", metavar="KEY=VALUE", help="config override, e.g. plant.cg_height_m=0.3")
     eq.add_argument("--window", action="store_true", help="instead: the drift window, the sideslips at which the "
                     "plant (default: DriftLab's) and the controller's model both drift both circles of an 8 of each "
@@ -59,7 +97,8 @@ def build_parser() -> argparse.ArgumentParser:
     ep = sub.add_parser("episode", help="run one 30 s figure-8 episode and print its metrics as JSON")
     ep.add_argument("--theta", help="c_lr=..,c_rl=..,dV=..,k=..,model_mu_scale=..,model_c_scale=.. (any subset; "
                     "defaults: 0.02, 0.02, 0, 0.05, 1, 1)")
-    ep.add_argument("--plant", choices=PLANT_CHOICES, default="default")
+    ep.add_argument("--plant", choices=PLANT_CHOICES, metavar=PLANT_METAVAR, default="default",
+                    help=PLANT_HELP)
     ep.add_argument("--controller", choices=("default", "paper"), default="default",
                     help="default: DriftLab's MPC with path states and actuator lags; paper: the paper's MPC")
     ep.add_argument("--set", action="append", metavar="KEY=VALUE", help="config override, e.g. mpc.q_sideslip=400")

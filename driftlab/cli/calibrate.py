@@ -90,7 +90,8 @@ def cmd_calibrate(args: argparse.Namespace) -> int:
 def add_calibrate_parser(sub, db_help: str, dask_help: str, int_in, plant_choices) -> argparse.ArgumentParser:
     cal = sub.add_parser("calibrate", help="find a car's MPC weights over points of its drift window; store them "
                          "as the car's profile (new jobs of that car take it)")
-    cal.add_argument("--plant", choices=plant_choices, required=True)
+    cal.add_argument("--plant", choices=plant_choices, metavar="PLANT", required=True,
+                     help="a plant preset: commonroad_std, commonroad_mb, or a plant installed beside DriftLab")
     cal.add_argument("--set", action="append", metavar="KEY=VALUE",
                      help="config override, e.g. plant.commonroad_vehicle=3, scenario.sideslip_rad=0.55")
     cal.add_argument("--points", help="SIDESLIP@RADIUS,... (default: the scenario's sideslip and every 0.05 rad "

@@ -6,17 +6,17 @@ import argparse
 import math
 import os
 import sys
+from collections.abc import Iterator
 from typing import TYPE_CHECKING, Any
 
-from driftlab.core.config import EpisodeConfig
-from driftlab.core.configure import PLANT_PRESETS, apply_overrides, overrides_inside_window, preset_config
 from driftlab.core.errors import ConfigError
-from driftlab.core.plants import installed_names
-from driftlab.core.robust import MAX_ROBUST_SAMPLES
-from driftlab.core.tuning import DEFAULT_CONFIRM_SAMPLES, DEFAULT_ROBUST_SAMPLES
+from driftlab.core.limits import DEFAULT_CONFIRM_SAMPLES, DEFAULT_ROBUST_SAMPLES, JOB_LIMITS, MAX_ROBUST_SAMPLES
 from driftlab.names import name_problem
 
+# The parser is built from light modules only, so that a bad argument is refused before the simulation, its solvers
+# and SQLAlchemy are imported (a second); each command imports what it runs.
 if TYPE_CHECKING:
+    from driftlab.core.config import EpisodeConfig
     from driftlab.settings import Settings
 
 DB_HELP = ("SQLite file or SQLAlchemy URL (default: DRIFTLAB_DATABASE_URL, else the shared "
@@ -93,12 +93,34 @@ def key_values(items: list[str], what: str) -> dict[str, str]:
     return pairs
 
 
-PLANT_CHOICES = (*PLANT_PRESETS, *installed_names())  # and any plant installed beside DriftLab
+class PlantChoices:
+    """``--plant``'s choices: the presets and any plant installed beside DriftLab, read from the plant catalog only
+    when argparse asks (a --plant given, or a help text), not when the parser is built."""
+
+    def _names(self) -> tuple[str, ...]:
+        from driftlab.core.configure import PLANT_PRESETS
+        from driftlab.core.plants import installed_names
+
+        return (*PLANT_PRESETS, *installed_names())
+
+    def __contains__(self, name: object) -> bool:
+        return name in self._names()
+
+    def __iter__(self) -> Iterator[str]:
+        return iter(self._names())
+
+
+PLANT_CHOICES = PlantChoices()
+PLANT_METAVAR = "PLANT"  # argparse lists a metavar's choices only in an error: the catalog is read then
+PLANT_HELP = ("a plant preset: default, nominal, commonroad_std, commonroad_mb, or a plant installed beside DriftLab "
+              "(default: default)")
 
 
 def episode_config(args: argparse.Namespace, *, inside_window: bool = False) -> EpisodeConfig:
     """The config of ``--plant``, ``--controller`` and ``--set``; ``inside_window``: at the middle of the car's drift
     window where the preset's sideslip is outside it (driftlab.core.configure.overrides_inside_window)."""
+    from driftlab.core.configure import apply_overrides, overrides_inside_window, preset_config
+
     preset = preset_config(args.plant or "default", getattr(args, "controller", "default"))
     parse = overrides_inside_window if inside_window else apply_overrides
     return parse(preset, key_values(args.set or [], "--set"))
@@ -139,7 +161,8 @@ def stored_db_url(db: str | None) -> str:
 
 def add_job_options(parser: argparse.ArgumentParser) -> None:
     """The options of a tuning job's specification (shared by `tune` and `study seeds`), but its seed."""
-    parser.add_argument("--iterations", type=int, help="evaluations in total (default 500 for a new job); on a "
+    parser.add_argument("--iterations", type=int_in(*JOB_LIMITS["iterations"]), metavar="N",
+                        help="evaluations in total (default 500 for a new job); on a "
                         "stored job a new budget: a finished job continues to it")
     parser.add_argument("--preset", choices=("default", "paper"), default="default",
                         help="paper: the paper's BO, 500 iterations, 20 space-filling points, active set 400, "
@@ -166,16 +189,20 @@ def add_job_options(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--warm-start-from", metavar="IDS",
                         help="start from these stored jobs' evaluations, e.g. 3,4 (job ids): told to the optimizer "
                              "where a job ran the same config, else its best thetas are asked first")
-    parser.add_argument("--seed-points", type=int, help="space-filling evaluations before the GP (default 12)")
-    parser.add_argument("--active-set", type=int, help="most evaluations the GP is fit on (default 400)")
-    parser.add_argument("--robust-samples", type=int, default=DEFAULT_ROBUST_SAMPLES, metavar="N",
+    parser.add_argument("--seed-points", type=int_in(*JOB_LIMITS["seed_points"]), metavar="N",
+                        help="space-filling evaluations before the GP (default 12)")
+    parser.add_argument("--active-set", type=int_in(*JOB_LIMITS["active_set"]), metavar="N",
+                        help="most evaluations the GP is fit on (default 400)")
+    parser.add_argument("--robust-samples", type=int_in(*JOB_LIMITS["robust_samples"]), default=DEFAULT_ROBUST_SAMPLES,
+                        metavar="N",
                         help=f"seeded episodes per evaluation, 1..{MAX_ROBUST_SAMPLES} (default "
                              f"{DEFAULT_ROBUST_SAMPLES}): J is their mean and an evaluation completes only if all "
                              "of them do")
-    parser.add_argument("--confirm-samples", type=int, default=DEFAULT_CONFIRM_SAMPLES, metavar="N",
+    parser.add_argument("--confirm-samples", type=int_in(*JOB_LIMITS["confirm_samples"]), metavar="N",
+                        default=DEFAULT_CONFIRM_SAMPLES,
                         help=f"more seeds an evaluation must also complete before it counts as the best so far "
                              f"(0..64, default {DEFAULT_CONFIRM_SAMPLES}; 0: off)")
-    parser.add_argument("--plant", choices=PLANT_CHOICES, default="default",
+    parser.add_argument("--plant", choices=PLANT_CHOICES, metavar=PLANT_METAVAR, default="default",
                         help="the plant preset the --set overrides start from (commonroad_std: CommonRoad's STD, "
                              "vehicle 2, sideslip 0.5, needs the commonroad extra)")
     parser.add_argument("--controller", choices=("default", "paper"), default="default")

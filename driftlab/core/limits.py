@@ -6,6 +6,12 @@ from __future__ import annotations
 
 from driftlab.core.errors import ConfigError
 
+# Episodes per evaluation by default: with 4 seeds a theta that fails one run in ten still fails an evaluation
+# 34% of the time, enough for the failure model to steer away from it, at 4x the episodes (2 workers keep
+# one evaluation in flight, so the BO stays sequential).
+DEFAULT_ROBUST_SAMPLES = 4
+# Extra seeds a would-be best evaluation must also complete (see driftlab.worker.job_loop).
+DEFAULT_CONFIRM_SAMPLES = 4
 MAX_ROBUST_SAMPLES = 64  # also the block of episode seeds each BO seed owns (driftlab.core.robust)
 
 JOB_LIMITS: dict[str, tuple[int, int]] = {

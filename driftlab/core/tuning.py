@@ -14,7 +14,13 @@ from typing import Any
 from driftlab.core.config import MODEL_FIT, THETA_KEYS, THETA_LIMITS, EpisodeConfig, Theta, config_to_dict
 from driftlab.core.configure import config_from_document, fitted
 from driftlab.core.errors import ConfigError
-from driftlab.core.limits import JOB_LIMITS, MAX_ROBUST_SAMPLES, check_int
+from driftlab.core.limits import (  # noqa: F401  # the defaults re-exported: callers take them from the job spec
+    DEFAULT_CONFIRM_SAMPLES,
+    DEFAULT_ROBUST_SAMPLES,
+    JOB_LIMITS,
+    MAX_ROBUST_SAMPLES,
+    check_int,
+)
 from driftlab.core.plants import entry_of
 from driftlab.core.robust import tuning_seeds
 from driftlab.core.stopping import StopRules
@@ -30,12 +36,6 @@ DEFAULT_BOUNDS: dict[str, tuple[float, float]] = {
 MODEL_BOUNDS: dict[str, tuple[float, float]] = {"model_mu_scale": (0.85, 1.2), "model_c_scale": (0.85, 1.3)}
 BOUND_LIMITS = THETA_LIMITS  # what a bound may span: theta's own validity range
 MAX_ITERATIONS = JOB_LIMITS["iterations"][1]
-# Episodes per evaluation by default: with 4 seeds a theta that fails one run in ten still fails an evaluation
-# 34% of the time, enough for the failure model to steer away from it, at 4x the episodes (2 workers keep
-# one evaluation in flight, so the BO stays sequential).
-DEFAULT_ROBUST_SAMPLES = 4
-# Extra seeds a would-be best evaluation must also complete (see driftlab.worker.job_loop).
-DEFAULT_CONFIRM_SAMPLES = 4
 # Space-filling evaluations before the GP takes over. 12 (3 per theta dimension) by default: against the paper's
 # 20 the best J after 25 evaluations is lower (median of 6 seeds -1.62 against -1.42) and level at 100
 # (benchmarks/peers.py). The paper's 500-run with its 20 is the `paper` preset.

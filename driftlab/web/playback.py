@@ -199,8 +199,9 @@ class Playback:
             self.downloads.content = "This what-if episode is not stored; the downloads are for stored evaluations."
             return
         base = f"/api/evaluations/{frames.evaluation_id}"
+        name = plain(frames.name())  # it holds the job's name: text, never markup
         self.downloads.content = (
-            f"{frames.name().capitalize()}:\n\n"
+            f"{name[:1].upper() + name[1:]}:\n\n"
             f"- [trajectory CSV]({base}/trajectory?format=csv)\n"
             f"- [trajectory JSON]({base}/trajectory?format=json)\n"
             f"- [recording (.viser)]({base}/recording.viser)\n"

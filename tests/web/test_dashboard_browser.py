@@ -274,6 +274,19 @@ def test_a_clicked_point_selects_its_evaluation_plays_it_and_an_enqueued_theta_r
     page.mouse.move(box["x"] + box["width"] / 2, box["y"] + 0.6 * box["height"], steps=5)
     page.mouse.up()
     expect(page.locator("#trials-filter")).to_contain_text("brushed: k")
+    # The lines outside the brush stand back (grey, under the others); a failed evaluation's line ends in the
+    # "failed" band, dashed, not at the top of the J axis.
+    lines = page.locator("#parallel path[data-in]")
+    expect(lines).to_have_count(stored)
+    inside = page.locator("#parallel path[data-in='1']").count()
+    assert 0 < inside and inside + page.locator("#parallel path[data-in='0']").count() == stored
+    assert all(p.get_attribute("stroke") == "#bbb" for p in page.locator("#parallel path[data-in='0']").all())
+    failed = [e for e in httpx.get(f"{server}/api/jobs/{job['id']}/evaluations").json() if not e["completed"]]
+    assert page.locator("#parallel path[data-failed='1']").count() == len(failed)
+    if failed:
+        expect(page.locator("#parallel text", has_text="failed")).to_have_count(1)
+    if SCREENSHOT_DIR:  # the docs' picture of the brushed parallel coordinates
+        page.locator("#parallel").screenshot(path=os.path.join(SCREENSHOT_DIR, "parallel_brushed.png"))
     k_column = [t.text_content() for t in page.locator("#trials-table th").all()].index("k") + 1
     ks = [float(t) for t in page.locator(f"#trials-table tbody tr td:nth-child({k_column})").all_text_contents()]
     low = 0.12 * 0.4 - 1e-3  # the job's box for k is [0, 0.12]; fmt rounds to 4 digits

@@ -6,7 +6,7 @@
 import { calibrationPanel } from "./calibrate.js";
 import { formBody, openForm as fillForm } from "./jobform.js";
 import { renderSpace } from "./searchspace.js";
-import { freshTrials, renderTrials, wireTrials } from "./trials.js";
+import { freshTrials, renderTrials, shownTrials, wireTrials } from "./trials.js";
 import { el, extent, fmt, frame, line, parallel, points, ramp, RAMPS } from "./svgplot.js";
 
 const POLL_MS = 1000;
@@ -231,12 +231,14 @@ function renderHistoryPlots() {
   slices.dataset.n = ev.length;
 
   const bestIndex = state.job.best ? ev.findIndex((e) => e.id === state.job.best.id) : -1;
-  const rows = ev.map((e, i) => ({ ...e.theta, J: e.completed ? e.J : yr[1], completed: e.completed,
-                                   best: i === bestIndex }));
+  const shown = new Set(shownTrials(state).map((e) => e.id)); // the table's filters and brushes
+  const rows = ev.map((e, i) => ({ ...e.theta, J: e.completed ? e.J : NaN, completed: e.completed,
+                                   best: i === bestIndex, id: e.id }));
   const axes = [...names.map((n) => ({ key: n, label: n, range: bounds[n] })), { key: "J", label: "J", range: yr }];
   rows.sort((a, c) => Number(a.best) - Number(c.best) || Number(a.completed) - Number(c.completed) || c.J - a.J);
-  parallel($("parallel"), rows, axes, { width: 860, height: 240, color: (r) => (r.completed
-    ? ramp(1 - (r.J - yr[0]) / (yr[1] - yr[0] || 1), RAMPS.viridis) : "rgba(201,42,42,0.45)"),
+  parallel($("parallel"), rows, axes, { width: 860, height: 252, color: (r) => (r.completed
+    ? ramp(1 - (r.J - yr[0]) / (yr[1] - yr[0] || 1), RAMPS.viridis) : "rgba(201,42,42,0.6)"),
+  inside: (r) => shown.has(r.id),
   brushes: state.trials.brushes, onBrush: (key, range) => {
     if (range) state.trials.brushes[key] = range; else delete state.trials.brushes[key];
     state.trials.page = 0;

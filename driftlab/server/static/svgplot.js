@@ -150,29 +150,42 @@ export function colorbar(f, lo, hi, { stops = VIRIDIS, reverse = false, label = 
 
 // Parallel coordinates: one axis per key, each row a polyline; `color(row)` picks its colour.
 // ``brushes``: axis key -> [lo, hi] drawn on its axis; ``onBrush(key, range or null)``: a drag along an axis
-// brushes that range (a click without a drag clears the axis's brush).
-export function parallel(svg, rows, axes, { width, height, color, brushes = {}, onBrush = null }) {
+// brushes that range (a click without a drag clears the axis's brush). ``inside(row)``: false draws the row greyed
+// under the others (outside the brushes and filters). A row whose value on an axis is not a number (a failed
+// evaluation's J) ends in a "failed" band above that axis, dashed: a failure is not a value at the axis's top.
+export function parallel(svg, rows, axes, { width, height, color, brushes = {}, onBrush = null,
+                                            inside = () => true }) {
   svg.replaceChildren();
   svg.setAttribute("viewBox", `0 0 ${width} ${height}`);
   svg.setAttribute("width", width);
   svg.setAttribute("height", height);
-  const m = { l: 30, r: 40, t: 28, b: 22 };
+  const m = { l: 30, r: 44, t: 40, b: 22 };
+  const failedY = 24; // the band a non-number ends in, above the axes' tops
   const ax = (i) => m.l + (i * (width - m.l - m.r)) / Math.max(axes.length - 1, 1);
   const ay = (a, v) => height - m.b - ((v - a.range[0]) / (a.range[1] - a.range[0] || 1)) * (height - m.t - m.b);
   const g = el("g", {}, svg);
-  for (const row of rows) {
+  const ordered = [...rows.filter((r) => !inside(r)), ...rows.filter((r) => inside(r))]; // the brushed on top
+  for (const row of ordered) {
     let d = "";
+    let failed = false;
     axes.forEach((a, i) => {
-      const v = Math.min(Math.max(row[a.key], a.range[0]), a.range[1]);
-      d += `${i ? "L" : "M"}${ax(i)},${ay(a, v)}`;
+      const value = row[a.key];
+      const y = Number.isFinite(value) ? ay(a, Math.min(Math.max(value, a.range[0]), a.range[1])) : failedY;
+      failed = failed || !Number.isFinite(value);
+      d += `${i ? "L" : "M"}${ax(i)},${y}`;
     });
-    el("path", { d, fill: "none", stroke: color(row), "stroke-width": row.best ? 3 : 1.2,
-                 "stroke-opacity": row.best ? 1 : 0.55 }, g);
+    const shown = inside(row);
+    el("path", { d, fill: "none", stroke: shown ? color(row) : "#bbb", "stroke-width": row.best ? 3 : 1.2,
+                 "stroke-opacity": !shown ? 0.25 : row.best ? 1 : 0.7, "stroke-dasharray": failed ? "4 3" : "none",
+                 "data-in": shown ? "1" : "0", "data-failed": failed ? "1" : "0" }, g);
+  }
+  if (rows.some((r) => axes.some((a) => !Number.isFinite(r[a.key])))) {
+    el("text", { x: width - m.r + 5, y: failedY + 3, class: "small" }, svg, "failed");
   }
   axes.forEach((a, i) => {
     el("line", { x1: ax(i), x2: ax(i), y1: m.t, y2: height - m.b, class: "pc-axis" }, svg);
-    el("text", { x: ax(i), y: 12, "text-anchor": "middle", class: "axis-label" }, svg, a.label);
-    el("text", { x: ax(i), y: m.t - 4, "text-anchor": "middle", class: "small" }, svg, fmt(a.range[1]));
+    el("text", { x: ax(i), y: 10, "text-anchor": "middle", class: "axis-label" }, svg, a.label);
+    el("text", { x: ax(i), y: m.t - 3, "text-anchor": "middle", class: "small" }, svg, fmt(a.range[1]));
     el("text", { x: ax(i), y: height - 6, "text-anchor": "middle", class: "small" }, svg, fmt(a.range[0]));
     const brushed = brushes[a.key];
     if (brushed) {

@@ -124,7 +124,7 @@ function parseTheta(text) {
 
 export function wireTrials(state, { api, act, say, redraw }) {
   $("trials-status").onchange = () => { state.trials.status = $("trials-status").value; state.trials.page = 0;
-                                         renderTrials(state); };
+                                         renderTrials(state); redraw(); };
   $("trials-clear").onclick = () => { state.trials.brushes = {}; renderTrials(state); redraw(); };
   $("trials-prev").onclick = () => { state.trials.page = Math.max(0, state.trials.page - 1); renderTrials(state); };
   $("trials-next").onclick = () => { state.trials.page += 1; renderTrials(state); };

@@ -294,6 +294,23 @@ def test_a_clicked_point_selects_its_evaluation_plays_it_and_an_enqueued_theta_r
     page.locator("#trials-clear").click()
     expect(page.locator("#trials-filter")).to_have_text("")
 
+    # "best 10": the ten lowest J of the completed evaluations, in the table and the parallel coordinates, kept in
+    # the page's address (a reload or a shared link shows the same).
+    evaluations = httpx.get(f"{server}/api/jobs/{job['id']}/evaluations").json()
+    ten = {e["id"] for e in sorted((e for e in evaluations if e["completed"]), key=lambda e: e["J"])[:10]}
+    page.locator("#trials-best").select_option("10")
+    rows = page.locator("#trials-table tbody tr")
+    expect(rows).to_have_count(len(ten))
+    assert {int(r.get_attribute("data-eval-id")) for r in rows.all()} == ten
+    expect(page.locator("#parallel path[data-in='1']")).to_have_count(len(ten))
+    assert "best=10" in page.url and f"job={job['id']}" in page.url
+    again = browser.new_page(viewport={"width": 1400, "height": 1000})
+    again.goto(page.url)
+    expect(again.locator("#trials-best")).to_have_value("10")
+    expect(again.locator("#trials-table tbody tr")).to_have_count(len(ten))
+    again.close()
+    page.locator("#trials-best").select_option("")
+
     # Enqueued from the page while the job is paused (nothing in flight): the next evaluation it runs, marked.
     done_before = httpx.get(f"{server}/api/jobs/{job['id']}").json()["n_done"]
     page.locator("#enqueue-form input[name=theta]").fill("k=0.061, dV=0.05")

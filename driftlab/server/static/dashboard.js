@@ -6,7 +6,7 @@
 import { calibrationPanel } from "./calibrate.js";
 import { formBody, openForm as fillForm } from "./jobform.js";
 import { renderSpace } from "./searchspace.js";
-import { freshTrials, renderTrials, shownTrials, wireTrials } from "./trials.js";
+import { freshTrials, keepInAddress, renderTrials, shownTrials, wireTrials } from "./trials.js";
 import { el, extent, fmt, frame, line, parallel, points, ramp, RAMPS } from "./svgplot.js";
 
 const POLL_MS = 1000;
@@ -19,7 +19,7 @@ const state = {
   space: null, spaceKey: "", spaceBusy: false,
   axesChosen: false, // until a parameter is chosen, the contour shows the two most important
   rescoring: false,
-  trials: freshTrials(), picked: null, // the evaluations table's view, and the evaluation selected everywhere
+  trials: freshTrials({ status: params.get("status"), best: Number(params.get("best")) }), picked: null, // the evaluations table's view, and the evaluation selected everywhere
   refreshCalibration: async () => {},
 };
 
@@ -87,6 +87,8 @@ function select(jobId) {
     state.trials = freshTrials();
     state.picked = null;
     $("trials-status").value = "";
+    $("trials-best").value = "";
+    keepInAddress(state);
     $("contour-x").replaceChildren();
     $("contour-y").replaceChildren();
   }

@@ -7,8 +7,19 @@ import { fmt } from "./svgplot.js";
 const $ = (id) => document.getElementById(id);
 const PAGE_ROWS = 50;
 
-export function freshTrials() {
-  return { sort: { key: "index", dir: 1 }, status: "", brushes: {}, page: 0 };
+/** The table's view; ``from``: the status and best-K filters the page's address gives (?status=...&best=K). */
+export function freshTrials(from = {}) {
+  return { sort: { key: "index", dir: 1 }, status: from.status || "", best: from.best || 0, brushes: {}, page: 0 };
+}
+
+/** The filters in the page's address, so that a reload or a shared link shows the same (?job=&status=&best=). */
+export function keepInAddress(state) {
+  const params = new URLSearchParams(location.search);
+  const set = (key, value) => (value ? params.set(key, value) : params.delete(key));
+  set("job", state.selected || "");
+  set("status", state.trials.status);
+  set("best", state.trials.best || "");
+  history.replaceState(null, "", `${location.pathname}${params.size ? `?${params}` : ""}`);
 }
 
 function columns(state) {
@@ -37,7 +48,12 @@ function matches(t, e) {
 /** The evaluations the table shows, in its order (every page). */
 export function shownTrials(state) {
   const t = state.trials;
-  const rows = state.evals.filter((e) => matches(t, e));
+  let rows = state.evals.filter((e) => matches(t, e));
+  if (t.best > 0) { // the K lowest J of the completed evaluations, then the other filters
+    const best = new Set(state.evals.filter((e) => e.completed).sort((a, b) => a.J - b.J).slice(0, t.best)
+      .map((e) => e.id));
+    rows = rows.filter((e) => best.has(e.id));
+  }
   const { key, dir } = t.sort;
   const num = (e) => { const v = value(e, key); return typeof v === "number" && Number.isFinite(v) ? v : Infinity; };
   return rows.sort((a, b) => (key === "status" ? dir * a.status.localeCompare(b.status) : dir * (num(a) - num(b)))
@@ -124,7 +140,11 @@ function parseTheta(text) {
 
 export function wireTrials(state, { api, act, say, redraw }) {
   $("trials-status").onchange = () => { state.trials.status = $("trials-status").value; state.trials.page = 0;
-                                         renderTrials(state); redraw(); };
+                                         keepInAddress(state); renderTrials(state); redraw(); };
+  $("trials-best").onchange = () => { state.trials.best = Number($("trials-best").value) || 0; state.trials.page = 0;
+                                       keepInAddress(state); renderTrials(state); redraw(); };
+  $("trials-status").value = state.trials.status;
+  $("trials-best").value = String(state.trials.best || "");
   $("trials-clear").onclick = () => { state.trials.brushes = {}; renderTrials(state); redraw(); };
   $("trials-prev").onclick = () => { state.trials.page = Math.max(0, state.trials.page - 1); renderTrials(state); };
   $("trials-next").onclick = () => { state.trials.page += 1; renderTrials(state); };

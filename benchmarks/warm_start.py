@@ -30,27 +30,6 @@ os.environ.setdefault("OMP_NUM_THREADS", "1")
 SOURCE_SEED = 1000  # the source job's seed: none of the compared jobs' seeds
 
 
-def _objective(robust_samples: int, job_seed: int):
-    """theta dict -> (J or None if the evaluation failed, the stored J), on the job's own episode seeds."""
-    from driftlab.core.config import Theta
-    from driftlab.core.configure import preset_config
-    from driftlab.core.episode import run_episode
-    from driftlab.core.robust import SampleResult, aggregate, tuning_seeds
-
-    config = preset_config("default")
-    seeds = tuning_seeds(job_seed, robust_samples)
-
-    def evaluate(theta: dict[str, float]) -> tuple[float | None, float]:
-        samples = []
-        for seed in seeds:
-            r = run_episode(Theta.from_mapping(theta), config, seed=seed)
-            samples.append(SampleResult(seed, r.status, r.J, r.metrics.completed_fraction, None))
-        score = aggregate(samples)
-        return (score.J if score.status == "completed" else None), score.J
-
-    return evaluate
-
-
 def _spec(seed: int, robust_samples: int, told=()):
     from driftlab.core.tuning import TuningSpec
     from driftlab.core.warm_start import Observation, WarmStart
@@ -66,6 +45,8 @@ def _run_job(spec, evaluations: int) -> tuple[list[tuple[dict, float | None, flo
     from driftlab.worker.optimizer_host import restore_optimizer
 
     optimizer = restore_optimizer(spec, [])
+    from peers import _objective  # the job default's objective, on the job's own episode seeds
+
     evaluate = _objective(spec.robust_samples, spec.seed)
     history, trace, best = [], [], np.inf
     for _ in range(evaluations):

@@ -7,6 +7,7 @@ The subcommands, one module each: ``episode`` (equilibrium, episode), ``tune`` (
 from __future__ import annotations
 
 import argparse
+import importlib
 import sys
 
 from driftlab.cli.options import (
@@ -26,41 +27,21 @@ from driftlab.cli.options import (
 from driftlab.core.errors import ConfigError
 
 
-# Each command's module is imported when it runs: the parser refuses a bad argument without them.
-def cmd_equilibrium(args: argparse.Namespace) -> int:
-    from driftlab.cli.episode import cmd_equilibrium
-
-    return cmd_equilibrium(args)
-
-
-def cmd_episode(args: argparse.Namespace) -> int:
-    from driftlab.cli.episode import cmd_episode
-
-    return cmd_episode(args)
+def _command(module: str, name: str):
+    """The subcommand ``name`` of driftlab.cli.<module>, imported when it runs: the parser refuses a bad argument
+    without it."""
+    def run(args: argparse.Namespace) -> int:
+        return getattr(importlib.import_module(f"driftlab.cli.{module}"), name)(args)
+    return run
 
 
-def cmd_tune(args: argparse.Namespace) -> int:
-    from driftlab.cli.tune import cmd_tune
-
-    return cmd_tune(args)
-
-
-def cmd_rescore(args: argparse.Namespace) -> int:
-    from driftlab.cli.tune import cmd_rescore
-
-    return cmd_rescore(args)
-
-
-def cmd_report(args: argparse.Namespace) -> int:
-    from driftlab.cli.tune import cmd_report
-
-    return cmd_report(args)
-
-
-def cmd_serve(args: argparse.Namespace) -> int:
-    from driftlab.cli.serve import cmd_serve
-
-    return cmd_serve(args)
+cmd_equilibrium = _command("episode", "cmd_equilibrium")
+cmd_episode = _command("episode", "cmd_episode")
+cmd_tune = _command("tune", "cmd_tune")
+cmd_rescore = _command("tune", "cmd_rescore")
+cmd_report = _command("tune", "cmd_report")
+cmd_serve = _command("serve", "cmd_serve")
+cmd_calibrate = _command("calibrate", "cmd_calibrate")
 
 
 def cmd_study(args: argparse.Namespace) -> int:
@@ -70,12 +51,6 @@ def cmd_study(args: argparse.Namespace) -> int:
     dask = dask_address(args) if hasattr(args, "dask") else None
     url = stored_db_url(args.db) if args.kind == "show" else db_url(args.db)
     return cmd_study(args, tuning_spec, url, dask)
-
-
-def cmd_calibrate(args: argparse.Namespace) -> int:
-    from driftlab.cli.calibrate import cmd_calibrate
-
-    return cmd_calibrate(args)
 
 
 def build_parser() -> argparse.ArgumentParser:

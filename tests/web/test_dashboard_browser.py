@@ -303,6 +303,14 @@ def test_a_clicked_point_selects_its_evaluation_plays_it_and_an_enqueued_theta_r
     expect(rows).to_have_count(len(ten))
     assert {int(r.get_attribute("data-eval-id")) for r in rows.all()} == ten
     expect(page.locator("#parallel path[data-in='1']")).to_have_count(len(ten))
+    # The rank plot: each parameter against the rank of J, of the evaluations the table shows.
+    expect(page.locator("#rank")).to_have_attribute("data-n", str(len(ten)))
+    names = list(job["spec"]["bounds"])
+    expect(page.locator("#rank svg")).to_have_count(len(names))
+    expect(page.locator("#rank svg").first.locator("[data-eval-id]")).to_have_count(len(ten))
+    if SCREENSHOT_DIR:  # the docs' pictures of the best-K filter and the rank plot
+        page.locator("#trials-box").screenshot(path=os.path.join(SCREENSHOT_DIR, "trials_best_10.png"))
+        page.locator("#rank").screenshot(path=os.path.join(SCREENSHOT_DIR, "rank_best_10.png"))
     assert "best=10" in page.url and f"job={job['id']}" in page.url
     again = browser.new_page(viewport={"width": 1400, "height": 1000})
     again.goto(page.url)

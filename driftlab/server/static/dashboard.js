@@ -231,6 +231,7 @@ function renderHistoryPlots() {
            { color: "#c92a2a", shape: "x", r: 3, ...marks });
   }
   slices.dataset.n = ev.length;
+  renderRank(ev, names, bounds);
 
   const bestIndex = state.job.best ? ev.findIndex((e) => e.id === state.job.best.id) : -1;
   const shown = new Set(shownTrials(state).map((e) => e.id)); // the table's filters and brushes
@@ -248,6 +249,25 @@ function renderHistoryPlots() {
     renderHistoryPlots();
   } });
   $("parallel").dataset.n = ev.length;
+}
+
+/** Each parameter against the rank of J among the completed evaluations the table shows (status, best K, brushes):
+ * the ordering, not the values, so that a few very good or very bad J do not flatten the rest (Optuna's rank plot). */
+function renderRank(ev, names, bounds) {
+  const rank = $("rank");
+  rank.replaceChildren();
+  const shown = new Set(shownTrials(state).map((e) => e.id));
+  const done = ev.filter((e) => e.completed && shown.has(e.id)).sort((a, b) => a.J - b.J);
+  const place = new Map(done.map((e, i) => [e.id, done.length > 1 ? i / (done.length - 1) : 0]));
+  for (const name of names) {
+    const f = frame(el("svg", { class: "rank" }, rank), { width: 250, height: 190, x: bounds[name], y: [0, 1],
+      xlabel: name, ylabel: "rank of J", title: `${name} against the rank of J` });
+    for (const e of done) {
+      points(f, [e.theta[name]], [place.get(e.id)], { color: ramp(1 - place.get(e.id), RAMPS.viridis), r: 2.6,
+        ids: [e.id], titles: [`evaluation id ${e.id} (index ${e.index}): J ${fmt(e.J)}, rank ${done.indexOf(e) + 1}`] });
+    }
+  }
+  rank.dataset.n = done.length;
 }
 
 // ----- the search space (the models, from GET /api/jobs/{id}/search-space) -------------------------------------

@@ -258,8 +258,10 @@ class ComparePanel:
         rows = []
         for n, job in enumerate(self.jobs):
             flicks = [p for p in job.get("best_phases", []) if "flip_s" in p]
-            cells = "; ".join(f"{_time(p['flip_s'])} / {_time(p['settle_s'])} s, -{p['speed_loss_mps']:.2f} m/s, "
-                              f"|e| {p['mean_abs_e_m']:.2f} m" for p in flicks)
+            # "\\|": a bare | inside a cell ends it (the mean |e| was cut off); the speed loss as the dashboard
+            # shows it (metrics.phases' speed_loss_mps: positive, the speed lost)
+            cells = "; ".join(f"{_time(p['flip_s'])} / {_time(p['settle_s'])} s, loses {p['speed_loss_mps']:.2f} "
+                              f"m/s, mean \\|e\\| {p['mean_abs_e_m']:.2f} m" for p in flicks)
             rows.append(f"| {COLOR_NAMES[n % len(COLOR_NAMES)]} | {cells or '-'} |")
         return ["", "| colour | flicks of the best episode: sign change / settled, speed loss, mean \\|e\\| |",
                 "|---|---|", *rows]

@@ -303,6 +303,8 @@ def test_a_clicked_point_selects_its_evaluation_plays_it_and_an_enqueued_theta_r
     expect(rows).to_have_count(len(ten))
     assert {int(r.get_attribute("data-eval-id")) for r in rows.all()} == ten
     expect(page.locator("#parallel path[data-in='1']")).to_have_count(len(ten))
+    # ... and the convergence plot: the evaluations outside the filter grey (every one still drawn, and clickable)
+    expect(page.locator("#convergence circle[data-eval-id]:not(.outside)")).to_have_count(len(ten))
     # The rank plot: each parameter against the rank of J, of the evaluations the table shows.
     expect(page.locator("#rank")).to_have_attribute("data-n", str(len(ten)))
     names = list(job["spec"]["bounds"])

@@ -201,11 +201,16 @@ function renderHistoryPlots() {
   const titles = ev.map((e) => `evaluation id ${e.id} (index ${e.index})${e.enqueued ? ", enqueued" : ""}: ` +
     `${e.status}, J ${fmt(e.J)}; ${Object.entries(e.theta).map(([k, v]) => `${k} ${fmt(v)}`).join(", ")}`);
   const marks = { ids, titles };
+  // The table's filters (status, best K, brushes) apply to every plot: the evaluations outside them grey.
+  const shown = new Set(shownTrials(state).map((e) => e.id));
+  const inView = (values, yes) => values.map((v, i) => (shown.has(ev[i].id) === yes ? v : NaN));
   const conv = frame($("convergence"), { width: 460, height: 260, x: [0, Math.max(state.job.iterations - 1, 1)],
     y: yr, xlabel: "evaluation", ylabel: "J", title: "Convergence" });
   line(conv, idx, best, { color: "#e8590c" });
-  points(conv, idx, J, { color: "#2a6fdb", ...marks });
-  points(conv, idx, failedTop, { color: "#c92a2a", shape: "x", r: 3.5, ...marks });
+  points(conv, idx, inView(J, false), { color: "#d0d0d0", cls: "outside", ...marks });
+  points(conv, idx, inView(failedTop, false), { color: "#d0d0d0", shape: "x", r: 3.5, cls: "outside", ...marks });
+  points(conv, idx, inView(J, true), { color: "#2a6fdb", ...marks });
+  points(conv, idx, inView(failedTop, true), { color: "#c92a2a", shape: "x", r: 3.5, ...marks });
   // enqueued evaluations in green; the selected one ringed
   points(conv, idx, ev.map((e, i) => (e.enqueued ? (e.completed ? J[i] : yr[1]) : NaN)),
          { color: "#2b8a3e", r: 4, ...marks });
@@ -222,8 +227,10 @@ function renderHistoryPlots() {
     const xs = ev.map((e) => e.theta[name]);
     const s = frame(el("svg", { class: "slice" }, slices), { width: 250, height: 190, x: bounds[name], y: yr,
       xlabel: name, ylabel: "J", title: `J against ${name}` });
-    points(s, xs, J, { color: "#2a6fdb", r: 2.6, ...marks });
-    points(s, xs, failedTop, { color: "#c92a2a", shape: "x", r: 3, ...marks });
+    points(s, xs, inView(J, false), { color: "#d0d0d0", r: 2.6, cls: "outside", ...marks });
+    points(s, xs, inView(failedTop, false), { color: "#d0d0d0", shape: "x", r: 3, cls: "outside", ...marks });
+    points(s, xs, inView(J, true), { color: "#2a6fdb", r: 2.6, ...marks });
+    points(s, xs, inView(failedTop, true), { color: "#c92a2a", shape: "x", r: 3, ...marks });
     const t = frame(el("svg", {}, thetaIter), { width: 250, height: 170, x: [0, Math.max(state.job.iterations - 1, 1)],
       y: bounds[name], xlabel: "evaluation", ylabel: name, title: name });
     points(t, idx, ev.map((e) => (e.completed ? e.theta[name] : NaN)), { color: "#2a6fdb", r: 2.4, ...marks });
@@ -234,7 +241,6 @@ function renderHistoryPlots() {
   renderRank(ev, names, bounds);
 
   const bestIndex = state.job.best ? ev.findIndex((e) => e.id === state.job.best.id) : -1;
-  const shown = new Set(shownTrials(state).map((e) => e.id)); // the table's filters and brushes
   const rows = ev.map((e, i) => ({ ...e.theta, J: e.completed ? e.J : NaN, completed: e.completed,
                                    best: i === bestIndex, id: e.id }));
   const axes = [...names.map((n) => ({ key: n, label: n, range: bounds[n] })), { key: "J", label: "J", range: yr }];

@@ -116,6 +116,8 @@ class TuningSpec:
             which parallel episodes complete changes what the optimizer has seen (two runs of a job with the
             same seed agree on the first evaluation, then may differ).
         config: the episode configuration (plant, controller, scenario ...).
+        version: the job document's version it was read from (:data:`JOB_DOCUMENT_VERSION` for a new job; 1 for
+            one stored before versions), written back as it was.
     """
 
     iterations: int = 500

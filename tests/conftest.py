@@ -25,9 +25,12 @@ def postgres():
     server.stop()
 
 
+@pytest.hookimpl(tryfirst=True)
 def pytest_collection_modifyitems(items):
     """Under ``-n N --dist loadgroup`` (the README's test command) the browser tests run one after another on one
-    worker: two software-rendered browsers at once on 2 cores starve each other's WebGL."""
+    worker: two software-rendered browsers at once on 2 cores starve each other's WebGL. First among the hooks:
+    xdist's own reads the group marks (and suffixes the test's id with ``@browser``); run after it, as a conftest's
+    hook is, the marks came too late and the browser tests ran on both workers."""
     for item in items:
         if "browser" in getattr(item, "fixturenames", ()):
             item.add_marker(pytest.mark.xdist_group("browser"))

@@ -12,6 +12,7 @@ from driftlab.core.errors import ConfigError
 DEFAULT_ROBUST_SAMPLES = 4
 # Extra seeds a would-be best evaluation must also complete (see driftlab.worker.job_loop).
 DEFAULT_CONFIRM_SAMPLES = 4
+MAX_GRID = 60  # points per axis of a search-space surface (GET /api/jobs/{id}/search-space)
 MAX_ROBUST_SAMPLES = 64  # also the block of episode seeds each BO seed owns (driftlab.core.robust)
 
 JOB_LIMITS: dict[str, tuple[int, int]] = {

@@ -26,11 +26,11 @@ from sklearn.gaussian_process import GaussianProcessClassifier
 from sklearn.gaussian_process.kernels import RBF, ConstantKernel
 
 from driftlab.core.errors import ConfigError
+from driftlab.core.limits import MAX_GRID
 from driftlab.core.surrogate import GaussianProcess, Hyperparameters, fit_hyperparameters
 
 HYPER_FIT_POINTS = 80  # as the optimizer: hyperparameters from at most this many points
 MAX_MODEL_POINTS = 400  # the GPs condition on at most this many evaluations (O(n^3)): the best half and a spread
-MAX_GRID = 60
 
 
 @dataclass(frozen=True)

@@ -11,13 +11,15 @@ from __future__ import annotations
 import threading
 from collections import OrderedDict
 from concurrent.futures import Future
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 from sqlalchemy.orm import Session, sessionmaker
 
-from driftlab.core.search_space import SearchSpaceModels, fit_models, surface
 from driftlab.db import storage
+
+if TYPE_CHECKING:
+    from driftlab.core.search_space import SearchSpaceModels
 
 _CACHE_SIZE = 16
 
@@ -70,6 +72,8 @@ class SearchSpaceCache:
             rows = storage.evaluations(session, job_id=job_id, limit=n)  # those counted: the key's
             bounds = job.spec.get("bounds") or {}
             history = ([dict(e.theta) for e in rows], [float(e.J) for e in rows], [bool(e.completed) for e in rows])
+        from driftlab.core.search_space import fit_models  # scikit-learn (1.4 s) on first use, not at start
+
         return fit_models(bounds, *history)
 
 
@@ -90,6 +94,8 @@ def search_space(cache: SearchSpaceCache, factory: sessionmaker[Session], *, job
     ranked = sorted(models.names, key=lambda k: -(importance or {}).get(k, 0.0)) if importance else list(models.names)
     x_key = x or next(k for k in ranked if k != y)
     y_key = y or next(k for k in ranked if k != x_key)
+    from driftlab.core.search_space import surface
+
     s = surface(models, x_key, y_key, grid)
     return {
         "job_id": job_id, "n_evaluations": n, "parameters": list(models.names),

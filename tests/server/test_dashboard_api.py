@@ -61,7 +61,7 @@ def test_the_search_space_of_a_stored_history(api):
 def test_tabs_asking_at_once_share_one_fit(api, monkeypatch):
     """Twelve requests for the same job's search space while it is fitted: one fit, twelve equal answers; a new
     evaluation refits once."""
-    from driftlab.services import search_space as module
+    from driftlab.core import search_space as module  # the service imports the fit when it first fits
 
     job = api.post("/api/jobs", json={"name": "sf", "iterations": 30, "model_correction": False}).json()
     _store(api, job["id"])

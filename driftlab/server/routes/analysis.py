@@ -10,7 +10,7 @@ from pydantic import BaseModel, ConfigDict, Field
 from sqlalchemy.orm import Session, sessionmaker
 
 from driftlab.core.config import THETA_KEYS
-from driftlab.core.search_space import MAX_GRID
+from driftlab.core.limits import MAX_GRID
 from driftlab.server import quotas
 from driftlab.server.heavy_reads import heavy_read
 from driftlab.server.responses import Rescore, SearchSpace, errors

@@ -120,7 +120,8 @@ async function refreshSelected(id) {
   const after = state.evals.length - 1;
   const fresh = await api("GET", `/api/jobs/${id}/evaluations?after=${after}&limit=1000`);
   if (id !== state.selected) return;
-  state.evals.push(...fresh.filter((e) => e.index > after));
+  // Two refreshes may overlap (a poll and an action's own): each appends only the next index, never one twice.
+  for (const e of fresh) if (e.index === state.evals.length) state.evals.push(e);
   renderJob();
   if (fresh.length) {
     renderHistoryPlots();

@@ -18,6 +18,7 @@ from numba import njit
 from driftlab.core.blas_threads import with_one_blas_thread
 from driftlab.core.equilibrium import Equilibrium, drift_equilibrium, has_drift_equilibrium
 from driftlab.core.errors import NoEquilibriumError
+from driftlab.core.integrator import rk4_stage, rk4_update
 from driftlab.core.mpc import KN, MpcConfig, ReferenceQp
 from driftlab.core.track import LEFT
 from driftlab.core.vehicle import VehicleParams, drift_derivatives_vec, pack_params
@@ -198,7 +199,7 @@ def predict_one_step(qa, params, linear, state, inputs_start, inputs_end, lag_s,
     mid = inputs_end + (inputs_start - inputs_end) * _lag_shape(0.5 * dt_s, lag_s, dt_s)
     start = inputs_start if lag_s > 0.0 else inputs_end
     k1 = _model_derivatives(qa, params, linear, state, start)
-    k2 = _model_derivatives(qa, params, linear, state + 0.5 * dt_s * k1, mid)
-    k3 = _model_derivatives(qa, params, linear, state + 0.5 * dt_s * k2, mid)
-    k4 = _model_derivatives(qa, params, linear, state + dt_s * k3, inputs_end)
-    return state + dt_s / 6.0 * (k1 + 2 * k2 + 2 * k3 + k4)
+    k2 = _model_derivatives(qa, params, linear, rk4_stage(state, 0.5 * dt_s, k1), mid)
+    k3 = _model_derivatives(qa, params, linear, rk4_stage(state, 0.5 * dt_s, k2), mid)
+    k4 = _model_derivatives(qa, params, linear, rk4_stage(state, dt_s, k3), inputs_end)
+    return rk4_update(state, dt_s, k1, k2, k3, k4)

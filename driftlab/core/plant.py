@@ -25,6 +25,7 @@ import numpy as np
 from numba import njit
 
 from driftlab.core.errors import ConfigError
+from driftlab.core.integrator import rk4_stage, rk4_update
 from driftlab.core.validation import check_ranges
 from driftlab.core.vehicle import VehicleParams, drift_derivatives, pack_params, pose_derivatives
 
@@ -234,10 +235,10 @@ def plant_step(state, steer_cmd, drive_cmd, duration_s, substep_s, p, act):
     h = duration_s / n_sub
     for _ in range(n_sub):
         k1 = plant_derivatives(s, steer_cmd, drive_cmd, p, act)
-        k2 = plant_derivatives(s + 0.5 * h * k1, steer_cmd, drive_cmd, p, act)
-        k3 = plant_derivatives(s + 0.5 * h * k2, steer_cmd, drive_cmd, p, act)
-        k4 = plant_derivatives(s + h * k3, steer_cmd, drive_cmd, p, act)
-        s = s + (h / 6.0) * (k1 + 2.0 * k2 + 2.0 * k3 + k4)
+        k2 = plant_derivatives(rk4_stage(s, 0.5 * h, k1), steer_cmd, drive_cmd, p, act)
+        k3 = plant_derivatives(rk4_stage(s, 0.5 * h, k2), steer_cmd, drive_cmd, p, act)
+        k4 = plant_derivatives(rk4_stage(s, h, k3), steer_cmd, drive_cmd, p, act)
+        s = rk4_update(s, h, k1, k2, k3, k4)
     return s
 
 

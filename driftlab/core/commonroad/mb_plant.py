@@ -28,6 +28,7 @@ from driftlab.core.commonroad.mb import (
 )
 from driftlab.core.commonroad.mb import M as MB_MASS
 from driftlab.core.commonroad.plant import _rate
+from driftlab.core.integrator import rk4_stage_into, rk4_update_into
 from driftlab.core.loop_state import DONE, I_PLANT_DUE, I_STATUS, INVALID, NEEDS_PLANT
 from driftlab.core.plant import (
     A_DRIVE_LAG,
@@ -82,22 +83,18 @@ def mb_plant_step(state, steer_cmd, drive_cmd, duration_s, substep_s, p, act):
         z[N_MB] += min(max(drive_cmd - z[N_MB], -reach), reach)
     n_sub = max(1, int(round(duration_s / substep_s)))
     h = duration_s / n_sub
-    half, sixth = 0.5 * h, h / 6.0
+    half = 0.5 * h
     u, stage = np.empty(2), np.empty(n)
     k1, k2, k3, k4 = np.empty(n), np.empty(n), np.empty(n), np.empty(n)
     for _ in range(n_sub):
         _mb_integrated_derivatives(z, steer_cmd, drive_cmd, p, act, u, k1)
-        for i in range(n):
-            stage[i] = z[i] + half * k1[i]
+        rk4_stage_into(stage, z, half, k1)
         _mb_integrated_derivatives(stage, steer_cmd, drive_cmd, p, act, u, k2)
-        for i in range(n):
-            stage[i] = z[i] + half * k2[i]
+        rk4_stage_into(stage, z, half, k2)
         _mb_integrated_derivatives(stage, steer_cmd, drive_cmd, p, act, u, k3)
-        for i in range(n):
-            stage[i] = z[i] + h * k3[i]
+        rk4_stage_into(stage, z, h, k3)
         _mb_integrated_derivatives(stage, steer_cmd, drive_cmd, p, act, u, k4)
-        for i in range(n):
-            z[i] = z[i] + sixth * (k1[i] + 2.0 * k2[i] + 2.0 * k3[i] + k4[i])
+        rk4_update_into(z, h, k1, k2, k3, k4)
         for i in range(23, 27):  # the package clamps the wheel speeds of its state at 0
             z[i] = max(0.0, z[i])
     out = np.empty(N_MB_PLANT_STATES)

@@ -36,6 +36,7 @@ from driftlab.core.commonroad.std import (
     acceleration_constraints,
     std_derivatives,
 )
+from driftlab.core.integrator import rk4_stage, rk4_update
 from driftlab.core.plant import (
     A_DRIVE_LAG,
     A_DRIVE_RATE,
@@ -91,10 +92,10 @@ def std_plant_step(state, steer_cmd, drive_cmd, duration_s, substep_s, cp, act):
     h = duration_s / n_sub
     for _ in range(n_sub):
         k1 = _integrated_derivatives(z, steer_cmd, drive_cmd, cp, act)
-        k2 = _integrated_derivatives(z + 0.5 * h * k1, steer_cmd, drive_cmd, cp, act)
-        k3 = _integrated_derivatives(z + 0.5 * h * k2, steer_cmd, drive_cmd, cp, act)
-        k4 = _integrated_derivatives(z + h * k3, steer_cmd, drive_cmd, cp, act)
-        z = z + (h / 6.0) * (k1 + 2.0 * k2 + 2.0 * k3 + k4)
+        k2 = _integrated_derivatives(rk4_stage(z, 0.5 * h, k1), steer_cmd, drive_cmd, cp, act)
+        k3 = _integrated_derivatives(rk4_stage(z, 0.5 * h, k2), steer_cmd, drive_cmd, cp, act)
+        k4 = _integrated_derivatives(rk4_stage(z, h, k3), steer_cmd, drive_cmd, cp, act)
+        z = rk4_update(z, h, k1, k2, k3, k4)
         z[S_OMEGA_F] = max(0.0, z[S_OMEGA_F])
         z[S_OMEGA_R] = max(0.0, z[S_OMEGA_R])
     out = np.empty(N_STD_PLANT_STATES)

@@ -17,6 +17,7 @@ from driftlab.core.commonroad.plant import (
     OMEGA_R,
     std_start_state,
 )
+from driftlab.core.integrator import rk4_stage, rk4_update
 from driftlab.core.plant import (
     A_DRIVE_LAG,
     A_DRIVE_RATE,
@@ -78,10 +79,10 @@ class ReferenceStdPlant:
         h = duration_s / n_sub
         for _ in range(n_sub):
             k1 = self._derivatives(z, steer_cmd_rad, drive_cmd_n)
-            k2 = self._derivatives(z + 0.5 * h * k1, steer_cmd_rad, drive_cmd_n)
-            k3 = self._derivatives(z + 0.5 * h * k2, steer_cmd_rad, drive_cmd_n)
-            k4 = self._derivatives(z + h * k3, steer_cmd_rad, drive_cmd_n)
-            z = z + (h / 6.0) * (k1 + 2.0 * k2 + 2.0 * k3 + k4)
+            k2 = self._derivatives(rk4_stage(z, 0.5 * h, k1), steer_cmd_rad, drive_cmd_n)
+            k3 = self._derivatives(rk4_stage(z, 0.5 * h, k2), steer_cmd_rad, drive_cmd_n)
+            k4 = self._derivatives(rk4_stage(z, h, k3), steer_cmd_rad, drive_cmd_n)
+            z = rk4_update(z, h, k1, k2, k3, k4)
             z[7], z[8] = max(0.0, z[7]), max(0.0, z[8])
         out = np.empty(N_STD_PLANT_STATES)
         out[X_POS], out[Y_POS], out[HEADING] = z[0], z[1], z[4]

@@ -80,3 +80,23 @@ def test_a_bad_prune_block_is_refused_naming_the_field_and_range(block, field):
     assert error.value.field == field
     if field in ("prune.confidence", "prune.min_seeds"):
         assert "[" in str(error.value)  # the range it must be in
+
+
+def test_the_rule_at_the_api_and_the_cli_names_its_field(tmp_path):
+    from driftlab.cli.tune import prune_rule
+    from tests.server.conftest import in_process_client
+
+    with in_process_client(tmp_path / "api.db") as api:
+        bad = api.post("/api/jobs", json={"iterations": 3, "prune": {"confidence": 1.5}})
+        assert bad.status_code == 422 and "confidence" in bad.text
+        assert api.post("/api/jobs", json={"iterations": 3, "prune": {"p": 0.05}}).status_code == 422
+        job = api.post("/api/jobs", json={"iterations": 3, "prune": {"enabled": False}}).json()
+        assert job["spec"]["prune"] == {"enabled": False, "confidence": DEFAULT_CONFIDENCE,
+                                        "min_seeds": DEFAULT_MIN_SEEDS}
+        assert api.post("/api/jobs", json={"iterations": 3}).json()["spec"]["prune"]["enabled"]
+    assert prune_rule("off") == PruneRule(enabled=False) and prune_rule(None) == PruneRule()
+    assert prune_rule("0.99,3") == PruneRule(True, 0.99, 3)
+    with pytest.raises(ConfigError, match="--prune must be"):
+        prune_rule("0.99")
+    with pytest.raises(ConfigError, match="prune.min_seeds"):
+        prune_rule("0.99,1")

@@ -153,6 +153,19 @@ def _prune_if_worse(evaluation: _PendingEvaluation, waiting: list[tuple[_Pending
             return
 
 
+def _held_back(evaluation: _PendingEvaluation, seed: int, rule: PruneRule, incumbent_J: dict[int, float] | None
+               ) -> bool:
+    """Whether a seed of the evaluation waits to start until its first ``min_seeds`` seeds are back: the prune rule
+    decides on those, and a seed started before it did runs for nothing if the theta stops (with 2 workers and 4
+    seeds, the third seed started as the first came back, so a stopped theta ran 3 episodes instead of 2; the
+    workers take the next evaluation's seeds meanwhile). Never a would-be best's seeds, and only while the rule can
+    stop the theta (it is on, and there is a best to compare with)."""
+    if evaluation.confirming or evaluation.pruned or not rule.enabled or incumbent_J is None:
+        return False
+    first = evaluation.seeds[:rule.min_seeds]
+    return seed not in first and not all(s in evaluation.outcomes for s in first)
+
+
 STORED, OVER_BUDGET, LOST = "stored", "over_budget", "lost"
 
 
@@ -253,10 +266,11 @@ def _fitted_spec(factory: sessionmaker[Session], job_id: int) -> TuningSpec:
 def _may_ask(waiting: list, evaluations: list[_PendingEvaluation], room: bool) -> bool:
     """Whether to ask the next theta now: while at most one evaluation is unfinished (the next one is asked as
     soon as the previous one starts, so its episodes wait ready when the workers free up), or while the share has
-    room and nothing waits for a slot. The optimizer knows no less than if it asked later: an evaluation is told
-    only once all of its seeds are in, so the next theta is asked with the unfinished one pending either way. (It
-    used to wait until the unfinished evaluation's last episodes had started: with 4 seeds on 2 workers the workers
-    then ran dry whenever the ask took longer than those last episodes.)"""
+    room and nothing that may start waits for a slot (a seed held back for the prune rule, :func:`_held_back`,
+    does not count: with many workers it would stop every ask). The optimizer knows no less than if it asked later:
+    an evaluation is told only once all of its seeds are in, so the next theta is asked with the unfinished one
+    pending either way. (It used to wait until the unfinished evaluation's last episodes had started: with 4 seeds
+    on 2 workers the workers then ran dry whenever the ask took longer than those last episodes.)"""
     return len(evaluations) < 2 or (not waiting and room)
 
 
@@ -324,9 +338,17 @@ def _run(factory: sessionmaker[Session], job_id: int, executor: EpisodeExecutor,
     episodes: dict[Future[EpisodeOutcome], _PendingEvaluation] = {}
     waiting: list[tuple[_PendingEvaluation, int]] = []  # asked episodes waiting for a slot
 
+    def startable() -> list[tuple[_PendingEvaluation, int]]:
+        """What waits and may start now, in order (:func:`_held_back`)."""
+        return [(e, seed) for e, seed in waiting if not _held_back(e, seed, spec.prune, incumbent_J)]
+
     def submit_waiting() -> None:
-        while waiting and slots.try_take(owner):
-            evaluation, seed = waiting.pop(0)
+        while waiting:
+            ready = next((i for i, (e, seed) in enumerate(waiting)
+                          if not _held_back(e, seed, spec.prune, incumbent_J)), None)
+            if ready is None or not slots.try_take(owner):
+                return
+            evaluation, seed = waiting.pop(ready)
             future = executor.submit(evaluation.theta, config_doc, seed)
             future.add_done_callback(lambda _: wake.set())
             episodes[future] = evaluation
@@ -355,13 +377,14 @@ def _run(factory: sessionmaker[Session], job_id: int, executor: EpisodeExecutor,
             stopping = not lease.held or stop_reason is not None
             # Deterministic: one evaluation at a time (its seeds still run in parallel), so the optimizer's
             # history never depends on which worker finished first.
-            free = not evaluations if spec.deterministic else _may_ask(waiting, evaluations, slots.has_room(owner))
+            free = not evaluations if spec.deterministic else _may_ask(startable(), evaluations,
+                                                                       slots.has_room(owner))
             while (not stopping and free and n_done + len(evaluations) < lease.iterations):
                 evaluation = _next_evaluation(lease, spec, optimizer, evaluations, seeds)
                 evaluations.append(evaluation)
                 waiting.extend((evaluation, seed) for seed in seeds)
                 submit_waiting()
-                free = not spec.deterministic and _may_ask(waiting, evaluations, slots.has_room(owner))
+                free = not spec.deterministic and _may_ask(startable(), evaluations, slots.has_room(owner))
             submit_waiting()  # what is asked completes, paused or not: its episodes were started or are due
             if not episodes and not waiting and (stopping or n_done + len(evaluations) >= lease.iterations):
                 break

@@ -391,3 +391,18 @@ def test_a_deterministic_job_prunes_the_same_evaluations_whatever_the_workers_ti
     many = stored("many", PairedSeedExecutor(rng_seed), 3)
     assert any(pruned for *_, pruned in one)
     assert one == many
+
+
+def test_a_thetas_later_seeds_wait_for_the_rule_and_the_workers_take_the_next_thetas_seeds_meanwhile(tmp_path):
+    """With 2 workers whose episodes finish in a random order, seed 2 of a theta does not start as soon as seed 0 is
+    back (it would run for nothing if the theta stops after seeds 0 and 1): a theta stopped after 2 seeds ran 2."""
+    executor = PairedSeedExecutor(3)
+    spec, stored, _ = _paired_job(tmp_path, "hold", PruneRule(), executor, workers=2)
+    by_theta: dict[tuple, list] = {}
+    for e in stored:
+        by_theta.setdefault(tuple(sorted(e.theta.items())), []).append(e)
+    stopped_at_two = [k for k, group in by_theta.items()
+                      if all(e.metrics.get("pruned") and e.metrics["n_samples"] == 2 for e in group)]
+    assert len(stopped_at_two) >= 5
+    for k in stopped_at_two:
+        assert sorted(executor.ran[k]) == sorted(s["seed"] for e in by_theta[k] for s in e.seeds)

@@ -32,8 +32,11 @@ from scipy import stats
 
 from driftlab.core.errors import ConfigError
 
-# Provisional, to be measured (docs/benchmarks.md). More seeds before deciding saves little with 2 workers and 4
-# seeds: by the time a third seed is in, the fourth has started.
+# Measured on the job default's 500-run (docs/benchmarks.md, "Stopping a losing theta early"): 0.95 and 2 seeds ran
+# 2.3 episodes an evaluation against 3.0 without pruning, with a best J and a best theta on fresh seeds within the
+# spread of the runs without it; 0.99 stops few thetas at 2 seeds (one degree of freedom: t > 31.8), 2.8; 0.90, 2.1,
+# stops a theta as good as the best up to one time in ten at each prefix it tests. With 4 seeds a theta stopped at 3
+# saves 1 episode, at 2 saves 2.
 DEFAULT_CONFIDENCE = 0.95
 DEFAULT_MIN_SEEDS = 2
 CONFIDENCE_LIMITS = (0.5, 0.9999)

@@ -94,6 +94,12 @@ def test_the_rule_at_the_api_and_the_cli_names_its_field(tmp_path):
         assert job["spec"]["prune"] == {"enabled": False, "confidence": DEFAULT_CONFIDENCE,
                                         "min_seeds": DEFAULT_MIN_SEEDS}
         assert api.post("/api/jobs", json={"iterations": 3}).json()["spec"]["prune"]["enabled"]
+    from driftlab.cli import build_parser
+    from driftlab.cli.tune import tuning_spec
+
+    for given, rule in ((["--prune", "off"], PruneRule(enabled=False)), ([], PruneRule()),
+                        (["--prune", "0.9,3"], PruneRule(True, 0.9, 3))):
+        assert tuning_spec(build_parser().parse_args(["tune", *given])).prune == rule
     assert prune_rule("off") == PruneRule(enabled=False) and prune_rule(None) == PruneRule()
     assert prune_rule("0.99,3") == PruneRule(True, 0.99, 3)
     with pytest.raises(ConfigError, match="--prune must be"):

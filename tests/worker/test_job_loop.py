@@ -406,3 +406,26 @@ def test_a_thetas_later_seeds_wait_for_the_rule_and_the_workers_take_the_next_th
     assert len(stopped_at_two) >= 5
     for k in stopped_at_two:
         assert sorted(executor.ran[k]) == sorted(s["seed"] for e in by_theta[k] for s in e.seeds)
+
+
+def test_a_resumed_job_prunes_against_the_best_it_stored(tmp_path):
+    """The best's per-seed J is read back from its stored seeds when a job resumes: a clearly worse theta, the first
+    one asked after the resume (enqueued), stops after 2 seeds (with no best in memory it would run all 4)."""
+    from driftlab.db import enqueued, lifecycle
+
+    factory = storage.open_database(f"sqlite:///{tmp_path / 'resume.db'}")
+    spec = TuningSpec(iterations=12, seed_points=8, seed=0, robust_samples=4, confirm_samples=2,
+                      bounds={"k": [0.0, 0.12]}, model_correction=False)
+    with storage.transaction(factory) as session:
+        job_id = storage.create_job(session, name="resume", spec=spec.to_dict(), seed=spec.seed).id
+    claim_job(factory, job_id, "runner")
+    assert run_job(factory, job_id, PairedSeedExecutor(None), runner="runner") == "finished"
+    with storage.transaction(factory) as session:
+        lifecycle.extend(session, job_id=job_id, iterations=13)
+        enqueued.enqueue(session, job_id=job_id, thetas=[spec.picked_theta({"k": 0.11})])
+    claim_job(factory, job_id, "runner2")
+    assert run_job(factory, job_id, PairedSeedExecutor(None), runner="runner2") == "finished"
+    with storage.snapshot(factory) as session:
+        resumed = storage.evaluations(session, job_id=job_id)[12]
+    assert resumed.theta["k"] == 0.11
+    assert resumed.metrics.get("pruned") and [s["seed"] for s in resumed.seeds] == spec.episode_seeds[:2]

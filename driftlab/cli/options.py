@@ -177,6 +177,9 @@ def add_job_options(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--deterministic", action="store_true", default=None,
                         help="one evaluation at a time (its seeds still in parallel): the thetas depend on the seed "
                              "and settings only, not on the number of workers or which episode finishes first")
+    parser.add_argument("--prune", metavar="off|CONFIDENCE,MIN_SEEDS",
+                        help="stop a theta whose first seeds are worse than the best's on the same seeds with "
+                             "confidence (default: on, 0.95,2; off: every evaluation runs every seed)")
     parser.add_argument("--time-budget", type=float, metavar="SECONDS",
                         help="finish the job once it has run this long in all (its runs' wall time), budget or not")
     parser.add_argument("--stop-after-no-improvement", metavar="N[:BY]",

@@ -22,6 +22,7 @@ from driftlab.core.limits import (  # noqa: F401  # the defaults re-exported: ca
     check_int,
 )
 from driftlab.core.plants import entry_of
+from driftlab.core.pruning import PruneRule
 from driftlab.core.robust import tuning_seeds
 from driftlab.core.stopping import StopRules
 from driftlab.core.warm_start import WarmStart
@@ -108,6 +109,9 @@ class TuningSpec:
             off: the seed points fill the whole box (jobs stored before revision 10). None (the default): on for
             DriftLab's own plants, off for any other (see LOCAL_POINTS); stored as what it resolved to.
         stop: stop rules besides the budget, a time budget and no improvement (driftlab.core.stopping).
+        prune: the early stop of a theta whose first seeds are worse than the best's with confidence
+            (driftlab.core.pruning; on by default, ``{"enabled": false}`` runs every seed of every evaluation).
+            A document without it (those stored before it existed included) takes the default.
         warm_start: what the job takes from other jobs' evaluations before its own (driftlab.core.warm_start):
             evaluations of its own config told first, or other configs' best thetas asked first. None: a cold start.
         deterministic: the next theta is asked only once every evaluation asked before is stored and told, so the
@@ -133,6 +137,7 @@ class TuningSpec:
     deterministic: bool = False
     warm_start: WarmStart | None = None
     stop: StopRules = field(default_factory=StopRules)
+    prune: PruneRule = field(default_factory=PruneRule)
     version: int = JOB_DOCUMENT_VERSION
 
     def __post_init__(self) -> None:
@@ -149,6 +154,8 @@ class TuningSpec:
             raise ConfigError(f"local_phase must be true or false, got {self.local_phase!r}", field="local_phase")
         if not isinstance(self.stop, StopRules):
             raise ConfigError("stop must be the job's stop rules", field="stop")
+        if not isinstance(self.prune, PruneRule):
+            raise ConfigError("prune must be the job's prune rule", field="prune")
         if not isinstance(self.deterministic, bool):
             raise ConfigError(f"deterministic must be true or false, got {self.deterministic!r}",
                               field="deterministic")
@@ -180,6 +187,7 @@ class TuningSpec:
                "seed": self.seed, "robust_samples": self.robust_samples, "confirm_samples": self.confirm_samples,
                "bounds": {k: list(v) for k, v in self.bounds.items()}, "model_correction": self.model_correction,
                "local_phase": self.local_phase, "deterministic": self.deterministic,
+               "prune": self.prune.to_dict(),  # stored whole: a job keeps its rule if the defaults change
                "config": config_to_dict(self.config)}
         if self.warm_start is not None:  # a cold job's document stays what it was
             out["warm_start"] = self.warm_start.to_dict()
@@ -253,7 +261,8 @@ class TuningSpec:
         """
         allowed = {"version", "fitted", "iterations", "seed_points", "active_set", "seed", "robust_samples",
                    "confirm_samples", "bounds",
-                   "model_correction", "local_phase", "deterministic", "config", "warm_start", "stop"}
+                   "model_correction", "local_phase", "deterministic", "config", "warm_start", "stop",
+                   "prune"}
         unknown = set(data) - allowed
         if unknown:
             raise ConfigError(f"unknown field {sorted(unknown)[0]!r}; allowed: {', '.join(sorted(allowed))}")
@@ -273,4 +282,5 @@ class TuningSpec:
                    deterministic=data.get("deterministic", False),
                    warm_start=None if data.get("warm_start") is None else WarmStart.from_dict(data["warm_start"]),
                    stop=StopRules() if data.get("stop") is None else StopRules.from_dict(data["stop"]),
+                   prune=PruneRule() if data.get("prune") is None else PruneRule.from_dict(data["prune"]),
                    version=version)

@@ -11,6 +11,7 @@ from pydantic import AfterValidator, BaseModel, ConfigDict, Field, model_validat
 from driftlab.core.config import THETA_KEYS, check_json_types
 from driftlab.core.errors import ConfigError
 from driftlab.core.limits import JOB_LIMITS
+from driftlab.core.pruning import CONFIDENCE_LIMITS, DEFAULT_CONFIDENCE, DEFAULT_MIN_SEEDS, MIN_SEEDS_LIMITS
 from driftlab.core.stopping import NO_IMPROVEMENT_BY, NO_IMPROVEMENT_EVALUATIONS, TIME_BUDGET_LIMITS_S
 from driftlab.core.tuning import DEFAULT_CONFIRM_SAMPLES, DEFAULT_ROBUST_SAMPLES, DEFAULT_SEED_POINTS
 from driftlab.core.warm_start import MAX_WARM_JOBS
@@ -95,6 +96,19 @@ class StopCreate(BaseModel):
         return self
 
 
+class PruneCreate(BaseModel):
+    """A job's early stop of a losing theta (driftlab.core.pruning)."""
+
+    model_config = ConfigDict(extra="forbid")
+
+    enabled: bool = Field(default=True, strict=True, description="false: every evaluation runs every seed")
+    confidence: StrictNumber = Field(default=DEFAULT_CONFIDENCE, ge=CONFIDENCE_LIMITS[0], le=CONFIDENCE_LIMITS[1],
+                                     description="how sure the paired test must be that a theta is worse than the "
+                                                 "best on the same seeds before it stops")
+    min_seeds: int = Field(default=DEFAULT_MIN_SEEDS, ge=MIN_SEEDS_LIMITS[0], le=MIN_SEEDS_LIMITS[1], strict=True,
+                           description="paired seeds before a theta may stop")
+
+
 class JobCreate(BaseModel):
     model_config = ConfigDict(extra="forbid")
 
@@ -125,6 +139,8 @@ class JobCreate(BaseModel):
                                           "e.g. {\"plant.steer_lag_s\": 0.02}, or nested sections")
     stop: StopCreate | None = Field(default=None, description="stop rules besides the budget: a time budget, no "
                                                           "improvement")
+    prune: PruneCreate | None = Field(default=None, description="stop a theta whose first seeds are worse than the "
+                                      "best's on the same seeds with confidence (default: on, 0.95, 2 seeds)")
     warm_start_from: list[Annotated[int, Field(ge=1, le=MAX_ID, strict=True)]] | None = Field(
         default=None, min_length=1, max_length=MAX_WARM_JOBS,
         description="start from these stored jobs' evaluations: told to the optimizer where a job ran the same "

@@ -12,6 +12,7 @@ import numpy as np
 import pytest
 
 from driftlab.core.errors import ConfigError
+from driftlab.core.pruning import PruneRule
 from driftlab.core.tuning import TuningSpec
 from driftlab.db import storage
 from driftlab.worker.executors import EpisodeOutcome
@@ -197,7 +198,7 @@ def test_a_failed_seed_ends_its_evaluation_unless_the_job_is_deterministic(tmp_p
     the seeds that ran; a deterministic job runs every seed (which ones had started would depend on timing)."""
     factory = storage.open_database(f"sqlite:///{tmp_path / 'skip.db'}")
     spec = TuningSpec(iterations=10, seed_points=10, seed=0, robust_samples=4, confirm_samples=0,
-                      deterministic=deterministic, bounds={"k": [0.0, 0.12]})
+                      deterministic=deterministic, bounds={"k": [0.0, 0.12]}, prune=PruneRule(enabled=False))
     with storage.transaction(factory) as session:
         job_id = storage.create_job(session, name="skip", spec=spec.to_dict(), seed=spec.seed).id
     claim_job(factory, job_id, "runner")
@@ -292,3 +293,139 @@ def test_a_job_document_states_its_version_and_refuses_one_it_cannot_read_or_a_f
     with pytest.raises(ConfigError, match="fitted: the document says its config is fitted, but it lacks") as lacks:
         TuningSpec.from_dict({**document, "fitted": True})
     assert lacks.value.field == "fitted"
+
+
+class PairedSeedExecutor:
+    """Episodes whose J is theta's quality plus a car of each seed (the same for every theta: common random numbers)
+    plus a little of both, each finished after a random delay on its own thread (or inline: ``rng_seed`` None).
+    Records the seeds it ran, per theta."""
+
+    def __init__(self, rng_seed: int | None) -> None:
+        self.rng = None if rng_seed is None else random.Random(rng_seed)
+        self.ran: dict[tuple, list[int]] = {}
+        self.lock = threading.Lock()
+
+    @staticmethod
+    def J(theta, seed) -> float:
+        car = ((seed * 7919) % 13) / 13 * 0.2
+        return (theta["k"] - 0.05) ** 2 * 300 + 0.3 * car * (1 + theta["k"]) - 1.5
+
+    def submit(self, theta, config_doc, seed=0) -> Future:
+        with self.lock:
+            self.ran.setdefault(tuple(sorted(theta.items())), []).append(seed)
+        future: Future = Future()
+
+        def finish():
+            future.set_result(EpisodeOutcome.packing(
+                theta=dict(theta), seed=seed, status="completed", J=self.J(theta, seed),
+                metrics={"completed_fraction": 1.0, "mean_abs_e_m": 0.1}, trigger_points=[], wall_ms=1.0,
+                columns=["t_s"], trajectory=np.zeros((2, 1))))
+
+        if self.rng is None:
+            finish()
+        else:
+            delay_s = self.rng.uniform(0.0, 0.01)
+            threading.Thread(target=lambda: (time.sleep(delay_s), finish()), daemon=True).start()
+        return future
+
+    def shutdown(self) -> None:
+        pass
+
+
+def _paired_job(tmp_path, name, prune: PruneRule, executor, workers=1, deterministic=False):
+    factory = storage.open_database(f"sqlite:///{tmp_path / (name + '.db')}")
+    spec = TuningSpec(iterations=30, seed_points=8, seed=0, robust_samples=4, confirm_samples=2,
+                      bounds={"k": [0.0, 0.12]}, model_correction=False, deterministic=deterministic, prune=prune)
+    with storage.transaction(factory) as session:
+        job_id = storage.create_job(session, name=name, spec=spec.to_dict(), seed=spec.seed).id
+    claim_job(factory, job_id, "runner")
+    assert run_job(factory, job_id, executor, runner="runner", workers=workers) == "finished"
+    with storage.snapshot(factory) as session:
+        return spec, storage.evaluations(session, job_id=job_id), storage.best_evaluation(session, job_id=job_id)
+
+
+def test_a_theta_clearly_worse_than_the_best_on_its_first_seeds_stops_there_and_the_best_runs_every_seed(tmp_path):
+    """Pruning on: a theta worse than the best on its first two seeds (with confidence) runs no more seeds, is stored
+    completed with its mean over those two and marked pruned; the best ran all its 4 + 2 seeds."""
+    executor = PairedSeedExecutor(None)  # inline, one worker: each episode is back before the next starts
+    spec, stored, best = _paired_job(tmp_path, "prune", PruneRule(confidence=0.95, min_seeds=2), executor)
+    assert len(stored) == 30
+    pruned = [e for e in stored if e.metrics.get("pruned")]
+    assert len(pruned) >= 5
+    for e in pruned:
+        assert [s["seed"] for s in e.seeds] == spec.episode_seeds[:2]
+        assert e.completed and e.metrics["n_samples"] == 2
+        assert e.J == pytest.approx(sum(PairedSeedExecutor.J(e.theta, s) for s in spec.episode_seeds[:2]) / 2)
+        assert e.J > best.J  # never the best on easy seeds
+    # The unstarted seeds never ran: the episodes run are those stored (a theta at a bound may be asked again).
+    stored_seeds: dict[tuple, list[int]] = {}
+    for e in stored:
+        stored_seeds.setdefault(tuple(sorted(e.theta.items())), []).extend(s["seed"] for s in e.seeds)
+    assert {k: sorted(v) for k, v in executor.ran.items()} == {k: sorted(v) for k, v in stored_seeds.items()}
+    assert not best.metrics.get("pruned")
+    assert [s["seed"] for s in best.seeds] == spec.episode_seeds + spec.confirm_seeds
+    unpruned = [e for e in stored if not e.metrics.get("pruned")]
+    assert all(len(e.seeds) in (4, 6) and "pruned" not in e.metrics for e in unpruned)
+
+
+def test_pruning_off_runs_every_seed_of_every_evaluation(tmp_path):
+    executor = PairedSeedExecutor(None)
+    spec, stored, best = _paired_job(tmp_path, "off", PruneRule(enabled=False), executor)
+    assert all(len(e.seeds) in (4, 6) and "pruned" not in e.metrics for e in stored)
+    assert sum(len(ran) for ran in executor.ran.values()) == sum(len(e.seeds) for e in stored)
+    # pruning on spends fewer episodes on the same job
+    on = PairedSeedExecutor(None)
+    _paired_job(tmp_path, "on", PruneRule(), on)
+    assert sum(len(ran) for ran in on.ran.values()) < sum(len(ran) for ran in executor.ran.values())
+
+
+@pytest.mark.parametrize("rng_seed", [1, 2])
+def test_a_deterministic_job_prunes_the_same_evaluations_whatever_the_workers_timing(tmp_path, rng_seed):
+    """The rule reads the prefix of the seeds in the job's order, shortest first: what is stored (thetas, seeds, J,
+    pruned) is the same on one inline worker and on three whose episodes finish in a random order."""
+    def stored(name, executor, workers):
+        _, evaluations, _ = _paired_job(tmp_path, name, PruneRule(), executor, workers, deterministic=True)
+        return [(e.theta, [s["seed"] for s in e.seeds], e.J, e.metrics.get("pruned")) for e in evaluations]
+
+    one = stored("one", PairedSeedExecutor(None), 1)
+    many = stored("many", PairedSeedExecutor(rng_seed), 3)
+    assert any(pruned for *_, pruned in one)
+    assert one == many
+
+
+def test_a_thetas_later_seeds_wait_for_the_rule_and_the_workers_take_the_next_thetas_seeds_meanwhile(tmp_path):
+    """With 2 workers whose episodes finish in a random order, seed 2 of a theta does not start as soon as seed 0 is
+    back (it would run for nothing if the theta stops after seeds 0 and 1): a theta stopped after 2 seeds ran 2."""
+    executor = PairedSeedExecutor(3)
+    spec, stored, _ = _paired_job(tmp_path, "hold", PruneRule(), executor, workers=2)
+    by_theta: dict[tuple, list] = {}
+    for e in stored:
+        by_theta.setdefault(tuple(sorted(e.theta.items())), []).append(e)
+    stopped_at_two = [k for k, group in by_theta.items()
+                      if all(e.metrics.get("pruned") and e.metrics["n_samples"] == 2 for e in group)]
+    assert len(stopped_at_two) >= 5
+    for k in stopped_at_two:
+        assert sorted(executor.ran[k]) == sorted(s["seed"] for e in by_theta[k] for s in e.seeds)
+
+
+def test_a_resumed_job_prunes_against_the_best_it_stored(tmp_path):
+    """The best's per-seed J is read back from its stored seeds when a job resumes: a clearly worse theta, the first
+    one asked after the resume (enqueued), stops after 2 seeds (with no best in memory it would run all 4)."""
+    from driftlab.db import enqueued, lifecycle
+
+    factory = storage.open_database(f"sqlite:///{tmp_path / 'resume.db'}")
+    spec = TuningSpec(iterations=12, seed_points=8, seed=0, robust_samples=4, confirm_samples=2,
+                      bounds={"k": [0.0, 0.12]}, model_correction=False)
+    with storage.transaction(factory) as session:
+        job_id = storage.create_job(session, name="resume", spec=spec.to_dict(), seed=spec.seed).id
+    claim_job(factory, job_id, "runner")
+    assert run_job(factory, job_id, PairedSeedExecutor(None), runner="runner") == "finished"
+    with storage.transaction(factory) as session:
+        lifecycle.extend(session, job_id=job_id, iterations=13)
+        enqueued.enqueue(session, job_id=job_id, thetas=[spec.picked_theta({"k": 0.11})])
+    claim_job(factory, job_id, "runner2")
+    assert run_job(factory, job_id, PairedSeedExecutor(None), runner="runner2") == "finished"
+    with storage.snapshot(factory) as session:
+        resumed = storage.evaluations(session, job_id=job_id)[12]
+    assert resumed.theta["k"] == 0.11
+    assert resumed.metrics.get("pruned") and [s["seed"] for s in resumed.seeds] == spec.episode_seeds[:2]

@@ -56,8 +56,10 @@ LOCAL_MODEL_RADIUS = 0.05
 LOCAL_GROWTH = 15
 # The job document's version (TuningSpec.to_dict). 2: it states whether its config is fitted to its plant ("fitted";
 # version 1 said so by the keys it lacked, driftlab.core.config.config_to_dict). A posted document without one is of
-# this release; the documents stored before it were stamped 1 (migration 0017).
-JOB_DOCUMENT_VERSION = 2
+# this release; the documents stored before it were stamped 1 (migration 0017). 3: it holds its prune rule
+# (driftlab.core.pruning); one of version 1 or 2 was written before the rule existed and runs every seed of every
+# evaluation, as it did (a resumed job goes on as it began).
+JOB_DOCUMENT_VERSION = 3
 # The paper's 500-run learns the paper's four parameters only.
 PAPER_PRESET = {"iterations": 500, "seed_points": 20, "active_set": 400, "model_correction": False}
 
@@ -111,7 +113,8 @@ class TuningSpec:
         stop: stop rules besides the budget, a time budget and no improvement (driftlab.core.stopping).
         prune: the early stop of a theta whose first seeds are worse than the best's with confidence
             (driftlab.core.pruning; on by default, ``{"enabled": false}`` runs every seed of every evaluation).
-            A document without it (those stored before it existed included) takes the default.
+            A posted document without it takes the default; a stored one of version 1 or 2 (before the rule
+            existed) runs with it off, as it ran.
         warm_start: what the job takes from other jobs' evaluations before its own (driftlab.core.warm_start):
             evaluations of its own config told first, or other configs' best thetas asked first. None: a cold start.
         deterministic: the next theta is asked only once every evaluation asked before is stored and told, so the
@@ -282,5 +285,13 @@ class TuningSpec:
                    deterministic=data.get("deterministic", False),
                    warm_start=None if data.get("warm_start") is None else WarmStart.from_dict(data["warm_start"]),
                    stop=StopRules() if data.get("stop") is None else StopRules.from_dict(data["stop"]),
-                   prune=PruneRule() if data.get("prune") is None else PruneRule.from_dict(data["prune"]),
+                   prune=_prune_rule(data.get("prune"), version),
                    version=version)
+
+
+def _prune_rule(data: Any, version: int) -> PruneRule:
+    """A document's prune rule: as it states it; else the default for a new document, off for one written before
+    the rule existed (version 1 or 2)."""
+    if data is not None:
+        return PruneRule.from_dict(data)
+    return PruneRule() if version >= 3 else PruneRule(enabled=False)

@@ -240,7 +240,7 @@ def test_a_runner_fits_a_cars_model_when_it_claims_the_job_and_stores_it_fitted(
     with storage.transaction(factory) as session:
         job_id = storage.create_job(session, name="car", spec=spec.to_dict(), seed=0).id
         queued = storage.get_job(session, job_id=job_id).spec
-        assert "vehicle" not in queued["config"] and queued["fitted"] is False and queued["version"] == 2
+        assert "vehicle" not in queued["config"] and queued["fitted"] is False and queued["version"] == 3
     claim_job(factory, job_id, "runner")
     executor = RecordingExecutor()
     assert run_job(factory, job_id, executor, runner="runner", workers=2) == "finished"
@@ -283,12 +283,16 @@ def test_a_job_document_states_its_version_and_refuses_one_it_cannot_read_or_a_f
     """A stored job's document is versioned (a document stored before versions was stamped 1 and re-runs as it
     did); "fitted" true with the controller's model missing is refused, naming the field."""
     document = TuningSpec.from_dict({"iterations": 3, "config": {"plant.model": "commonroad_std"}}).to_dict()
-    assert document["version"] == 2 and document["fitted"] is False
+    assert document["version"] == 3 and document["fitted"] is False
     posted = {k: v for k, v in document.items() if k not in ("version", "fitted")}
     assert TuningSpec.from_dict(posted) == TuningSpec.from_dict(document)  # a posted document is of this release
     assert TuningSpec.from_dict({**document, "version": 1}).to_dict()["version"] == 1  # kept as stored
-    with pytest.raises(ConfigError, match="version must be 1 to 2") as refused:
-        TuningSpec.from_dict({**document, "version": 3})
+    # A document of before the prune rule (version 1 or 2, none stated) runs every seed, as it did; a new one prunes.
+    before = {k: v for k, v in document.items() if k != "prune"}
+    assert [TuningSpec.from_dict({**before, "version": v}).prune.enabled for v in (1, 2, 3)] == [False, False, True]
+    assert TuningSpec.from_dict({k: v for k, v in before.items() if k != "version"}).prune.enabled
+    with pytest.raises(ConfigError, match="version must be 1 to 3") as refused:
+        TuningSpec.from_dict({**document, "version": 4})
     assert refused.value.field == "version"
     with pytest.raises(ConfigError, match="fitted: the document says its config is fitted, but it lacks") as lacks:
         TuningSpec.from_dict({**document, "fitted": True})

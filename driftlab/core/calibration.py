@@ -28,7 +28,6 @@ from driftlab.core.drivability import drift_window, drivable_reason
 from driftlab.core.episode import failure_penalty
 from driftlab.core.errors import ConfigError
 from driftlab.core.mpc_config import MpcConfig
-from driftlab.core.optimizer import BayesianOptimizer
 from driftlab.core.statuses import EpisodeStatus
 from driftlab.core.track import TILED_RADIUS_SHARES
 
@@ -254,6 +253,8 @@ def calibrate(base: EpisodeConfig, points: Sequence[tuple[CalibrationPoint, Epis
             starts.append(x)
         calibration.known_tried.append(starts.index(x))
     seed_points = min(max(20, len(starts)), iterations)
+    from driftlab.core.optimizer import BayesianOptimizer  # here: the server validates calibrations with this module
+
     optimizer = BayesianOptimizer(bounds, seed_points=seed_points, seed=seed, initial_points=starts[:seed_points],
                                   local_points=min(10, seed_points - min(len(starts), seed_points)),
                                   local_radius=0.15, local_growth=max(iterations // 2, 1))
@@ -312,6 +313,7 @@ def learn_theta(config: EpisodeConfig, run_batch: RunBatch, *, iterations: int, 
     ``seeds`` calibration seeds as a weight set is (mean J, failures at their penalty). Returns the best theta and
     its score. A calibration's next round searches the weights again for it: the flick a job finds there is not
     the untuned one, and at the edge of a car's window the weights for the untuned flick complete nothing."""
+    from driftlab.core.optimizer import BayesianOptimizer
     from driftlab.core.tuning import TuningSpec
 
     spec = TuningSpec(iterations=iterations, config=config, seed=seed)

@@ -11,7 +11,7 @@ import threading
 import time
 from collections.abc import Callable, Hashable
 from concurrent.futures import CancelledError, Future
-from dataclasses import dataclass, field, replace
+from dataclasses import dataclass, replace
 
 from sqlalchemy.orm import Session, sessionmaker
 
@@ -19,8 +19,7 @@ from driftlab.core.config import Theta
 from driftlab.core.convergence import best_so_far
 from driftlab.core.drivability import check_drivable
 from driftlab.core.errors import ConfigError
-from driftlab.core.pruning import PruneRule
-from driftlab.core.robust import RobustScore, SampleResult, aggregate
+from driftlab.core.robust import RobustScore, SampleResult
 from driftlab.core.statuses import EpisodeStatus
 from driftlab.core.tuning import TuningSpec
 from driftlab.db import enqueued, group_commit, lifecycle, storage
@@ -29,6 +28,7 @@ from driftlab.db.models import Job
 from driftlab.settings import MAX_TRAJECTORIES_PER_JOB
 from driftlab.worker.executors import EpisodeExecutor, EpisodeOutcome
 from driftlab.worker.optimizer_host import OptimizerHost, restore_optimizer
+from driftlab.worker.seed_queue import PendingEvaluation, SeedQueue
 from driftlab.worker.slots import EpisodeSlots
 
 
@@ -66,32 +66,8 @@ def interrupted_status(exc: BaseException) -> tuple[WorkStatus, str]:
     return WorkStatus.FAILED, text[:2000]
 
 
-@dataclass
-class _PendingEvaluation:
-    """One asked theta whose episodes (one per seed) are running."""
-
-    theta: dict[str, float]
-    seeds: list[int]
-    outcomes: dict[int, EpisodeOutcome] = field(default_factory=dict)
-    confirming: bool = False
-    enqueued_id: int | None = None  # an enqueued theta's row (driftlab.db.enqueued), not the optimizer's proposal
-    pruned: bool = False  # stopped early, worse than the best (_prune_if_worse); scored on the seeds it decided on
-    tested: int = 0  # the longest prefix of its seeds the prune rule has looked at
-
-    @property
-    def done(self) -> bool:
-        # every seed it is scored on is in (a pruned one may have another episode still running, not waited for)
-        return all(seed in self.outcomes for seed in self.seeds)
-
-    def score(self) -> tuple[RobustScore, list[SampleResult], EpisodeOutcome]:
-        ordered = [self.outcomes[s] for s in self.seeds]
-        samples = [o.sample() for o in ordered]
-        score = aggregate(samples)
-        return score, samples, ordered[score.representative]
-
-
-def _next_evaluation(lease: _Lease, spec: TuningSpec, optimizer, in_flight: list[_PendingEvaluation],
-                     seeds: list[int]) -> _PendingEvaluation:
+def _next_evaluation(lease: _Lease, spec: TuningSpec, optimizer, in_flight: list[PendingEvaluation],
+                     seeds: list[int]) -> PendingEvaluation:
     """The oldest theta enqueued for the job and not in flight (POST /api/jobs/{id}/enqueue; told to the optimizer
     like any other once evaluated), where the lease has seen any, else the optimizer's next proposal."""
     if lease.enqueued:
@@ -100,76 +76,15 @@ def _next_evaluation(lease: _Lease, spec: TuningSpec, optimizer, in_flight: list
             row = next(iter(enqueued.waiting(session, job_id=lease.job_id, taken=taken, limit=1)), None)
             if row is not None:
                 theta = Theta.filled(row.theta)
-                return _PendingEvaluation({k: float(theta[k]) for k in spec.bounds}, seeds, enqueued_id=row.id)
+                return PendingEvaluation({k: float(theta[k]) for k in spec.bounds}, seeds, enqueued_id=row.id)
         lease.enqueued = False  # none left to take: the next heartbeat looks again
-    return _PendingEvaluation(optimizer.ask(), seeds)
-
-
-def _skip_unstarted(evaluation: _PendingEvaluation, waiting: list[tuple[_PendingEvaluation, int]]) -> None:
-    """One of the evaluation's seeds failed, so the evaluation fails whatever the others do (it completes only if
-    every seed does): its seeds not started yet are dropped, and it is scored and stored with the seeds that ran
-    (J: their mean). In the job default's 500-run 310 of 500 evaluations failed, 295 of them within their first
-    two seeds, and failed evaluations took 57 % of the workers' time. Not in a deterministic job: which seeds had
-    started when the failure came back depends on the workers' timing."""
-    skipped = {seed for queued, seed in waiting if queued is evaluation}
-    if skipped:
-        waiting[:] = [(queued, seed) for queued, seed in waiting if queued is not evaluation]
-        evaluation.seeds = [seed for seed in evaluation.seeds if seed not in skipped]
-
-
-def _prune_if_worse(evaluation: _PendingEvaluation, waiting: list[tuple[_PendingEvaluation, int]], rule: PruneRule,
-                    incumbent_J: dict[int, float] | None, best_J: float | None, deterministic: bool) -> None:
-    """Stop an evaluation whose first seeds are worse than the incumbent's on the same seeds with confidence
-    (driftlab.core.pruning): its seeds not started yet are dropped and it is scored on the seeds the decision read
-    (told to the optimizer as their mean, a completed value). A would-be best is confirming and never stops here.
-
-    The rule reads the prefix of the evaluation's seeds, in the job's order, that have come back completed, and each
-    prefix length once, shortest first: it stops at the shortest prefix that is clearly worse, whichever order the
-    episodes came back in, so in a deterministic job (one evaluation at a time, the incumbent fixed while it runs)
-    what is stored and told depends on the episodes' results only, never on the workers' timing. An episode that
-    had started beyond that prefix is not waited for, and its result is not used: which had started is timing, and a
-    pruned evaluation's mean must be the mean the rule judged (above the best J: it must never become the best).
-    Outside a deterministic job an evaluation with a failed seed is a failure (:func:`_skip_unstarted`), told as
-    one, and is not pruned; in a deterministic one a failure after the prefix the rule stopped at is not used, as
-    any other seed after it (whether it was in first is timing)."""
-    if evaluation.confirming or evaluation.pruned or not rule.enabled or incumbent_J is None:
-        return
-    if not deterministic and any(not o.completed for o in evaluation.outcomes.values()):
-        return
-    prefix: dict[int, float] = {}
-    for seed in evaluation.seeds:
-        outcome = evaluation.outcomes.get(seed)
-        if outcome is None or not outcome.completed:
-            break
-        prefix[seed] = outcome.J
-    seeds = list(prefix)[:len(evaluation.seeds) - 1]  # with every seed in there is nothing left to save
-    while evaluation.tested < len(seeds):
-        evaluation.tested += 1
-        decided = seeds[:evaluation.tested]
-        if rule.stops({s: prefix[s] for s in decided}, incumbent_J, best_J):
-            evaluation.pruned = True
-            evaluation.seeds = decided
-            waiting[:] = [(queued, seed) for queued, seed in waiting if queued is not evaluation]
-            return
-
-
-def _held_back(evaluation: _PendingEvaluation, seed: int, rule: PruneRule, incumbent_J: dict[int, float] | None
-               ) -> bool:
-    """Whether a seed of the evaluation waits to start until its first ``min_seeds`` seeds are back: the prune rule
-    decides on those, and a seed started before it did runs for nothing if the theta stops (with 2 workers and 4
-    seeds, the third seed started as the first came back, so a stopped theta ran 3 episodes instead of 2; the
-    workers take the next evaluation's seeds meanwhile). Never a would-be best's seeds, and only while the rule can
-    stop the theta (it is on, and there is a best to compare with)."""
-    if evaluation.confirming or evaluation.pruned or not rule.enabled or incumbent_J is None:
-        return False
-    first = evaluation.seeds[:rule.min_seeds]
-    return seed not in first and not all(s in evaluation.outcomes for s in first)
+    return PendingEvaluation(optimizer.ask(), seeds)
 
 
 STORED, OVER_BUDGET, LOST = "stored", "over_budget", "lost"
 
 
-def _store(factory: sessionmaker[Session], lease: _Lease, evaluation: _PendingEvaluation,
+def _store(factory: sessionmaker[Session], lease: _Lease, evaluation: PendingEvaluation,
            scored: tuple[RobustScore, list[SampleResult], EpisodeOutcome]) -> str:
     """Commit the evaluation if this runner still holds the job (LOST if the job was taken over or deleted: its
     new runner asks again, and no index is stored twice) and the budget has room (OVER_BUDGET: a PATCH lowered it
@@ -263,15 +178,15 @@ def _fitted_spec(factory: sessionmaker[Session], job_id: int) -> TuningSpec:
         return replace(spec, iterations=int(job.spec["iterations"]))
 
 
-def _may_ask(waiting: list, evaluations: list[_PendingEvaluation], room: bool) -> bool:
+def _may_ask(startable: bool, evaluations: list[PendingEvaluation], room: bool) -> bool:
     """Whether to ask the next theta now: while at most one evaluation is unfinished (the next one is asked as
     soon as the previous one starts, so its episodes wait ready when the workers free up), or while the share has
-    room and nothing that may start waits for a slot (a seed held back for the prune rule, :func:`_held_back`,
-    does not count: with many workers it would stop every ask). The optimizer knows no less than if it asked later:
-    an evaluation is told only once all of its seeds are in, so the next theta is asked with the unfinished one
-    pending either way. (It used to wait until the unfinished evaluation's last episodes had started: with 4 seeds
-    on 2 workers the workers then ran dry whenever the ask took longer than those last episodes.)"""
-    return len(evaluations) < 2 or (not waiting and room)
+    room and nothing that may start waits for a slot (a seed held back for the prune rule does not count,
+    :meth:`SeedQueue.any_startable`: with many workers it would stop every ask). The optimizer knows no less than if
+    it asked later: an evaluation is told only once all of its seeds are in, so the next theta is asked with the
+    unfinished one pending either way. (It used to wait until the unfinished evaluation's last episodes had started:
+    with 4 seeds on 2 workers the workers then ran dry whenever the ask took longer than those last episodes.)"""
+    return len(evaluations) < 2 or (not startable and room)
 
 
 def run_job(factory: sessionmaker[Session], job_id: int, executor: EpisodeExecutor, *, runner: str,
@@ -286,9 +201,9 @@ def run_job(factory: sessionmaker[Session], job_id: int, executor: EpisodeExecut
     Each evaluation runs one episode per seed of the job (``robust_samples`` of them, the same seeds for every
     theta) on the executor; one that completes every episode with a J better than the best so far then runs
     ``confirm_samples`` more seeds, and is stored with all of them. Once a seed fails, the seeds of that evaluation
-    not started yet are skipped (:func:`_skip_unstarted`; not in a deterministic job); once its first seeds are
+    not started yet are skipped (:meth:`SeedQueue.skip_unstarted`; not in a deterministic job); once its first seeds are
     worse than the best evaluation's on the same seeds with confidence, it stops there (the job's ``prune`` rule,
-    :func:`_prune_if_worse`, stored with ``metrics["pruned"]``). The job keeps at most its
+    :meth:`SeedQueue.prune_if_worse`, stored with ``metrics["pruned"]``). The job keeps at most its
     share of ``slots`` episodes in flight (the executor's capacity shared with the other jobs running on it, see
     driftlab.worker.slots; ``workers`` alone when no ``slots`` are given; ``owner`` names the job there, if the
     caller joined it already); an evaluation's episodes wait for a slot, and a new theta is asked while at most one
@@ -334,21 +249,13 @@ def _run(factory: sessionmaker[Session], job_id: int, executor: EpisodeExecutor,
     seeds, confirm_seeds = spec.episode_seeds, spec.confirm_seeds
     lease = _Lease(factory, job_id, runner, spec.iterations, max_trajectories)
     n_done = len(history)
-    evaluations: list[_PendingEvaluation] = []
-    episodes: dict[Future[EpisodeOutcome], _PendingEvaluation] = {}
-    waiting: list[tuple[_PendingEvaluation, int]] = []  # asked episodes waiting for a slot
-
-    def startable() -> list[tuple[_PendingEvaluation, int]]:
-        """What waits and may start now, in order (:func:`_held_back`)."""
-        return [(e, seed) for e, seed in waiting if not _held_back(e, seed, spec.prune, incumbent_J)]
+    evaluations: list[PendingEvaluation] = []
+    episodes: dict[Future[EpisodeOutcome], PendingEvaluation] = {}
+    waiting = SeedQueue(spec.prune, best, incumbent_J, spec.deterministic)  # asked episodes waiting for a slot
 
     def submit_waiting() -> None:
-        while waiting:
-            ready = next((i for i, (e, seed) in enumerate(waiting)
-                          if not _held_back(e, seed, spec.prune, incumbent_J)), None)
-            if ready is None or not slots.try_take(owner):
-                return
-            evaluation, seed = waiting.pop(ready)
+        while waiting.any_startable() and slots.try_take(owner):
+            evaluation, seed = waiting.pop_startable()
             future = executor.submit(evaluation.theta, config_doc, seed)
             future.add_done_callback(lambda _: wake.set())
             episodes[future] = evaluation
@@ -377,14 +284,14 @@ def _run(factory: sessionmaker[Session], job_id: int, executor: EpisodeExecutor,
             stopping = not lease.held or stop_reason is not None
             # Deterministic: one evaluation at a time (its seeds still run in parallel), so the optimizer's
             # history never depends on which worker finished first.
-            free = not evaluations if spec.deterministic else _may_ask(startable(), evaluations,
+            free = not evaluations if spec.deterministic else _may_ask(waiting.any_startable(), evaluations,
                                                                        slots.has_room(owner))
             while (not stopping and free and n_done + len(evaluations) < lease.iterations):
                 evaluation = _next_evaluation(lease, spec, optimizer, evaluations, seeds)
                 evaluations.append(evaluation)
-                waiting.extend((evaluation, seed) for seed in seeds)
+                waiting.add(evaluation, seeds)
                 submit_waiting()
-                free = not spec.deterministic and _may_ask(startable(), evaluations, slots.has_room(owner))
+                free = not spec.deterministic and _may_ask(waiting.any_startable(), evaluations, slots.has_room(owner))
             submit_waiting()  # what is asked completes, paused or not: its episodes were started or are due
             if not episodes and not waiting and (stopping or n_done + len(evaluations) >= lease.iterations):
                 break
@@ -397,9 +304,9 @@ def _run(factory: sessionmaker[Session], job_id: int, executor: EpisodeExecutor,
                 outcome = future.result()
                 evaluation.outcomes[outcome.seed] = outcome
                 if not outcome.completed and not spec.deterministic:
-                    _skip_unstarted(evaluation, waiting)
+                    waiting.skip_unstarted(evaluation)
                 else:  # decided before the freed workers take its next seeds (a stored one returns at once)
-                    _prune_if_worse(evaluation, waiting, spec.prune, incumbent_J, best, spec.deterministic)
+                    waiting.prune_if_worse(evaluation)
             submit_waiting()  # the freed workers take what waits before this thread stores, tells and asks
             for evaluation in [e for e in evaluations if e.done]:
                 scored = evaluation.score()
@@ -410,7 +317,7 @@ def _run(factory: sessionmaker[Session], job_id: int, executor: EpisodeExecutor,
                     # hundreds of thetas, some pass a few seeds by luck near a failure boundary).
                     evaluation.confirming = True
                     evaluation.seeds = evaluation.seeds + confirm_seeds
-                    waiting.extend((evaluation, seed) for seed in confirm_seeds)
+                    waiting.add(evaluation, confirm_seeds)
                     continue
                 evaluations.remove(evaluation)
                 outcome_of_store = _store(factory, lease, evaluation, scored)
@@ -426,7 +333,8 @@ def _run(factory: sessionmaker[Session], job_id: int, executor: EpisodeExecutor,
                 optimizer.tell(evaluation.theta, score.J if completed else None, score.J)
                 n_done += 1
                 if completed and not evaluation.pruned and (best is None or score.J < best):
-                    best, incumbent_J = score.J, {s.seed: s.J for s in scored[1]}
+                    best = score.J
+                    waiting.new_best(best, {s.seed: s.J for s in scored[1]})
                 curve.append(best)
                 if on_progress is not None:
                     rate = (time.perf_counter() - started) / max(n_done - n_at_start, 1)

@@ -24,10 +24,10 @@ from multiprocessing.connection import Connection
 from multiprocessing.process import BaseProcess
 from typing import TYPE_CHECKING, Any
 
-from driftlab.core.optimizer import BayesianOptimizer
 from driftlab.worker.child_process import follow_parent
 
 if TYPE_CHECKING:  # an optimizer process imports this module: not the config's parsing and physics
+    from driftlab.core.optimizer import BayesianOptimizer
     from driftlab.core.tuning import TuningSpec
 
 History = list[tuple[dict[str, float], float | None, float]]
@@ -48,6 +48,10 @@ class OptimizerStart:
         return cls(dict(spec.bounds), dict(spec.optimizer_options), told)
 
     def restored(self, history: History) -> BayesianOptimizer:
+        # here, not at import: scikit-learn and SciPy's statistics are ~2/3 of what the server would load at start,
+        # and with DRIFTLAB_OPTIMIZER_PROCESS the server's own process never asks
+        from driftlab.core.optimizer import BayesianOptimizer
+
         optimizer = BayesianOptimizer(self.bounds, **self.options)
         for theta, value, stored_j in [*self.told, *history]:
             optimizer.tell(theta, value, stored_j)

@@ -20,6 +20,7 @@ from driftlab.cli.options import (
     add_job_options,
     dask_address,
     db_url,
+    episode_controller,
     int_in,
     name_text,
     stored_db_url,
@@ -74,8 +75,9 @@ def build_parser() -> argparse.ArgumentParser:
                     "defaults: 0.02, 0.02, 0, 0.05, 1, 1)")
     ep.add_argument("--plant", choices=PLANT_CHOICES, metavar=PLANT_METAVAR, default="default",
                     help=PLANT_HELP)
-    ep.add_argument("--controller", choices=("default", "paper"), default="default",
-                    help="default: DriftLab's MPC with path states and actuator lags; paper: the paper's MPC")
+    ep.add_argument("--controller", type=episode_controller, default="default", metavar="CONTROLLER",
+                    help="default: DriftLab's MPC with path states and actuator lags; paper: the paper's MPC; "
+                         "policy:FILE: a learned policy (.npz, driftlab.gym.policy; the rl extra)")
     ep.add_argument("--set", action="append", metavar="KEY=VALUE", help="config override, e.g. mpc.q_sideslip=400")
     ep.add_argument("--seed", type=int, default=0, help="episode seed: the plant's per-episode variation, start and "
                     "sensor noise (default 0; the nominal plant has none)")

@@ -8,7 +8,14 @@ import os
 import sys
 from typing import Any
 
-from driftlab.cli.options import PLOT_SUFFIXES, check_output_file, episode_config, finite, key_values
+from driftlab.cli.options import (
+    PLOT_SUFFIXES,
+    POLICY_PREFIX,
+    check_output_file,
+    episode_config,
+    finite,
+    key_values,
+)
 from driftlab.core.config import Theta, config_to_dict
 from driftlab.core.configure import fitted
 from driftlab.core.drivability import check_drivable, drift_window
@@ -63,6 +70,21 @@ def _print_window(args: argparse.Namespace) -> int:
     return 0
 
 
+def _policy_episode(args: argparse.Namespace, theta: Theta) -> Any:
+    """The episode under a learned policy (driftlab.gym.policy): the environment's episode of the same plant, keys
+    and seed, its commands from the policy file."""
+    try:
+        from driftlab.gym import FigureEightEnv
+        from driftlab.gym.policy import MlpPolicy, PolicyController, run_policy_episode
+    except ImportError as exc:
+        raise ConfigError(f"--controller policy:FILE needs the rl extra (pip install 'driftlab[rl]'): {exc}",
+                          field="controller") from exc
+    policy = MlpPolicy.load(args.controller[len(POLICY_PREFIX):])
+    env = FigureEightEnv(plant=args.plant, controller="default", config=key_values(args.set or [], "--set"),
+                         theta=theta.as_dict())
+    return run_policy_episode(env, PolicyController(policy, env), args.seed)
+
+
 def cmd_episode(args: argparse.Namespace) -> int:
     from driftlab.core.episode import COLUMNS, run_episode
     from driftlab.core.track import FigureEight
@@ -76,12 +98,19 @@ def cmd_episode(args: argparse.Namespace) -> int:
         raise ConfigError(f"--plot {args.plot}: the file name must end in one of {', '.join(PLOT_SUFFIXES)}")
     check_drivable(config)
     config = fitted(config)  # what runs, and what the CSV records for a re-run
-    result = run_episode(theta, config, seed=args.seed)
-    print(json.dumps(finite(result.summary())))
+    if args.controller.startswith(POLICY_PREFIX):
+        result = _policy_episode(args, theta)
+    else:
+        result = run_episode(theta, config, seed=args.seed)
+    summary = finite(result.summary())
+    if args.controller.startswith(POLICY_PREFIX):
+        summary["controller"] = args.controller
+    print(json.dumps(summary))
     if args.csv:
         from driftlab.reports.export import metadata_json, trajectory_csv, with_lap_column
 
-        metadata = {"theta": theta.as_dict(), "seed": args.seed, "J_episode": result.J, "episode_status": result.status,
+        metadata = {"theta": theta.as_dict(), "seed": args.seed, "controller": args.controller,
+                    "J_episode": result.J, "episode_status": result.status,
                     "J": result.J, "status": result.status, "n_seeds": 1, "config": config_to_dict(config)}
         with open(args.csv, "w", newline="") as handle:
             track = FigureEight(config.scenario.left_radius_m, config.scenario.right_radius_m, config.scenario.laps)

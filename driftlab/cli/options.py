@@ -116,12 +116,28 @@ PLANT_HELP = ("a plant preset: default, nominal, commonroad_std, commonroad_mb, 
               "(default: default)")
 
 
+POLICY_PREFIX = "policy:"
+
+
+def episode_controller(text: str) -> str:
+    """`driftlab episode --controller`: default, paper, or policy:FILE (a learned policy, driftlab.gym.policy)."""
+    if text in ("default", "paper") or (text.startswith(POLICY_PREFIX) and len(text) > len(POLICY_PREFIX)):
+        return text
+    raise argparse.ArgumentTypeError(f"must be default, paper or policy:FILE (a policy .npz), got {text!r}")
+
+
+def mpc_preset(args: argparse.Namespace) -> str:
+    """The MPC preset of ``--controller``: a learned policy's commands are bounded as the default MPC's."""
+    controller = getattr(args, "controller", "default")
+    return "default" if controller.startswith(POLICY_PREFIX) else controller
+
+
 def episode_config(args: argparse.Namespace, *, inside_window: bool = False) -> EpisodeConfig:
     """The config of ``--plant``, ``--controller`` and ``--set``; ``inside_window``: at the middle of the car's drift
     window where the preset's sideslip is outside it (driftlab.core.configure.overrides_inside_window)."""
     from driftlab.core.configure import apply_overrides, overrides_inside_window, preset_config
 
-    preset = preset_config(args.plant or "default", getattr(args, "controller", "default"))
+    preset = preset_config(args.plant or "default", mpc_preset(args))
     parse = overrides_inside_window if inside_window else apply_overrides
     return parse(preset, key_values(args.set or [], "--set"))
 

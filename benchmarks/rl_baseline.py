@@ -7,8 +7,8 @@ command), for a wall-time budget; exports the policy as a NumPy file (driftlab.g
 tunes the MPC as a job of the job default does (``--iterations`` evaluations) and scores its best theta on the same
 seeds.
 
-Run (the rl extra, and Stable-Baselines3 with PyTorch's CPU build):
-    pip install -e ".[rl]" stable-baselines3 torch --index-url https://download.pytorch.org/whl/cpu ...
+Run (the rl extra: the environment and Stable-Baselines3; PyTorch's CPU build first, docs/rl_baseline.md):
+    pip install torch --index-url https://download.pytorch.org/whl/cpu && pip install -e ".[rl]"
     OMP_NUM_THREADS=1 python benchmarks/rl_baseline.py --variant sac --minutes 60 --out results/sac_default
     OMP_NUM_THREADS=1 python benchmarks/rl_baseline.py --variant mpc --iterations 150 --out results/mpc_default
 Add ``--plant commonroad_std --set scenario.sideslip_rad=0.5`` for CommonRoad's BMW. Each run writes

@@ -77,7 +77,7 @@ def build_parser() -> argparse.ArgumentParser:
                     help=PLANT_HELP)
     ep.add_argument("--controller", type=episode_controller, default="default", metavar="CONTROLLER",
                     help="default: DriftLab's MPC with path states and actuator lags; paper: the paper's MPC; "
-                         "policy:FILE: a learned policy (.npz, driftlab.gym.policy; the rl extra)")
+                         "policy:FILE: a learned policy (.npz, driftlab.gym.policy; the gym extra)")
     ep.add_argument("--set", action="append", metavar="KEY=VALUE", help="config override, e.g. mpc.q_sideslip=400")
     ep.add_argument("--seed", type=int, default=0, help="episode seed: the plant's per-episode variation, start and "
                     "sensor noise (default 0; the nominal plant has none)")

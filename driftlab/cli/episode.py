@@ -77,7 +77,7 @@ def _policy_episode(args: argparse.Namespace, theta: Theta) -> Any:
         from driftlab.gym import FigureEightEnv
         from driftlab.gym.policy import MlpPolicy, PolicyController, run_policy_episode
     except ImportError as exc:
-        raise ConfigError(f"--controller policy:FILE needs the rl extra (pip install 'driftlab[rl]'): {exc}",
+        raise ConfigError(f"--controller policy:FILE needs the gym extra (pip install 'driftlab[gym]'): {exc}",
                           field="controller") from exc
     policy = MlpPolicy.load(args.controller[len(POLICY_PREFIX):])
     env = FigureEightEnv(plant=args.plant, controller="default", config=key_values(args.set or [], "--set"),

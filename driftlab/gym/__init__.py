@@ -5,7 +5,7 @@
     env = gym.make("DriftLab/Figure8-v0", plant="commonroad_std", config={"scenario.sideslip_rad": 0.5})
 
 (or ``gym.make("driftlab.gym:DriftLab/Figure8-v0", ...)``, which imports this package itself). A package at the
-edge: it imports driftlab.core and gymnasium only (the ``rl`` extra).
+edge: it imports driftlab.core and gymnasium only (the ``gym`` extra; ``rl`` adds a learner).
 """
 
 from __future__ import annotations

@@ -98,3 +98,18 @@ def test_the_episode_command_runs_a_policy_file(tmp_path, capsys):
     assert printed["J"] == run_episode(Theta(), FigureEightEnv(plant="default").episode_config, seed=3).J
     assert json.loads((tmp_path / "run.json").read_text())["metadata"]["controller"] == f"policy:{path}"
     assert (tmp_path / "run.csv").read_text().count("\n") > 500
+
+
+def test_the_episode_command_writes_a_replay_with_the_mpc_beside_the_policy(tmp_path, capsys):
+    path = tmp_path / "zero.npz"
+    _policy("residual", N_OBSERVATION + 2, out_weight=0.0).save(path)
+    page = tmp_path / "replay.html"
+    assert main(["episode", "--seed", "3", "--controller", f"policy:{path}", "--html", str(page),
+                 "--ghost", "default", "--ghost-theta", "k=0.07"]) == 0
+    text = page.read_text()
+    assert f"<h1>policy:{path} controller</h1>" in text  # the panel names what drove each car
+    assert "beside it, the translucent car: default controller · completed · J " in text
+    assert "k</td><td>0.05</td>" in text  # the first episode's theta, not the ghost's
+    capsys.readouterr()
+    assert main(["episode", "--ghost", "default"]) == 2
+    assert "--ghost and --ghost-theta go with --html" in capsys.readouterr().err

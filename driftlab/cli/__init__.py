@@ -84,6 +84,11 @@ def build_parser() -> argparse.ArgumentParser:
     ep.add_argument("--csv", help="write the trajectory to this CSV file (pandas.read_csv reads it as it is), and its "
                     "metadata (theta, seed, J, the config as run) beside it: FILE.csv -> FILE.json")
     ep.add_argument("--plot", help="write the paper's figures to this PNG file")
+    ep.add_argument("--html", help="write a standalone 3D replay of the episode to this HTML file (no server needed)")
+    ep.add_argument("--ghost", type=episode_controller, metavar="CONTROLLER",
+                    help="with --html: also drive this controller (default, paper or policy:FILE) on the same seed, "
+                         "as a translucent car beside the first")
+    ep.add_argument("--ghost-theta", help="the ghost's theta, as --theta (default: --theta)")
     ep.set_defaults(func=cmd_episode)
     tu = sub.add_parser("tune", help="run (or resume) a Bayesian-optimization tuning job headless")
     add_job_options(tu)

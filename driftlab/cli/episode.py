@@ -70,38 +70,71 @@ def _print_window(args: argparse.Namespace) -> int:
     return 0
 
 
-def _policy_episode(args: argparse.Namespace, theta: Theta) -> Any:
-    """The episode under a learned policy (driftlab.gym.policy): the environment's episode of the same plant, keys
-    and seed, its commands from the policy file."""
+def _run(args: argparse.Namespace, controller: str, theta: Theta, config: Any) -> Any:
+    """The episode of ``controller`` (default, paper or policy:FILE) on ``--plant``, ``--set`` and ``--seed``. A
+    learned policy (driftlab.gym.policy) drives the environment's episode of the same plant, keys and seed."""
+    from driftlab.core.episode import run_episode
+
+    if not controller.startswith(POLICY_PREFIX):
+        if controller != args.controller:  # the ghost's MPC: its own preset, the same keys
+            args = argparse.Namespace(**{**vars(args), "controller": controller})
+            config = fitted(episode_config(args))
+        return run_episode(theta, config, seed=args.seed)
     try:
         from driftlab.gym import FigureEightEnv
         from driftlab.gym.policy import MlpPolicy, PolicyController, run_policy_episode
     except ImportError as exc:
         raise ConfigError(f"--controller policy:FILE needs the gym extra (pip install 'driftlab[gym]'): {exc}",
                           field="controller") from exc
-    policy = MlpPolicy.load(args.controller[len(POLICY_PREFIX):])
+    policy = MlpPolicy.load(controller[len(POLICY_PREFIX):])
     env = FigureEightEnv(plant=args.plant, controller="default", config=key_values(args.set or [], "--set"),
                          theta=theta.as_dict())
     return run_policy_episode(env, PolicyController(policy, env), args.seed)
 
 
+def _theta(text: str | None, option: str) -> Theta:
+    return Theta.from_mapping(key_values(text.split(",") if text else [], option))
+
+
+def _write_html(args: argparse.Namespace, result: Any, config: Any, theta: Theta) -> None:
+    """The standalone replay (driftlab.web.recording), with the ghost's episode beside it."""
+    from driftlab.core.episode import COLUMNS
+    from driftlab.core.track import FigureEight
+    from driftlab.web.frames import frames_of_result
+    from driftlab.web.recording import EpisodeRecorder
+
+    scenario = config.scenario
+    track = FigureEight(scenario.left_radius_m, scenario.right_radius_m, scenario.laps)
+    ghost = None
+    if args.ghost:
+        ghost_theta = _theta(args.ghost_theta, "--ghost-theta") if args.ghost_theta else theta
+        ghost = frames_of_result(COLUMNS, _run(args, args.ghost, ghost_theta, config), f"{args.ghost} controller")
+    recorder = EpisodeRecorder()
+    try:
+        page = recorder.html(frames_of_result(COLUMNS, result, f"{args.controller} controller"), track, ghost)
+    finally:
+        recorder.stop()
+    with open(args.html, "w") as handle:
+        handle.write(page)
+
+
 def cmd_episode(args: argparse.Namespace) -> int:
-    from driftlab.core.episode import COLUMNS, run_episode
+    from driftlab.core.episode import COLUMNS
     from driftlab.core.track import FigureEight
 
     config = episode_config(args)
-    theta = Theta.from_mapping(key_values(args.theta.split(",") if args.theta else [], "--theta"))
+    theta = _theta(args.theta, "--theta")
+    if (args.ghost or args.ghost_theta) and not args.html:
+        raise ConfigError("--ghost and --ghost-theta go with --html (the replay they are drawn in)", field="ghost")
     sidecar = metadata_path(args.csv) if args.csv else None
-    for option, path in (("--csv", args.csv), ("--csv", sidecar), ("--plot", args.plot)):  # before the episode runs
+    outputs = (("--csv", args.csv), ("--csv", sidecar), ("--plot", args.plot), ("--html", args.html))
+    for option, path in outputs:  # before the episode runs
         check_output_file(option, path)
     if args.plot and os.path.splitext(args.plot)[1].lower() not in PLOT_SUFFIXES:
         raise ConfigError(f"--plot {args.plot}: the file name must end in one of {', '.join(PLOT_SUFFIXES)}")
     check_drivable(config)
     config = fitted(config)  # what runs, and what the CSV records for a re-run
-    if args.controller.startswith(POLICY_PREFIX):
-        result = _policy_episode(args, theta)
-    else:
-        result = run_episode(theta, config, seed=args.seed)
+    result = _run(args, args.controller, theta, config)
     summary = finite(result.summary())
     if args.controller.startswith(POLICY_PREFIX):
         summary["controller"] = args.controller
@@ -117,6 +150,8 @@ def cmd_episode(args: argparse.Namespace) -> int:
             handle.write(trajectory_csv(*with_lap_column(list(COLUMNS), result.trajectory, track)))
         with open(str(sidecar), "w") as handle:
             handle.write(metadata_json(metadata))
+    if args.html:
+        _write_html(args, result, config, theta)
     if args.plot:
         from driftlab.reports.plotting import plot_episode
 

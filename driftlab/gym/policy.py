@@ -71,10 +71,12 @@ class MlpPolicy:
         return np.tanh(x)
 
     def save(self, path: str) -> None:
-        arrays = {f"w{i}": w for i, w in enumerate(self.weights)} | {f"b{i}": b for i, b in enumerate(self.biases)}
-        np.savez(path, mode=np.array(self.mode), layers=np.array(len(self.weights)), obs_mean=self.obs_mean,
-                 obs_std=self.obs_std, residual_scale=self.residual_scale,
-                 trained_on=np.array(json.dumps(self.trained_on)), **arrays)
+        arrays: dict[str, Any] = {f"w{i}": w for i, w in enumerate(self.weights)}
+        arrays.update({f"b{i}": b for i, b in enumerate(self.biases)})
+        arrays.update(mode=np.array(self.mode), layers=np.array(len(self.weights)), obs_mean=self.obs_mean,
+                      obs_std=self.obs_std, residual_scale=self.residual_scale,
+                      trained_on=np.array(json.dumps(self.trained_on)))
+        np.savez(path, **arrays)
 
     @classmethod
     def load(cls, path: str) -> MlpPolicy:
@@ -103,7 +105,9 @@ class PolicyController:
         if not isinstance(unwrapped, FigureEightEnv):
             raise TypeError(f"a policy drives DriftLab's environment, got {type(unwrapped).__name__}")
         self.policy = policy
-        self.low, self.high = unwrapped.action_space.low, unwrapped.action_space.high
+        space = unwrapped.action_space
+        assert isinstance(space, gym.spaces.Box)
+        self.low, self.high = space.low, space.high
         self.mpc = MpcPolicy(unwrapped) if policy.mode == "residual" else None
 
     def __call__(self, observation: np.ndarray) -> np.ndarray:
@@ -129,11 +133,11 @@ class ResidualMpcEnv(gym.Wrapper):
         super().__init__(env)
         self.mpc = MpcPolicy(env)
         self.residual_scale = np.asarray(residual_scale, dtype=np.float64)
-        inner = env.observation_space
-        assert isinstance(inner, gym.spaces.Box)
-        space = env.unwrapped.action_space
+        inner, space = env.observation_space, env.unwrapped.action_space
+        assert isinstance(inner, gym.spaces.Box) and isinstance(space, gym.spaces.Box)
         self.observation_space = gym.spaces.Box(np.concatenate([inner.low, space.low]),
-                                                np.concatenate([inner.high, space.high]), dtype=np.float64)
+                                                np.concatenate([inner.high, space.high]),
+                                                dtype=np.float64)
         self.action_space = gym.spaces.Box(-1.0, 1.0, (2,), dtype=np.float64)
         self._base = np.zeros(2)
 
@@ -145,7 +149,7 @@ class ResidualMpcEnv(gym.Wrapper):
         observation, info = self.env.reset(**kwargs)
         return self._observe(observation), info
 
-    def step(self, action: Any) -> tuple[np.ndarray, float, bool, bool, dict[str, Any]]:
+    def step(self, action: Any) -> tuple[np.ndarray, Any, bool, bool, dict[str, Any]]:
         command = self._base + np.clip(np.asarray(action, dtype=np.float64), -1.0, 1.0) * self.residual_scale
         observation, reward, terminated, truncated, info = self.env.step(command)
         if terminated or truncated:

@@ -46,6 +46,7 @@ class EpisodeFrames:
     failure_reason: str = ""  # why an episode stopped before its first step (its metrics')
     job: str = ""  # the stored evaluation's job: "job 3 · name"
     car: str = ""  # the plant it ran on (driftlab.services.read_model.plant_label)
+    label: str = ""  # an episode not stored: what ran it (`driftlab episode --html`: its controller)
 
     def __post_init__(self) -> None:
         if self.rows.ndim != 2 or self.rows.shape[1] != len(self.columns):
@@ -93,7 +94,7 @@ class EpisodeFrames:
     def name(self) -> str:
         """Which episode: the API's evaluation id first (what the URLs use), the job's index beside it."""
         if self.evaluation_id is None:
-            return "what-if episode"
+            return self.label or "what-if episode"
         job = f"{self.job} · " if self.job else ""
         return f"{job}evaluation id {self.evaluation_id} (index {self.index} in its job)"
 
@@ -110,3 +111,11 @@ class EpisodeFrames:
         plant = " | plant: " + ", ".join(f"{k} {v:.4g}" for k, v in self.plant.items()) if self.plant else ""
         car = f" | on {self.car}" if self.car else ""
         return f"{self.name()}: {self.status}, {self.j_text()} | {theta}{plant}{car}"
+
+
+def frames_of_result(columns: tuple[str, ...], result: Any, label: str) -> EpisodeFrames:
+    """An episode run here (a driftlab.core.episode.EpisodeResult with its trajectory's ``columns``), not stored,
+    named ``label``."""
+    return EpisodeFrames(tuple(columns), np.asarray(result.trajectory), tuple(result.trigger_points),
+                         theta=result.theta.as_dict(), status=result.status, J=float(result.J), seed=int(result.seed),
+                         episode_J=float(result.J), label=label)

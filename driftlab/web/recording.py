@@ -34,19 +34,19 @@ class EpisodeRecorder:
         self._server.scene.reset()
         return self._server.scene
 
-    def _record(self, frames: EpisodeFrames, track: FigureEight, *, caption_label: bool = True
-                ) -> viser.infra.StateSerializer:
+    def _record(self, frames: EpisodeFrames, track: FigureEight, *, caption_label: bool = True,
+                ghost: EpisodeFrames | None = None) -> viser.infra.StateSerializer:
         scene = self._fresh_scene()
         scene.set_up_direction("+z")
         player = EpisodePlayer(scene, track)
         serializer = self._server.get_scene_serializer()
-        player.load(frames)
+        player.load(frames, ghost)
         if caption_label:  # the .viser file has no page around it: the caption is a label in the scene
             player.show_caption(frames.caption())
         step_s = 1.0 / self.fps
-        n_steps = int(frames.duration_s * self.fps) + 1
+        n_steps = int(player.duration_s * self.fps) + 1
         for k in range(n_steps + 1):
-            player.seek(min(k * step_s, frames.duration_s))
+            player.seek(min(k * step_s, player.duration_s))
             serializer.insert_sleep(step_s)
         return serializer
 
@@ -54,10 +54,12 @@ class EpisodeRecorder:
         with self._lock:
             return self._record(frames, track).serialize()
 
-    def html(self, frames: EpisodeFrames, track: FigureEight) -> str:
+    def html(self, frames: EpisodeFrames, track: FigureEight, ghost: EpisodeFrames | None = None) -> str:
+        """A standalone replay page; ``ghost``: another episode driven beside it (a translucent car)."""
         with self._lock:
             # The HTML replay shows the caption and the state plots in a panel beside the 3D view.
-            return with_panel(self._record(frames, track, caption_label=False).as_html(), frames)
+            return with_panel(self._record(frames, track, caption_label=False, ghost=ghost).as_html(), frames,
+                              ghost)
 
     def stop(self) -> None:
         if self._server is not None:

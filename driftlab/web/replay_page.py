@@ -57,9 +57,9 @@ def state_plot_svg(t_s: np.ndarray, actual: np.ndarray, reference: np.ndarray, l
     return "".join(parts)
 
 
-def replay_panel_html(frames: EpisodeFrames) -> str:
+def replay_panel_html(frames: EpisodeFrames, ghost: EpisodeFrames | None = None) -> str:
     """The panel: the evaluation, its status and J, theta and plant settings (4 significant digits; the
-    trajectory download has them in full), and the state plots."""
+    trajectory download has them in full), and the state plots; with a ghost, which episode it drives."""
     theta = "".join(f"<tr><td>{html.escape(k)}</td><td>{v:.4g}</td></tr>" for k, v in frames.theta.items())
     plant = "".join(f"<tr><td>{html.escape(k)}</td><td>{v:.4g}</td></tr>" for k, v in frames.plant.items())
     plots = "".join(state_plot_svg(frames.column("t_s"), frames.column(a), frames.column(r), label)
@@ -68,6 +68,8 @@ def replay_panel_html(frames: EpisodeFrames) -> str:
     return (f'<aside id="driftlab-panel"><h1>{html.escape(frames.name())}</h1>'
             f'<p class="j">{html.escape(frames.status)} · {html.escape(frames.j_text())}</p>'
             + (f'<p>plant: {html.escape(frames.car)}</p>' if frames.car else "")
+            + (f'<p>beside it, the translucent car: {html.escape(ghost.name())} · {html.escape(ghost.status)} · '
+               f'{html.escape(ghost.j_text())}</p>' if ghost is not None else "")
             + f'<p>triggers at {triggers} · duration {frames.duration_s:.4g} s</p>'
             f'<table><tr><th colspan="2">theta</th></tr>{theta}'
             + (f'<tr><th colspan="2">plant (changed)</th></tr>{plant}' if plant else "")
@@ -83,10 +85,10 @@ _STYLE = (f"<style>#root{{position:fixed;left:0;top:0;bottom:0;right:{PANEL_WIDT
           "#driftlab-panel svg .t{font-size:11px;fill:#222}</style>")
 
 
-def with_panel(viser_html: str, frames: EpisodeFrames) -> str:
+def with_panel(viser_html: str, frames: EpisodeFrames, ghost: EpisodeFrames | None = None) -> str:
     """viser's standalone page with the panel on the right and the 3D player beside it."""
     head_end = viser_html.index("</head>")
     title = f"<title>{html.escape(frames.name())}, J {frames.J:.4g} · DriftLab replay</title>"
     page = re.sub(r"<title>.*?</title>", "", viser_html[:head_end], flags=re.S) + title + _STYLE + viser_html[head_end:]
     body = page.index("<body>") + len("<body>")
-    return page[:body] + replay_panel_html(frames) + page[body:]
+    return page[:body] + replay_panel_html(frames, ghost) + page[body:]

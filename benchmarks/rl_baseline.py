@@ -11,7 +11,8 @@ Run (the rl extra: the environment and Stable-Baselines3; PyTorch's CPU build fi
     pip install torch --index-url https://download.pytorch.org/whl/cpu && pip install -e ".[rl]"
     OMP_NUM_THREADS=1 python benchmarks/rl_baseline.py --variant sac --minutes 60 --out results/sac_default
     OMP_NUM_THREADS=1 python benchmarks/rl_baseline.py --variant mpc --iterations 150 --out results/mpc_default
-Add ``--plant commonroad_std --set scenario.sideslip_rad=0.5`` for CommonRoad's BMW. Each run writes
+Add ``--plant commonroad_std`` for CommonRoad's BMW (0.5 rad on 44 m circles). The learning curves of runs:
+``python benchmarks/rl_baseline.py curves OUT.png RUN_FOLDER...``. Each run writes
 ``summary.json`` (the table's row), ``curve.csv`` (the learning curve: environment steps, wall seconds, episodes,
 the last 20 training episodes' completion and return) and, for a policy, ``policy.npz``.
 
@@ -190,13 +191,15 @@ def train(args: argparse.Namespace) -> dict[str, Any]:
 
 
 def tune_mpc(args: argparse.Namespace) -> dict[str, Any]:
-    """The job default (`driftlab tune`) for ``--iterations`` evaluations, its best theta on the evaluation seeds."""
+    """The job default (`driftlab tune`) for ``--iterations`` evaluations, its best theta on the evaluation seeds
+    (``--iterations 0``: the untuned theta, no episode used)."""
     from driftlab.core.config import Theta
-    from driftlab.core.episode import run_episode
     from driftlab.db import storage
-    from driftlab.gym import episode_config
 
+    theta, episodes, tune_s = Theta().as_dict(), 0, 0.0
     with tempfile.TemporaryDirectory() as folder:
+        if args.iterations == 0:
+            return _mpc_row(args, theta, episodes, tune_s)
         url = f"sqlite:///{folder}/mpc.db"
         command = [sys.executable, "-m", "driftlab.cli", "tune", "--name", "mpc", "--db", url, "--iterations",
                    str(args.iterations), "--seed", str(args.seed), "--plant", args.plant,
@@ -211,13 +214,49 @@ def tune_mpc(args: argparse.Namespace) -> dict[str, Any]:
             episodes = sum(len(e.seeds or []) for e in storage.evaluations(session, job_id=job.id))
             theta = dict(best.theta)
         storage.close_database(factory)
+    return _mpc_row(args, theta, episodes, tune_s)
+
+
+def _mpc_row(args: argparse.Namespace, theta: dict[str, float], episodes: int, tune_s: float) -> dict[str, Any]:
+    from driftlab.core.config import Theta
+    from driftlab.core.episode import run_episode
+    from driftlab.gym import episode_config
+
     config = episode_config(args.plant, "default", dict(kv.split("=", 1) for kv in args.set))
     results = [run_episode(Theta.from_mapping(theta), config, seed=seed) for seed in fresh_seeds()]
     return {**row_of(results), "variant": "mpc", "plant": args.plant, "set": args.set, "theta": theta,
             "train_minutes": round(tune_s / 60.0, 1), "episodes_used": episodes, "iterations": args.iterations}
 
 
+def plot_curves(folders: list[str], png: str) -> None:
+    """The learning curves of runs (their ``curve.csv``): completion of the last 20 training episodes against
+    environment steps, one line a run, with what the run's ``summary.json`` says it is."""
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    figure, axis = plt.subplots(figsize=(7.5, 3.6))
+    for folder in folders:
+        with open(os.path.join(folder, "summary.json")) as handle:
+            summary = json.load(handle)
+        with open(os.path.join(folder, "curve.csv")) as handle:
+            rows = list(csv.DictReader(handle))
+        axis.plot([int(r["steps"]) for r in rows], [float(r["completion_last20"]) for r in rows],
+                  label=f"{summary['variant']}, {summary['plant']} ({summary['train_minutes']} min)")
+    axis.set_xlabel("environment steps")
+    axis.set_ylabel("completed, last 20 training episodes")
+    axis.set_ylim(-0.05, 1.05)
+    axis.grid(alpha=0.3)
+    axis.legend(fontsize=8)
+    figure.tight_layout()
+    figure.savefig(png, dpi=110)
+
+
 def main() -> None:
+    if sys.argv[1:2] == ["curves"]:  # python benchmarks/rl_baseline.py curves OUT.png RUN_FOLDER...
+        plot_curves(sys.argv[3:], sys.argv[2])
+        return
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--variant", choices=("sac", "residual", "mpc"), required=True)
     parser.add_argument("--plant", default="default")

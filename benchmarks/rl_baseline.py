@@ -194,12 +194,15 @@ def tune_mpc(args: argparse.Namespace) -> dict[str, Any]:
     """The job default (`driftlab tune`) for ``--iterations`` evaluations, its best theta on the evaluation seeds
     (``--iterations 0``: the untuned theta, no episode used)."""
     from driftlab.core.config import Theta
+    from driftlab.core.tuning import TuningSpec
     from driftlab.db import storage
+    from driftlab.gym import episode_config
 
     theta, episodes, tune_s = Theta().as_dict(), 0, 0.0
     with tempfile.TemporaryDirectory() as folder:
-        if args.iterations == 0:
-            return _mpc_row(args, theta, episodes, tune_s)
+        if args.iterations == 0:  # the environment's config: the preset and --set, fitted
+            config = episode_config(args.plant, "default", dict(kv.split("=", 1) for kv in args.set))
+            return _mpc_row(args, theta, config, episodes, tune_s)
         url = f"sqlite:///{folder}/mpc.db"
         command = [sys.executable, "-m", "driftlab.cli", "tune", "--name", "mpc", "--db", url, "--iterations",
                    str(args.iterations), "--seed", str(args.seed), "--plant", args.plant,
@@ -213,16 +216,17 @@ def tune_mpc(args: argparse.Namespace) -> dict[str, Any]:
             best = storage.best_evaluation(session, job_id=job.id)
             episodes = sum(len(e.seeds or []) for e in storage.evaluations(session, job_id=job.id))
             theta = dict(best.theta)
+            # the job's own config: with the car's calibrated profile where one ships (`driftlab tune` applies it)
+            config = TuningSpec.from_dict(job.spec).config
         storage.close_database(factory)
-    return _mpc_row(args, theta, episodes, tune_s)
+    return _mpc_row(args, theta, config, episodes, tune_s)
 
 
-def _mpc_row(args: argparse.Namespace, theta: dict[str, float], episodes: int, tune_s: float) -> dict[str, Any]:
+def _mpc_row(args: argparse.Namespace, theta: dict[str, float], config: Any, episodes: int,
+             tune_s: float) -> dict[str, Any]:
     from driftlab.core.config import Theta
     from driftlab.core.episode import run_episode
-    from driftlab.gym import episode_config
 
-    config = episode_config(args.plant, "default", dict(kv.split("=", 1) for kv in args.set))
     results = [run_episode(Theta.from_mapping(theta), config, seed=seed) for seed in fresh_seeds()]
     return {**row_of(results), "variant": "mpc", "plant": args.plant, "set": args.set, "theta": theta,
             "train_minutes": round(tune_s / 60.0, 1), "episodes_used": episodes, "iterations": args.iterations}

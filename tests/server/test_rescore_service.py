@@ -94,9 +94,11 @@ def test_after_a_clean_stop_the_database_file_alone_holds_every_evaluation(tmp_p
 def test_the_servers_runner_runs_a_calibration_beside_the_jobs(tmp_path):
     proc, url = start_server(tmp_path / "driftlab.db", free_port(), extra_args=("--workers", "2"))
     try:
+        # Queueing a calibration checks the car's drift at its points: ~2.5 s of physics on an idle 2-core machine,
+        # beyond httpx's 5 s default under the suite's load (a request that works, not one that hangs).
         queued = httpx.post(f"{url}/api/calibrations", json={
             "plant": "commonroad_std", "points": "0.5@44", "iterations": 2, "seeds": 1,
-            "config": {"plant.model_drive_coupling": False, "mpc.steer_limit_rad": 0.6}})
+            "config": {"plant.model_drive_coupling": False, "mpc.steer_limit_rad": 0.6}}, timeout=60)
         assert queued.status_code == 202, queued.text
         job = httpx.post(f"{url}/api/jobs", json={"iterations": 2, "robust_samples": 1, "confirm_samples": 0}).json()
         state = wait_for(f"{url}/api/calibrations/{queued.json()['id']}",
@@ -120,8 +122,8 @@ def test_sigterm_with_a_job_a_rescore_and_a_calibration_running_exits_within_doc
         tuned = _finished_job(url)
         job = httpx.post(f"{url}/api/jobs", json={"name": "long", "iterations": 400}).json()["id"]
         assert httpx.post(f"{url}/api/jobs/{tuned}/rescore", json={"samples": 60}).status_code == 202
-        calibration = httpx.post(f"{url}/api/calibrations", json={
-            "plant": "commonroad_std", "points": "0.5@44", "iterations": 40, "seeds": 2}).json()["id"]
+        calibration = httpx.post(f"{url}/api/calibrations", json={  # ~2.5 s of drift checks (above)
+            "plant": "commonroad_std", "points": "0.5@44", "iterations": 40, "seeds": 2}, timeout=60).json()["id"]
         wait_for(f"{url}/api/jobs/{job}", lambda j: j["n_done"] >= 2, timeout_s=300)
         wait_for(f"{url}/api/jobs/{tuned}/rescore", lambda r: r["done"] >= 1, timeout_s=300)
         wait_for(f"{url}/api/calibrations/{calibration}", lambda c: c["status"] == "running", timeout_s=300)

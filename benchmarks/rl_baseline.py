@@ -115,7 +115,6 @@ def train(args: argparse.Namespace) -> dict[str, Any]:
     torch.set_num_threads(1)
     residual = args.variant == "residual"
     obs_mean, obs_std, bonus = normalisation(args, residual)
-    scale = residual_scale_of(env_of(args), args.residual_share) if residual else np.zeros(2)
 
     class Shaped(gym.Wrapper):
         """Scaled observations, and the alive bonus added to each step's reward (training only)."""
@@ -134,6 +133,7 @@ def train(args: argparse.Namespace) -> dict[str, Any]:
             return ((observation - obs_mean) / obs_std).astype(np.float32), reward + alive, terminated, truncated, info
 
     base = env_of(args)
+    scale = residual_scale_of(base, args.residual_share) if residual else np.zeros(2)
     env = Shaped(ResidualMpcEnv(base, scale) if residual else base)
     env.reset(seed=args.seed)  # the training episodes' seeds come from the environment's generator, seeded here
     curve: list[dict[str, Any]] = []

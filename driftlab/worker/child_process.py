@@ -1,26 +1,54 @@
-"""A worker process that dies with its parent: the episode workers and the optimizer host of a server killed with
-kill -9 (no cleanup runs) must not live on as orphans holding cores."""
+"""The processes a server or a CLI starts (episode workers, optimizer hosts): how they start, and that they die with
+the process that owns them (a server killed with kill -9 runs no cleanup, and they must not live on as orphans
+holding cores)."""
 
 from __future__ import annotations
 
+import multiprocessing
 import os
 import signal
 import threading
 import time
 
+# What every worker imports: the forkserver imports it once, and each worker is forked with it already loaded.
+# Not the optimizer's scikit-learn (~1.5 s): optimizer processes are off by default (driftlab.settings).
+PRELOADED = ("driftlab.worker.executors.episode", "driftlab.worker.optimizer_host")
 
-def _exit_with_parent(parent_pid: int, period_s: float = 0.5) -> None:
-    """A worker whose parent died (kill -9 included: no cleanup ran) exits within ``period_s`` instead of
-    living on as an orphan; it notices by being re-parented."""
+
+def worker_context() -> multiprocessing.context.BaseContext:
+    """Workers are forked from multiprocessing's forkserver, which imported :data:`PRELOADED` once: a spawned worker
+    imported NumPy, SciPy, numba and DriftLab anew, ~2 s of a core each (four or more a server). Not forked from the
+    server itself: it has threads, and a fork would copy their locks. The forkserver has one thread and exits when
+    its owner does (its end of a pipe closes), and with it, through the kernel's signal, every worker forked from
+    it. It inherits the owner's environment at its start: one BLAS thread is set first."""
+    os.environ.setdefault("OMP_NUM_THREADS", "1")
+    context = multiprocessing.get_context("forkserver")
+    context.set_forkserver_preload(list(PRELOADED))
+    return context
+
+
+def _alive(pid: int) -> bool:
+    try:
+        os.kill(pid, 0)
+    except ProcessLookupError:
+        return False
+    except PermissionError:
+        return True
+    return True
+
+
+def _exit_with_owner(owner_pid: int, parent_pid: int, period_s: float = 0.5) -> None:
+    """A worker whose owner died (kill -9 included: no cleanup ran) exits within ``period_s`` instead of living on
+    as an orphan; it notices by being re-parented (its forkserver ended) or by the owner being gone."""
     while True:
         time.sleep(period_s)
-        if os.getppid() != parent_pid:
+        if os.getppid() != parent_pid or not _alive(owner_pid):
             os._exit(0)
 
 
 def _die_with_parent() -> None:
-    """Linux: the kernel kills this process the moment its parent dies (PR_SET_PDEATHSIG), even while a compiled
-    episode holds the interpreter and the watcher thread below cannot run."""
+    """Linux: the kernel kills this process the moment its parent (the forkserver, which ends with the owner) dies
+    (PR_SET_PDEATHSIG), even while a compiled episode holds the interpreter and the watcher thread cannot run."""
     try:
         import ctypes
 
@@ -30,12 +58,13 @@ def _die_with_parent() -> None:
         pass  # not Linux: the watcher thread alone
 
 
-def follow_parent(parent_pid: int, *, kernel_signal: bool = True) -> None:
-    """Called first in the worker (a pool's initializer): it exits when ``parent_pid`` does. ``kernel_signal``
-    also asks the kernel to kill it at once; that signal follows the parent *thread* that started the worker, so
-    a pool whose workers may be started from a short-lived thread must go without it (the watcher alone)."""
-    if kernel_signal:
-        _die_with_parent()
-    if os.getppid() != parent_pid:  # the parent died before the signal was armed
+def follow_owner(owner_pid: int) -> None:
+    """Called first in a worker started from :func:`worker_context` (a pool's initializer): it exits when
+    ``owner_pid`` (the server or CLI that started it) does. The kernel's signal follows the forkserver's one
+    thread, which lives as long as the owner, whichever of the owner's threads asked for the worker."""
+    _die_with_parent()
+    parent_pid = os.getppid()
+    if not _alive(owner_pid):  # the owner died before the signal was armed
         os._exit(0)
-    threading.Thread(target=_exit_with_parent, args=(parent_pid,), name="exit-with-parent", daemon=True).start()
+    threading.Thread(target=_exit_with_owner, args=(owner_pid, parent_pid), name="exit-with-owner",
+                     daemon=True).start()

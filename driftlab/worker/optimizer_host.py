@@ -15,7 +15,6 @@ job resumed after a crash is (:func:`restore_optimizer`, which the job loop uses
 
 from __future__ import annotations
 
-import multiprocessing
 import os
 import threading
 import uuid
@@ -24,7 +23,7 @@ from multiprocessing.connection import Connection
 from multiprocessing.process import BaseProcess
 from typing import TYPE_CHECKING, Any
 
-from driftlab.worker.child_process import follow_parent
+from driftlab.worker.child_process import follow_owner, worker_context
 
 if TYPE_CHECKING:  # an optimizer process imports this module: not the config's parsing and physics
     from driftlab.core.optimizer import BayesianOptimizer
@@ -94,13 +93,11 @@ def _warm() -> int:
     return os.getpid()
 
 
-def _serve(connection: Connection, niceness: int, parent_pid: int) -> None:
+def _serve(connection: Connection, niceness: int, owner_pid: int) -> None:
     """An optimizer process: answers (function, arguments) on its pipe until it is closed."""
     if niceness:
         os.nice(niceness)
-    # The process may be (re)started from a job's thread, which ends with its job: no kernel signal (it follows the
-    # starting thread), the watcher alone (an ask runs Python, so the watcher gets its turn within 0.5 s).
-    follow_parent(parent_pid, kernel_signal=False)
+    follow_owner(owner_pid)
     while True:
         try:
             fn, args = connection.recv()
@@ -118,7 +115,7 @@ class ProcessGone(RuntimeError):
 
 
 class _Process:
-    """One optimizer process (spawned: the server has threads, and a fork would copy their locks), called through a
+    """One optimizer process (driftlab.worker.child_process.worker_context), called through a
     pipe on the caller's own thread: no executor threads between a job and its optimizer. A dead one is started
     again on the next call (:meth:`restart`)."""
 
@@ -131,7 +128,7 @@ class _Process:
 
     def _started(self) -> Connection:
         if self._connection is None:
-            context = multiprocessing.get_context("spawn")
+            context = worker_context()
             here, there = context.Pipe()
             self._process = context.Process(target=_serve, args=(there, self.niceness, os.getpid()), daemon=True)
             self._process.start()

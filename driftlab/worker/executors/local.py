@@ -1,22 +1,22 @@
-"""Episodes in local worker processes (spawned, one BLAS thread each, dying with their parent)."""
+"""Episodes in local worker processes (from a forkserver, one BLAS thread each, dying with their owner)."""
 
 from __future__ import annotations
 
-import multiprocessing
 import os
+import threading
 from concurrent.futures import Future, ProcessPoolExecutor
 from typing import Any
 
-from driftlab.worker.child_process import follow_parent
+from driftlab.worker.child_process import follow_owner, worker_context
 from driftlab.worker.executors.episode import EpisodeOutcome, evaluate_episode
 
 
-def _init_worker(niceness: int, parent_pid: int) -> None:
+def _init_worker(niceness: int, owner_pid: int) -> None:
     # BLAS oversubscription on 2 cores costs up to 8x.
     os.environ["OMP_NUM_THREADS"] = "1"
     if niceness:
         os.nice(niceness)
-    follow_parent(parent_pid)
+    follow_owner(owner_pid)
 
 
 class LocalProcessExecutor:
@@ -26,13 +26,18 @@ class LocalProcessExecutor:
         """``niceness`` > 0 lowers the workers' CPU priority (batch work that must not slow interactive work)."""
         os.environ.setdefault("OMP_NUM_THREADS", "1")
         self.workers = workers
-        self.pool = ProcessPoolExecutor(max_workers=workers, mp_context=multiprocessing.get_context("spawn"),
+        self.pool = ProcessPoolExecutor(max_workers=workers, mp_context=worker_context(),
                                         initializer=_init_worker, initargs=(niceness, os.getpid()))
-        # Start every worker now, from this thread: the pool would start them on demand from the thread that
-        # submits, and a worker dies with the thread that started it (PR_SET_PDEATHSIG follows the parent thread),
-        # so a job's thread that ends would take the workers it started with it (the server runs jobs on threads).
-        for _ in range(workers):
-            self.pool.submit(os.getpid)
+        # Start every worker now, but not on this thread: the first start waits for the forkserver's imports
+        # (~1.3 s of a core), which the caller's own start-up overlaps.
+        threading.Thread(target=self._start_workers, name="episode-workers-start", daemon=True).start()
+
+    def _start_workers(self) -> None:
+        try:
+            for _ in range(self.workers):
+                self.pool.submit(os.getpid)
+        except RuntimeError:
+            pass  # shut down before they started
 
     def submit(self, theta: dict[str, float], config_doc: dict[str, Any], seed: int = 0) -> Future[EpisodeOutcome]:
         return self.pool.submit(evaluate_episode, theta, config_doc, seed)

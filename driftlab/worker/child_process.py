@@ -17,10 +17,11 @@ PRELOADED = ("driftlab.worker.executors.episode", "driftlab.worker.optimizer_hos
 
 def worker_context() -> multiprocessing.context.BaseContext:
     """Workers are forked from multiprocessing's forkserver, which imported :data:`PRELOADED` once: a spawned worker
-    imported NumPy, SciPy, numba and DriftLab anew, ~2 s of a core each (four or more a server). Not forked from the
-    server itself: it has threads, and a fork would copy their locks. The forkserver has one thread and exits when
-    its owner does (its end of a pipe closes), and with it, through the kernel's signal, every worker forked from
-    it. It inherits the owner's environment at its start: one BLAS thread is set first."""
+    imported NumPy, SciPy, numba and DriftLab anew, ~0.7 s of a core each before its first episode (three a server).
+    Not forked from the server itself: it has threads, and a fork would copy their locks. The forkserver has one
+    thread and exits when its owner does (its end of a pipe closes), and with it, through the kernel's signal, every
+    worker forked from it. It inherits the owner's environment at its start: one BLAS thread is set first (BLAS
+    oversubscription on 2 cores cost up to 8x)."""
     os.environ.setdefault("OMP_NUM_THREADS", "1")
     context = multiprocessing.get_context("forkserver")
     context.set_forkserver_preload(list(PRELOADED))
@@ -33,7 +34,7 @@ def _alive(pid: int) -> bool:
     except ProcessLookupError:
         return False
     except PermissionError:
-        return True
+        pass  # it exists, under another user
     return True
 
 

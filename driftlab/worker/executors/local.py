@@ -12,8 +12,6 @@ from driftlab.worker.executors.episode import EpisodeOutcome, evaluate_episode
 
 
 def _init_worker(niceness: int, owner_pid: int) -> None:
-    # BLAS oversubscription on 2 cores costs up to 8x.
-    os.environ["OMP_NUM_THREADS"] = "1"
     if niceness:
         os.nice(niceness)
     follow_owner(owner_pid)
@@ -24,12 +22,11 @@ class LocalProcessExecutor:
 
     def __init__(self, workers: int = 1, *, niceness: int = 0) -> None:
         """``niceness`` > 0 lowers the workers' CPU priority (batch work that must not slow interactive work)."""
-        os.environ.setdefault("OMP_NUM_THREADS", "1")
         self.workers = workers
         self.pool = ProcessPoolExecutor(max_workers=workers, mp_context=worker_context(),
                                         initializer=_init_worker, initargs=(niceness, os.getpid()))
         # Start every worker now, but not on this thread: the first start waits for the forkserver's imports
-        # (~1.3 s of a core), which the caller's own start-up overlaps.
+        # (~0.7 s of a core), which the caller's own start-up overlaps.
         threading.Thread(target=self._start_workers, name="episode-workers-start", daemon=True).start()
 
     def _start_workers(self) -> None:

@@ -57,12 +57,14 @@ def test_the_mpc_driven_episode_is_the_runners_bit_for_bit(plant, controller, se
 
 
 def test_the_cli_figures_come_out_of_the_environment():
-    # `driftlab episode --seed 3` and `driftlab episode --plant nominal --controller paper` on this machine's lock.
-    for kwargs, seed, expected in (({}, 3, -0.5858037297915338),
-                                   ({"plant": "nominal", "controller": "paper"}, 0, -1.5448774883161882)):
+    # `driftlab episode --seed 3` and `driftlab episode --plant nominal --controller paper`. Their last digits
+    # follow the CPU (OpenBLAS picks its kernels by instruction set: -1.5448774884742065 with AVX-512,
+    # -1.5448774883161882 with OPENBLAS_CORETYPE=Haswell), so to 1e-9, as the stored-release check does.
+    for kwargs, seed, expected in (({}, 3, -0.5858037297916099),
+                                   ({"plant": "nominal", "controller": "paper"}, 0, -1.5448774884742065)):
         env = gym.make(ENV_ID, **kwargs)
         _mpc_episode(env, seed)
-        assert env.unwrapped.objective_j() == pytest.approx(expected, abs=1e-12)
+        assert env.unwrapped.objective_j() == pytest.approx(expected, abs=1e-9)
 
 
 def test_rewards_are_minus_the_stage_costs_of_j():

@@ -53,9 +53,10 @@ def _alive(pid: int) -> bool:
         return False
 
 
-@pytest.fixture
-def server(tmp_path):
-    db = tmp_path / "driftlab.db"
+@pytest.fixture(scope="module")
+def server(tmp_path_factory):
+    """One server for the tests below: each leaves its jobs finished or paused and released."""
+    db = tmp_path_factory.mktemp("lifecycle") / "driftlab.db"
     proc, url = start_server(db, free_port())
     yield proc, url, db
     if proc.poll() is None:
@@ -98,6 +99,7 @@ def test_a_second_server_on_a_taken_port_leaves_the_first_ones_jobs_alone(server
     assert after["status"] == "running" and after["runner_id"] == before["runner_id"]
     httpx.post(f"{url}/api/jobs/{job['id']}/pause")
     wait_status(url, job["id"], {"paused"})
+    wait_released(url, job["id"])
 
 
 @pytest.mark.parametrize("optimizer_process", ["0", "1"])

@@ -9,6 +9,8 @@ from __future__ import annotations
 import numpy as np
 from scipy.special import ndtr
 
+from driftlab.core.nearest import nearest_squared_distances
+
 _INV_SQRT_2PI = 1.0 / np.sqrt(2.0 * np.pi)
 
 
@@ -26,8 +28,7 @@ def failure_clearance(x: np.ndarray, failed: np.ndarray, radius: float) -> np.nd
     and EI would propose the same failing point again and again."""
     if len(failed) == 0:
         return np.ones(len(x))
-    d2 = np.min(((x[:, None, :] - failed[None, :, :]) ** 2).sum(axis=2), axis=1)
-    return 1.0 - np.exp(-d2 / radius**2)
+    return 1.0 - np.exp(-nearest_squared_distances(x, failed) / radius**2)
 
 
 def constrained_ei(ei: np.ndarray, p_success: np.ndarray, clearance: np.ndarray, min_probability: float) -> np.ndarray:

@@ -41,6 +41,7 @@ from driftlab.core.acquisition import constrained_ei, expected_improvement, fail
 from driftlab.core.errors import ConfigError
 from driftlab.core.failure_model import SuccessProbability, bounded_lbfgs
 from driftlab.core.limits import check_int
+from driftlab.core.nearest import farthest_point_order, nearest_squared_distances
 from driftlab.core.surrogate import GaussianProcess, Hyperparameters, fit_hyperparameters
 
 _CANDIDATES = 256
@@ -241,8 +242,7 @@ class BayesianOptimizer:
         rng = self._rng()
         spread = max(_RETREAT_SPREAD * 0.5 ** ((streak - _FAILURE_STREAK) // _FAILURE_STREAK), 1e-3)
         candidates = np.clip(x_best + rng.normal(0.0, spread, (_LOCAL_CANDIDATES, self.dim)), 0.0, 1.0)
-        d2 = np.min(((candidates[:, None, :] - failed[None, :, :]) ** 2).sum(axis=2), axis=1)
-        return candidates[int(np.argmax(d2))]
+        return candidates[int(np.argmax(nearest_squared_distances(candidates, failed)))]
 
     def _active_indices(self, x: np.ndarray, y: np.ndarray, limit: int) -> np.ndarray:
         n = len(y)
@@ -256,17 +256,7 @@ class BayesianOptimizer:
     @staticmethod
     def _spread(candidates: np.ndarray, chosen: np.ndarray, count: int, ids: np.ndarray) -> list[int]:
         """``count`` of ``ids`` (rows of ``candidates``) in greedy farthest-point order from ``chosen``."""
-        if len(chosen):
-            dist = np.min(np.linalg.norm(candidates[:, None, :] - chosen[None, :, :], axis=2), axis=1)
-        else:
-            dist = np.full(len(candidates), np.inf)
-        picked = []
-        for _ in range(min(count, len(candidates))):
-            j = int(np.argmax(dist))
-            picked.append(int(ids[j]))
-            dist = np.minimum(dist, np.linalg.norm(candidates - candidates[j], axis=1))
-            dist[j] = -1.0
-        return picked
+        return [int(ids[j]) for j in farthest_point_order(candidates, chosen, count)]
 
     def _boundary(self, offset: int = 0) -> int:
         """The history size whose prefix the hyperparameters are fit on: the last multiple of refit_every, plus
@@ -383,5 +373,4 @@ class BayesianOptimizer:
         taken = np.vstack([x_all, np.array(self.pending).reshape(-1, self.dim)])
         if len(taken) == 0:
             return candidates[0]
-        dist = np.min(np.linalg.norm(candidates[:, None, :] - taken[None, :, :], axis=2), axis=1)
-        return candidates[int(np.argmax(dist))]
+        return candidates[int(np.argmax(np.sqrt(nearest_squared_distances(candidates, taken))))]

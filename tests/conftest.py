@@ -36,7 +36,9 @@ def pytest_collection_modifyitems(items):
             item.add_marker(pytest.mark.xdist_group("browser"))
 
 
-_WARM_UP = []  # the controller's kernel warm-up processes, under xdist
+# An episode of each plant, short: the first compiles the kernels into numba's cache, the others load them.
+_WARM_UP_COMMAND = [sys.executable, "-m", "driftlab.cli", "episode", "--set", "scenario.max_time_s=2", "--plant"]
+_warming_up: list[subprocess.Popen] = []  # the controller's MB episode while it compiles, under xdist
 
 
 @pytest.hookimpl(tryfirst=True)
@@ -44,24 +46,21 @@ def pytest_sessionstart(session):
     """Under xdist, the controller compiles the episode kernels before any test runs: on a fresh clone (no numba
     cache) each test process and each server a test starts compiled the same kernel at once otherwise (~40 s of a
     core each, several at a time on 2 cores, while browser tests waited on their pages). MB first: its loop compiles
-    the shared kernel too. It runs while the workers start and collect (a core it left idle for ~10 s of its ~60 s);
-    no test is handed out before it ends (:func:`pytest_xdist_node_collection_finished`). With the cache warm this
-    costs ~5 s."""
-    if hasattr(session.config, "workerinput") or session.config.getoption("numprocesses", None) is None:
+    the shared kernel too. The workers start and collect meanwhile, on the core the compile leaves free; no test is
+    handed out before it ends (:func:`pytest_xdist_node_collection_finished`). With the cache warm this costs ~5 s."""
+    if hasattr(session.config, "workerinput") or not session.config.getoption("numprocesses", None):
         return
-    warm = [sys.executable, "-m", "driftlab.cli", "episode", "--set", "scenario.max_time_s=2", "--plant"]
-    _WARM_UP.append(subprocess.Popen([*warm, "commonroad_mb"], stdout=subprocess.DEVNULL, stderr=subprocess.PIPE))
-    _WARM_UP.append(warm)
+    _warming_up.append(subprocess.Popen([*_WARM_UP_COMMAND, "commonroad_mb"], stdout=subprocess.DEVNULL,
+                                        stderr=subprocess.PIPE))
 
 
 def pytest_xdist_node_collection_finished(node, ids):
     """The controller hands out tests once every worker has collected: the kernels are compiled by then."""
-    if len(_WARM_UP) != 2:
+    if not _warming_up:
         return
-    first, warm = _WARM_UP
-    _WARM_UP.clear()
+    first = _warming_up.pop()
     _, err = first.communicate(timeout=900)
     assert first.returncode == 0, err.decode(errors="replace")[-2000:]
-    rest = [subprocess.Popen([*warm, plant], stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
+    rest = [subprocess.Popen([*_WARM_UP_COMMAND, plant], stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
             for plant in ("commonroad_std", "default")]  # the kernel is compiled: these load it
     assert all(p.wait(timeout=900) == 0 for p in rest)

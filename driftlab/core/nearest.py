@@ -4,7 +4,8 @@
 
 Compiled loops that add the same squares in the same order as NumPy's broadcast form
 (``((a[:, None] - b[None]) ** 2).sum(axis=2)``; up to 128 dimensions), so the results are the same to the
-bit, without the (n, m, d) temporaries and the per-call overhead that made these a tenth of an ask.
+bit, without the (n, m, d) temporaries and the per-call overhead that made these ~13 % of the asks' time in
+the job default's 500-run.
 """
 
 from __future__ import annotations

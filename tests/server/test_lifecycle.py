@@ -5,7 +5,6 @@ import json
 import os
 import shutil
 import signal
-import sqlite3
 import subprocess
 import sys
 import time
@@ -15,8 +14,9 @@ from pathlib import Path
 import httpx
 import pytest
 
+from driftlab.db import storage
 from driftlab.db.lease import LEASE_TIMEOUT_S, naive
-from driftlab.db.models import utcnow
+from driftlab.db.models import Job, utcnow
 from tests.server_process import free_port, start_server, wait_for, wait_released, wait_status
 
 pytestmark = pytest.mark.e2e  # real processes: servers, browsers, Dask, the CLI
@@ -117,9 +117,8 @@ def test_kill_9_leaves_no_orphan_workers_and_the_next_server_takes_the_job_over(
         time.sleep(0.2)
     assert not [p for p in workers if _alive(p)], "worker processes outlived a killed server"
     # The dead server's lease as it is LEASE_TIMEOUT_S later (that it holds until then: tests/db/test_lease.py).
-    with sqlite3.connect(db) as connection:
-        connection.execute("UPDATE jobs SET heartbeat_at = ? WHERE id = ?",
-                           (str(naive(utcnow() - timedelta(seconds=LEASE_TIMEOUT_S + 1))), job["id"]))
+    with storage.transaction(storage.open_database(f"sqlite:///{db}")) as session:
+        session.get(Job, job["id"]).heartbeat_at = naive(utcnow() - timedelta(seconds=LEASE_TIMEOUT_S + 1))
     proc, url = start_server(db, free_port())
     try:  # the new server takes the job over
         done = wait_status(url, job["id"], {"finished"}, timeout_s=180)

@@ -15,7 +15,7 @@ from driftlab.core.track import FigureEight
 from driftlab.web.frames import EpisodeFrames
 from driftlab.web.player import EpisodePlayer
 from driftlab.web.replay_page import with_panel
-from driftlab.web.scene import set_replay_camera
+from driftlab.web.scene import set_replay_camera, set_world
 from driftlab.web.viser_server import quiet_viser_server
 
 RECORDING_FPS = 30.0
@@ -37,7 +37,7 @@ class EpisodeRecorder:
     def _record(self, frames: EpisodeFrames, track: FigureEight, *, caption_label: bool = True,
                 ghost: EpisodeFrames | None = None) -> viser.infra.StateSerializer:
         scene = self._fresh_scene()
-        scene.set_up_direction("+z")
+        set_world(scene)
         player = EpisodePlayer(scene, track)
         serializer = self._server.get_scene_serializer()
         player.load(frames, ghost)

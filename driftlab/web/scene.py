@@ -40,6 +40,15 @@ def circle_points(circle: Circle, radius_offset_m: float = 0.0, n: int = _CIRCLE
     return np.column_stack([circle.center_x_m + radius * np.cos(phi), circle.center_y_m + radius * np.sin(phi)])
 
 
+def set_world(scene: viser.SceneApi) -> None:
+    """z up, as the track's frame, and lit by viser's default lights alone, without its environment map. Where
+    WebGL runs without a GPU (a container, a remote desktop, a headless browser) the map's image-based lighting was
+    most of every frame's work: the view's browser tests spent 64 s of the GPU process's CPU with it, 28 s without
+    (docs/benchmarks.md, "The test suite's time"). A flat track and a box car show nothing more with it."""
+    scene.set_up_direction("+z")
+    scene.configure_environment_map(hdri=None)
+
+
 def set_overview_camera(camera) -> None:
     """Point a camera (a client's, or a server's initial camera) at the whole 8 from above one side."""
     # From -x: the left circle (y > 0) is on the left of the screen, as a driver at P0 would name it.

@@ -22,7 +22,7 @@ from driftlab.web.compare import ComparePanel
 from driftlab.web.frames import EpisodeFrames
 from driftlab.web.playback import Playback
 from driftlab.web.plots import padded_range, series
-from driftlab.web.scene import set_overview_camera
+from driftlab.web.scene import set_overview_camera, set_world
 from driftlab.web.sources import JobHistory, car_geometry_of_spec, track_of_spec
 from driftlab.web.what_if import WhatIfPanel
 
@@ -64,7 +64,7 @@ class ClientSession:
         self.history: JobHistory | None = None
         self.best_frames: EpisodeFrames | None = None
         self._closed = threading.Event()
-        client.scene.set_up_direction("+z")
+        set_world(client.scene)
         set_overview_camera(client.camera)
         gui = client.gui
         gui.configure_theme(control_width="large", dark_mode=False)

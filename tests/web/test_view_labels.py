@@ -55,6 +55,9 @@ def test_a_replay_shows_its_j_and_theta():
         recorder.stop()
     raw = zstandard.ZstdDecompressor().decompressobj().decompress(data[8:])  # after viser's 8-byte size header
     assert b"evaluation id 1234" in raw and b"J -1.234" in raw and b"c_lr 0.02146" in raw
+    # No environment map: a message with no HDRI turns viser's default one off (scene.set_world)
+    environment = raw[:raw.index(b"\xb5EnvironmentMapMessage")]
+    assert environment[environment.rindex(b"hdri_data"):].startswith(b"hdri_data\xc0")  # msgpack's nil
 
 
 def test_two_triggers_by_p0_share_one_label_and_distant_ones_have_their_own():

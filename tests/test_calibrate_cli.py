@@ -92,3 +92,25 @@ def test_each_point_is_calibrated_on_its_own_from_the_scenarios_drift_outwards(t
     assert "learned at 0.5 rad @ R 44 m" in rounds.stderr
     bad = _run("calibrate", "--plant", "commonroad_std", "--rounds", "2", "--one-set", "--db", str(db))
     assert bad.returncode == 2 and "--rounds" in bad.stderr and len(bad.stderr.strip().splitlines()) == 1
+
+
+
+def test_a_batch_comes_back_in_the_order_it_was_sent_whatever_the_number_of_workers():
+    """What makes a calibration's profiles the same with any --workers (its default is a process per core): each
+    batch's scores in the order sent, though with 2 workers the short failing episodes come back first."""
+    from driftlab.cli.calibrate import run_batch_on
+    from driftlab.core.config import Theta, config_to_dict
+    from driftlab.core.configure import preset_config
+    from driftlab.worker.executors import LocalProcessExecutor
+
+    document = config_to_dict(preset_config("commonroad_std"))
+    drives, spins = Theta().as_dict(), {**Theta().as_dict(), "dV": 1.0, "k": 0.12}
+    batch = [(theta, document, seed) for seed in range(3) for theta in (drives, spins)]
+    scores = []
+    for workers in (1, 2):
+        executor = LocalProcessExecutor(workers)
+        try:
+            scores.append(run_batch_on(executor)(batch))
+        finally:
+            executor.shutdown()
+    assert scores[0] == scores[1] and len({status for status, *_ in scores[0]}) == 2

@@ -11,7 +11,7 @@ import shlex
 import sys
 from typing import Any
 
-from driftlab.cli.options import dask_address, db_url, finite, key_values
+from driftlab.cli.options import dask_address, db_url, finite, key_values, machine_cores
 
 SUMMARY_KEYS = ("profile_id", "plant_model", "vehicle_id", "score", "completed", "episodes", "per_point", "start",
                 "candidates", "window", "weights", "wall_s")
@@ -70,7 +70,8 @@ def cmd_calibrate(args: argparse.Namespace) -> int:
         raise ConfigError(str(exc).replace("one_set", "--one-set").replace("rounds:", "--rounds:")
                           .replace("points:", "--points:"), field=exc.field) from None
     factory = storage.open_database(db_url(args.db))
-    executor, _ = open_executor(args.workers, dask_address(args))
+    address = dask_address(args)
+    executor, _ = open_executor(args.workers or (None if address else machine_cores()), address)
     try:
         try:
             documents = run_calibration(request, factory, run_batch_on(executor), on_event=_print_event)
@@ -103,7 +104,8 @@ def add_calibrate_parser(sub, db_help: str, dask_help: str, int_in, plant_choice
                      help="episode seeds per point (1..64, default 3)")
     cal.add_argument("--seed", type=int, default=0, help="the optimizer's seed")
     cal.add_argument("--workers", type=int_in(1, 1024), metavar="N",
-                     help="episodes in flight (default: 1 local process, the cluster's threads with --dask)")
+                     help="episodes in flight (default: a local process per core this process may use, the "
+                     "cluster's threads with --dask); the profiles found do not depend on it")
     cal.add_argument("--dask", metavar="ADDRESS", help=dask_help)
     cal.add_argument("--db", help=db_help)
     cal.add_argument("--theta", help="the theta every weight set drives, c_lr=..,c_rl=..,dV=..,k=.. (any subset; "

@@ -142,6 +142,15 @@ def episode_config(args: argparse.Namespace, *, inside_window: bool = False) -> 
     return parse(preset, key_values(args.set or [], "--set"))
 
 
+def machine_cores() -> int:
+    """The cores this process may run on: its CPU affinity where the OS reports one (a container's limit), else
+    the machine's."""
+    try:
+        return len(os.sched_getaffinity(0))
+    except AttributeError:  # macOS and Windows have no affinity call
+        return os.cpu_count() or 1
+
+
 def dask_address(args: argparse.Namespace) -> str | None:
     return args.dask or settings().dask_address
 

@@ -15,6 +15,7 @@ import viser
 from websockets.exceptions import ConnectionClosed, InvalidStatus
 from websockets.sync.client import connect
 
+from driftlab.db import storage
 from tests.server_process import free_port, start_server, wait_status
 
 pytestmark = pytest.mark.e2e  # real processes: servers, browsers, Dask, the CLI
@@ -210,9 +211,7 @@ def test_the_queue_is_bounded(tmp_path):
 
 def test_a_read_only_database_is_a_json_503_and_a_newer_one_a_one_line_exit_2(tmp_path):
     db = tmp_path / "ro.db"
-    proc, url = start_server(db, free_port())  # creates the file at the head revision
-    proc.terminate()
-    proc.wait(timeout=30)
+    storage.close_database(storage.open_database(f"sqlite:///{db}"))  # at the head revision, as a server makes it
     # Opened read-only (SQLite's mode=ro: even root cannot write through it), as a file on a read-only mount is.
     proc, url = start_server(f"sqlite:///file:{db}?mode=ro&uri=true", free_port())
     try:

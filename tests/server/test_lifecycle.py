@@ -106,7 +106,7 @@ def test_a_second_server_on_a_taken_port_leaves_the_first_ones_jobs_alone(server
 def test_kill_9_leaves_no_orphan_workers_and_the_next_server_takes_the_job_over(tmp_path, optimizer_process):
     db = tmp_path / "crash.db"
     proc, url = start_server(db, free_port(), env_extra={"DRIFTLAB_OPTIMIZER_PROCESS": optimizer_process})
-    job = httpx.post(f"{url}/api/jobs", json={"iterations": 30, "seed_points": 5, "robust_samples": 1}).json()
+    job = httpx.post(f"{url}/api/jobs", json={"iterations": 12, "seed_points": 5, "robust_samples": 1}).json()
     _wait_done(url, job["id"], 4)
     workers = _children(proc.pid)
     assert len(workers) >= 3  # the job's pool, the what-if worker, multiprocessing's helpers
@@ -123,8 +123,8 @@ def test_kill_9_leaves_no_orphan_workers_and_the_next_server_takes_the_job_over(
     try:  # the new server takes the job over
         done = wait_status(url, job["id"], {"finished"}, timeout_s=180)
         evals = httpx.get(f"{url}/api/jobs/{job['id']}/evaluations").json()
-        assert done["n_done"] == 30 and [e["index"] for e in evals] == list(range(30))
-        assert len({tuple(sorted(e["theta"].items())) for e in evals}) == 30
+        assert done["n_done"] == 12 and [e["index"] for e in evals] == list(range(12))
+        assert len({tuple(sorted(e["theta"].items())) for e in evals}) == 12
     finally:
         proc.terminate()
         proc.wait(timeout=30)

@@ -3,6 +3,9 @@
 from __future__ import annotations
 
 import signal
+import threading
+
+_terminated = threading.Event()
 
 
 def stop_on_sigterm() -> None:
@@ -10,6 +13,15 @@ def stop_on_sigterm() -> None:
     processes shut down, instead of the lease going stale for 15 s and semaphores leaking."""
 
     def interrupt(_signum, _frame):
+        _terminated.set()
         raise KeyboardInterrupt
 
     signal.signal(signal.SIGTERM, interrupt)
+
+
+def raise_if_terminated() -> None:
+    """KeyboardInterrupt once SIGTERM came. The handler's own raise is lost where the signal lands in a finalizer
+    (llvmlite's ``ObjectRef.__del__``): Python prints such an exception and goes on, and a `tune` went on running
+    its 2000 evaluations. Called at each evaluation, it stops the run one evaluation later."""
+    if _terminated.is_set():
+        raise KeyboardInterrupt

@@ -9,7 +9,7 @@ import sys
 import time
 
 from driftlab.cli.options import dask_address, db_url, episode_config, finite, key_values, settings, stored_db_url
-from driftlab.cli.shutdown import stop_on_sigterm
+from driftlab.cli.shutdown import raise_if_terminated, stop_on_sigterm
 from driftlab.core.drivability import check_drivable
 from driftlab.core.errors import ConfigError
 
@@ -167,6 +167,7 @@ def cmd_tune(args: argparse.Namespace) -> int:
         return 0
 
     def progress(p: Progress) -> None:
+        raise_if_terminated()
         best = f"{p.best_J:.3f}" if p.best_J is not None else "-"
         eta = f"{p.eta_s:.0f} s" if p.eta_s is not None else "-"
         line = f"[{p.n_done}/{p.iterations}] best J {best}  last {p.last.status} J {p.last.J:.3f}  ETA {eta}"

@@ -6,9 +6,14 @@ import subprocess
 import sys
 import tempfile
 import time
+from datetime import timedelta
 from pathlib import Path
 
 import httpx
+
+from driftlab.db import storage
+from driftlab.db.lease import LEASE_TIMEOUT_S, naive
+from driftlab.db.models import Job, utcnow
 
 
 def free_port() -> int:
@@ -64,3 +69,18 @@ def serve_finished_job(iterations=8):
                     "--seed-points", str(iterations), "--db", str(db), "--name", "finished"],
                    check=True, capture_output=True)
     return start_server(db, free_port())
+
+
+def age_leases(db_url: str, which) -> None:
+    """The leases of the jobs ``which`` selects (a SQLAlchemy condition on Job) as they are LEASE_TIMEOUT_S after
+    their runner's last heartbeat: a killed server's, without waiting that long (that a lease holds until then and
+    not after: tests/db/test_lease.py)."""
+    from sqlalchemy import select
+
+    factory = storage.open_database(db_url)
+    try:
+        with storage.transaction(factory) as session:
+            for job in session.scalars(select(Job).where(which)):
+                job.heartbeat_at = naive(utcnow() - timedelta(seconds=LEASE_TIMEOUT_S + 1))
+    finally:
+        storage.close_database(factory)

@@ -94,7 +94,6 @@ def test_each_point_is_calibrated_on_its_own_from_the_scenarios_drift_outwards(t
     assert bad.returncode == 2 and "--rounds" in bad.stderr and len(bad.stderr.strip().splitlines()) == 1
 
 
-
 def test_a_batch_comes_back_in_the_order_it_was_sent_whatever_the_number_of_workers():
     """What makes a calibration's profiles the same with any --workers (its default is a process per core): each
     batch's scores in the order sent, though with 2 workers the short failing episodes come back first."""

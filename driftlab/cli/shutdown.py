@@ -21,7 +21,7 @@ def stop_on_sigterm() -> None:
 
 def raise_if_terminated() -> None:
     """KeyboardInterrupt once SIGTERM came. The handler's own raise is lost where the signal lands in a finalizer
-    (llvmlite's ``ObjectRef.__del__``): Python prints such an exception and goes on, and a `tune` went on running
-    its 2000 evaluations. Called at each evaluation, it stops the run one evaluation later."""
+    (llvmlite's ``ObjectRef.__del__``): Python prints an exception raised there and goes on. Called at each
+    evaluation, this stops the run one evaluation later."""
     if _terminated.is_set():
         raise KeyboardInterrupt

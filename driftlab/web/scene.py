@@ -41,10 +41,9 @@ def circle_points(circle: Circle, radius_offset_m: float = 0.0, n: int = _CIRCLE
 
 
 def set_world(scene: viser.SceneApi) -> None:
-    """z up, as the track's frame, and lit by viser's default lights alone, without its environment map. Where
-    WebGL runs without a GPU (a container, a remote desktop, a headless browser) the map's image-based lighting was
-    most of every frame's work: the view's browser tests spent 64 s of the GPU process's CPU with it, 28 s without
-    (docs/benchmarks.md, "The test suite's time"). A flat track and a box car show nothing more with it."""
+    """z up, as the track's frame, and lit by viser's default lights alone, without its environment map: where
+    WebGL runs without a GPU (a container, a remote desktop) the map's image-based lighting is most of each frame's
+    work (docs/benchmarks.md, "The test suite's time"), and a flat track and a box car show nothing more with it."""
     scene.set_up_direction("+z")
     scene.configure_environment_map(hdri=None)
 

@@ -8,16 +8,13 @@ import signal
 import subprocess
 import sys
 import time
-from datetime import timedelta
 from pathlib import Path
 
 import httpx
 import pytest
 
-from driftlab.db import storage
-from driftlab.db.lease import LEASE_TIMEOUT_S, naive
-from driftlab.db.models import Job, utcnow
-from tests.server_process import free_port, start_server, wait_for, wait_released, wait_status
+from driftlab.db.models import Job
+from tests.server_process import age_leases, free_port, start_server, wait_for, wait_released, wait_status
 
 pytestmark = pytest.mark.e2e  # real processes: servers, browsers, Dask, the CLI
 
@@ -116,9 +113,7 @@ def test_kill_9_leaves_no_orphan_workers_and_the_next_server_takes_the_job_over(
     while any(_alive(p) for p in workers) and time.time() < deadline:
         time.sleep(0.2)
     assert not [p for p in workers if _alive(p)], "worker processes outlived a killed server"
-    # The dead server's lease as it is LEASE_TIMEOUT_S later (that it holds until then: tests/db/test_lease.py).
-    with storage.transaction(storage.open_database(f"sqlite:///{db}")) as session:
-        session.get(Job, job["id"]).heartbeat_at = naive(utcnow() - timedelta(seconds=LEASE_TIMEOUT_S + 1))
+    age_leases(f"sqlite:///{db}", Job.id == job["id"])
     proc, url = start_server(db, free_port())
     try:  # the new server takes the job over
         done = wait_status(url, job["id"], {"finished"}, timeout_s=180)

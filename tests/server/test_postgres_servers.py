@@ -2,16 +2,12 @@
 server is killed -9 the other takes its jobs over once their leases go stale, losing nothing that was stored."""
 
 import signal
-from datetime import timedelta
 
 import httpx
 import pytest
-from sqlalchemy import select
 
-from driftlab.db import storage
-from driftlab.db.lease import LEASE_TIMEOUT_S, naive
-from driftlab.db.models import Job, utcnow
-from tests.server_process import free_port, start_server, wait_for
+from driftlab.db.models import Job
+from tests.server_process import age_leases, free_port, start_server, wait_for
 
 pytestmark = pytest.mark.e2e
 
@@ -43,11 +39,7 @@ def test_two_servers_run_a_queue_each_job_exactly_once_through_a_kill_9(postgres
         stored_before = {job_id: {e["id"] for e in _evaluations(second_url, job_id)} for job_id in ids}
         first.send_signal(signal.SIGKILL)
         first.wait()
-        # The dead server's leases as they are LEASE_TIMEOUT_S later (that they hold until then:
-        # tests/db/test_lease.py); the second server, running all along, finds them stale on its own.
-        with storage.transaction(storage.open_database(database)) as session:
-            for job in session.scalars(select(Job).where(Job.runner_id.contains(mine))):
-                job.heartbeat_at = naive(utcnow() - timedelta(seconds=LEASE_TIMEOUT_S + 1))
+        age_leases(database, Job.runner_id.contains(mine))  # the second server, running, finds them stale itself
         # The second server finishes the queue, the dead server's jobs once their leases are stale.
         for job_id in ids:
             done = wait_for(f"{second_url}/api/jobs/{job_id}", lambda job: job["status"] == "finished",

@@ -10,9 +10,12 @@ every weight set or theta tried, and ``{"profile": ...}`` when a profile is stor
 
 from __future__ import annotations
 
+import threading
 import time
 from collections.abc import Callable, Sequence
+from concurrent.futures import FIRST_EXCEPTION, ThreadPoolExecutor, wait
 from dataclasses import asdict, dataclass, field, replace
+from functools import partial
 from importlib.metadata import version
 from typing import Any
 
@@ -187,17 +190,26 @@ def _round_centre(given: EpisodeConfig, last: dict[str, Any]) -> EpisodeConfig:
 
 @dataclass
 class _Run:
-    """One calibration's context while it runs."""
+    """One calibration's context while it runs. A group's candidate models are searched side by side, each in a
+    thread of its own (:func:`_side_by_side`): what they share is safe to use from several threads."""
 
     request: CalibrationRequest
     given: EpisodeConfig
-    run_batch: RunBatch
+    executor_batch: RunBatch
     on_event: Event
     known: list[tuple[str, Any]]
     stage: dict[str, Any] = field(default_factory=dict)
     # Why a candidate model had no fit at a point (by its plant section, which holds the model's settings): a later
     # round or steering limit of the same model is not sent to the workers there again.
     unfitted: dict[tuple[Any, CalibrationPoint], str] = field(default_factory=dict)
+    # Set when one search failed or was stopped: the searches beside it stop before their next batch.
+    stopping: threading.Event = field(default_factory=threading.Event)
+
+    def run_batch(self, batch: list[tuple[dict[str, float], dict[str, Any], int]]
+                  ) -> list[tuple[str, float, float, float | None]]:
+        if self.stopping.is_set():
+            raise CalibrationStopped
+        return self.executor_batch(batch)
 
     def say(self, message: str) -> None:
         self.on_event({"message": message})
@@ -206,13 +218,60 @@ class _Run:
         self.on_event({"progress": {**self.stage, **values}})
 
 
+class _GroupProgress:
+    """The weight searches of a group's candidate models, running side by side, reported as one: every set any of
+    them tried, of ``iterations`` for each, the best score among them."""
+
+    def __init__(self, run: _Run, searches: int) -> None:
+        self.run, self.of = run, run.request.iterations * searches
+        self.lock = threading.Lock()
+        self.tried: dict[int, Any] = {}  # the search's number -> its Calibration
+
+    def __call__(self, number: int, calibration) -> None:
+        with self.lock:
+            self.tried[number] = calibration
+            best = min((c.best for c in self.tried.values()), key=lambda r: (r.score, -r.completed))
+            last = calibration.tried[-1]
+            self.run.progress(tried=sum(len(c.tried) for c in self.tried.values()), of=self.of,
+                              best_score=best.score, best_completed=best.completed, last_score=last.score,
+                              last_completed=last.completed, episodes=len(last.episodes))
+
+
+def _side_by_side(run: _Run, calls: Sequence[Callable[[], Any]]) -> list[Any]:
+    """Each of ``calls``' results, in order, the calls running at once in threads of their own: one search asks for
+    its next weight set while the others' episodes run, so the workers do not wait on the asks. The first
+    exception (a failed batch, CalibrationStopped) stops the others before their next batch and is raised."""
+    if len(calls) <= 1:
+        return [call() for call in calls]
+    pool = ThreadPoolExecutor(max_workers=len(calls), thread_name_prefix="calibration-search")
+    futures = [pool.submit(call) for call in calls]
+    try:
+        wait(futures, return_when=FIRST_EXCEPTION)
+        if any(f.done() and f.exception() is not None for f in futures):
+            run.stopping.set()
+        wait(futures)
+    except BaseException:  # KeyboardInterrupt while waiting: the searches stop at their next batch
+        run.stopping.set()
+        raise
+    finally:
+        pool.shutdown(wait=False)
+    errors = [f.exception() for f in futures]
+    # What stopped the first search, not the CalibrationStopped it then caused in the others.
+    cause = [e for e in errors if e is not None and not isinstance(e, CalibrationStopped)]
+    raised = cause or [e for e in errors if e is not None]
+    if raised:
+        raise raised[0]
+    return [f.result() for f in futures]
+
+
 def _model_text(config: EpisodeConfig) -> str:
     return (f"plant.model_drive_coupling={str(config.plant.model_drive_coupling).lower()}, "
             f"mpc.steer_limit_rad={config.mpc.steer_limit_rad:g}")
 
 
 def _search_candidate(run: _Run, base: EpisodeConfig, inside: list[tuple[CalibrationPoint, EpisodeConfig]],
-                      outside: list[tuple[CalibrationPoint, str]], theta: Theta):
+                      outside: list[tuple[CalibrationPoint, str]], theta: Theta,
+                      on_progress: Callable[[Any], None]):
     """The weights searched for one candidate model at the points ``inside`` (the calibration, or None where the
     model cannot be fitted at any of them). The workers fit each point's model with its first episode
     (driftlab.core.calibration.point_config): where a point has no fit of this model, the first batch raises; that
@@ -228,18 +287,10 @@ def _search_candidate(run: _Run, base: EpisodeConfig, inside: list[tuple[Calibra
         if not inside:
             break
         run.say(f"calibrating {', '.join(p.label() for p, _ in inside)} with {_model_text(base)}")
-        run.stage.update(step="weights", model_drive_coupling=base.plant.model_drive_coupling,
-                         steer_limit_rad=base.mpc.steer_limit_rad)
-
-        def progress(calibration) -> None:
-            best, last = calibration.best, calibration.tried[-1]
-            run.progress(tried=len(calibration.tried), of=request.iterations, best_score=best.score,
-                         best_completed=best.completed, last_score=last.score, last_completed=last.completed,
-                         episodes=len(last.episodes))
         try:
             return calibrate(base, inside, run.run_batch, iterations=request.iterations, seeds=request.seeds,
                              seed=request.seed, known=[mpc for _, mpc in run.known], theta=theta,
-                             on_progress=progress)
+                             on_progress=on_progress)
         except ConfigError:
             unfit = unfittable(inside)  # which point's fit failed: found only after a failure
             if not unfit:
@@ -260,6 +311,7 @@ def _calibrate_group(run: _Run, centre: EpisodeConfig, points: Sequence[Calibrat
         if stage is others and stage:
             run.say(f"the nearest calibrated point's model has no fit at {', '.join(p.label() for p in points)}: "
                     "the other candidates")
+        searches = []
         for change in stage:
             # Fitted at each point, not at the scenario's drift: a model that has no fit there may fit the points.
             base = apply_overrides(centre, change) if change else centre
@@ -267,7 +319,13 @@ def _calibrate_group(run: _Run, centre: EpisodeConfig, points: Sequence[Calibrat
             if not inside:  # this model fits none of the points: the other candidates run
                 run.say(f"skipped the model with {change}: {'; '.join(reason for _, reason in outside)}")
                 continue
-            calibration = _search_candidate(run, base, inside, outside, theta)
+            searches.append((base, inside, outside))
+        run.stage.update(step="weights", candidates=len(searches))
+        progress = _GroupProgress(run, len(searches))
+        found = _side_by_side(run, [partial(_search_candidate, run, base, inside, outside, theta,
+                                            partial(progress, number)) for number, (base, inside, outside)
+                                    in enumerate(searches)])
+        for (base, inside, outside), calibration in zip(searches, found, strict=True):
             if calibration is None:
                 unfit_models.append({"model_drive_coupling": base.plant.model_drive_coupling,
                                      "steer_limit_rad": base.mpc.steer_limit_rad,

@@ -5,6 +5,7 @@ event, its episodes in flight dropped, the profiles it stored kept."""
 
 from __future__ import annotations
 
+import threading
 import time
 from collections.abc import Callable, Hashable
 from typing import Any
@@ -44,26 +45,30 @@ def run_stored_calibration(factory: sessionmaker[Session], calibration_id: int, 
 
 class _Reporter:
     """Stores the run's events as they come (one per weight set or theta tried: a cancel stops the run at the end
-    of the set in flight), renewing the lease; raises CalibrationStopped once the runner lost it (cancelled)."""
+    of the set in flight), renewing the lease; raises CalibrationStopped once the runner lost it (cancelled). Called
+    from each thread of the candidate searches that run side by side: one at a time."""
 
     def __init__(self, factory, calibration_id: int, runner: str, should_stop: Callable[[], bool]) -> None:
         self.factory, self.calibration_id, self.runner, self.should_stop = factory, calibration_id, runner, should_stop
         self.progress: dict[str, Any] | None = None
         self.messages: list[str] = []
         self.last = 0.0
+        self.lock = threading.RLock()
 
     def __call__(self, event: dict[str, Any]) -> None:
-        if "message" in event:
-            self.messages.append(event["message"])
-        if "progress" in event:
-            self.progress = event["progress"]
-        self.flush(profile_id=event["profile"]["profile_id"] if "profile" in event else None)
+        with self.lock:
+            if "message" in event:
+                self.messages.append(event["message"])
+            if "progress" in event:
+                self.progress = event["progress"]
+            self.flush(profile_id=event["profile"]["profile_id"] if "profile" in event else None)
 
     def flush(self, profile_id: int | None = None) -> None:
-        with storage.transaction(self.factory) as session:
-            held = calibrations.record(session, calibration_id=self.calibration_id, runner=self.runner,
-                                       progress=self.progress, messages=self.messages, profile_id=profile_id)
-        self.messages, self.last = [], time.monotonic()
+        with self.lock:
+            with storage.transaction(self.factory) as session:
+                held = calibrations.record(session, calibration_id=self.calibration_id, runner=self.runner,
+                                           progress=self.progress, messages=self.messages, profile_id=profile_id)
+            self.messages, self.last = [], time.monotonic()
         if not held:
             raise CalibrationStopped
 
@@ -71,7 +76,9 @@ class _Reporter:
         """Between episodes: stop when asked, renewing the lease while a batch waits."""
         if self.should_stop():
             raise CalibrationStopped
-        if time.monotonic() - self.last >= lease.HEARTBEAT_S:
+        with self.lock:
+            due = time.monotonic() - self.last >= lease.HEARTBEAT_S
+        if due:
             self.flush()
 
 

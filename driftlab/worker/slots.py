@@ -12,7 +12,7 @@ from __future__ import annotations
 import threading
 import time
 from collections.abc import Callable, Hashable
-from typing import Any
+from typing import Any, Protocol
 
 # How often a capacity that follows the executor (a Dask cluster's worker threads) is read again.
 CAPACITY_READ_EVERY_S = 1.0
@@ -25,6 +25,12 @@ def capacity_of(executor: Any, workers_given: int | None, workers: int) -> int |
     return follow if workers_given is None and callable(follow) else workers
 
 
+class Wake(Protocol):
+    """What a job waits on (a threading.Event, or what sets several)."""
+
+    def set(self) -> None: ...
+
+
 class EpisodeSlots:
     def __init__(self, capacity: int | Callable[[], int]) -> None:
         """``capacity``: episodes the executor runs at once, or a function that says how many now (read at most
@@ -34,7 +40,7 @@ class EpisodeSlots:
         self._read_at = time.monotonic()
         self._lock = threading.Lock()
         self._held: dict[Hashable, int] = {}  # episodes in flight per job, in the order the jobs joined
-        self._wakes: dict[Hashable, threading.Event] = {}
+        self._wakes: dict[Hashable, Wake] = {}
         self._in_flight = 0
         self.peak = 0  # the most episodes in flight at once so far
 
@@ -48,7 +54,7 @@ class EpisodeSlots:
                 self._wake_all()
         return self._capacity
 
-    def join(self, owner: Hashable, wake: threading.Event | None = None) -> None:
+    def join(self, owner: Hashable, wake: Wake | None = None) -> None:
         """``owner`` (one running job) takes part; ``wake`` is set whenever a slot it may use becomes free."""
         with self._lock:
             self._held.setdefault(owner, 0)

@@ -21,16 +21,40 @@ from driftlab.worker.slots import EpisodeSlots
 Task = tuple[dict[str, float], dict[str, Any], int]  # (theta, config document, seed): one episode
 
 
+class _Wakes:
+    """Sets the wake of every run of one owner in progress: a calibration runs its candidate models' batches from
+    several threads at once, and each waits on an event of its own (one shared event, cleared by one run, would
+    leave another asleep until its heartbeat)."""
+
+    def __init__(self) -> None:
+        self._lock = threading.Lock()
+        self._events: set[threading.Event] = set()
+
+    def add(self, event: threading.Event) -> None:
+        with self._lock:
+            self._events.add(event)
+
+    def discard(self, event: threading.Event) -> None:
+        with self._lock:
+            self._events.discard(event)
+
+    def set(self) -> None:
+        with self._lock:
+            for event in self._events:
+                event.set()
+
+
 class SlottedEpisodes:
     """``owner``'s part of the shared slots while the ``with`` block runs (joined on entry, left on exit: its share
-    goes back to the others, whatever it still had in flight is freed)."""
+    goes back to the others, whatever it still had in flight is freed). :meth:`run` may be called from several
+    threads at once; their episodes share the owner's part."""
 
     def __init__(self, executor: EpisodeExecutor, slots: EpisodeSlots, owner: Hashable) -> None:
         self.executor, self.slots, self.owner = executor, slots, owner
-        self.wake = threading.Event()
+        self.wakes = _Wakes()
 
     def __enter__(self) -> SlottedEpisodes:
-        self.slots.join(self.owner, self.wake)
+        self.slots.join(self.owner, self.wakes)
         return self
 
     def __exit__(self, *exc_info: object) -> None:
@@ -45,23 +69,27 @@ class SlottedEpisodes:
         waiting = list(enumerate(tasks))
         waiting.reverse()  # popped from the end: submitted in the order given
         in_flight: dict[Future[EpisodeOutcome], int] = {}
+        wake = threading.Event()
+        self.wakes.add(wake)
         try:
             while waiting or in_flight:
                 while waiting and self.slots.try_take(self.owner):
                     index, (theta, document, seed) = waiting.pop()
                     future = self.executor.submit(theta, document, seed)
-                    future.add_done_callback(lambda _: self.wake.set())
+                    future.add_done_callback(lambda _: wake.set())
                     in_flight[future] = index
-                self.wake.wait(timeout=HEARTBEAT_S)
-                self.wake.clear()
+                wake.wait(timeout=HEARTBEAT_S)
+                wake.clear()
                 for future in [f for f in in_flight if f.done()]:
                     index = in_flight.pop(future)
                     self.slots.give_back(self.owner)
+                    self.wakes.set()  # this owner's runs in other threads may take the slot (EpisodeSlots wakes others)
                     on_result(index, future.result())
                 if not go_on():
                     return False
             return True
         finally:
+            self.wakes.discard(wake)
             for future in in_flight:
                 future.cancel()
 

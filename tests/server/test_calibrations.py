@@ -57,7 +57,9 @@ def test_a_calibration_runs_reports_its_progress_and_its_profile_drives_the_next
     assert executor.submitted == 4 + 3 * VERIFY_SEEDS
     state = api.get(f"/api/calibrations/{queued.json()['id']}").json()
     assert state["status"] == "finished" and state["error"] is None, state
-    assert state["progress"]["tried"] == 2 and state["progress"]["of"] == 2 and state["progress"]["step"] == "weights"
+    # The two candidates' searches side by side, reported as one: 2 weight sets each.
+    assert state["progress"]["tried"] == 4 and state["progress"]["of"] == 4 and state["progress"]["step"] == "weights"
+    assert state["progress"]["candidates"] == 2
     assert any(m.startswith("calibrating 0.5 rad @ R 44 m") for m in state["messages"])
     profile_id, = state["profile_ids"]
     summary, = api.get("/api/profiles").json()
@@ -98,7 +100,9 @@ def test_a_cancelled_calibration_stops_at_its_next_episode_and_keeps_what_it_sto
     with ThreadPoolExecutor(1) as pool:
         executor = CancelsAfterThree(pool)
         assert _run_queued(api, executor) == "cancelled"
-    assert executor.submitted <= 4  # it stopped after the weight set in flight, not after 50 sets
+    # It stopped after the weight sets in flight (one for each of the 2 candidate models' searches, which run side by
+    # side), not after 50 sets each.
+    assert executor.submitted <= 3 + 2
     state = api.get(f"/api/calibrations/{calibration_id}").json()
     assert state["status"] == "cancelled" and state["profile_ids"] == []
     assert api.delete(f"/api/calibrations/{calibration_id}").status_code == 404  # nothing left to cancel

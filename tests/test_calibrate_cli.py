@@ -55,6 +55,8 @@ def test_calibrate_stores_a_profile_that_the_next_job_of_that_car_takes(tmp_path
     assert bad.returncode == 2 and "--points" in bad.stderr and len(bad.stderr.strip().splitlines()) == 1
     bad = _run("calibrate", "--plant", "commonroad_std", "--theta", "dV=0.1,nope=1", "--db", str(db))
     assert bad.returncode == 2 and "'nope'" in bad.stderr and len(bad.stderr.strip().splitlines()) == 1
+    bad = _run("calibrate", "--plant", "commonroad_std", "--prune", "0.95", "--db", str(db))
+    assert bad.returncode == 2 and "--prune" in bad.stderr and len(bad.stderr.strip().splitlines()) == 1
 
 
 def test_each_point_is_calibrated_on_its_own_from_the_scenarios_drift_outwards(tmp_path):

@@ -11,7 +11,7 @@ import shlex
 import sys
 from typing import Any
 
-from driftlab.cli.options import dask_address, db_url, finite, key_values, machine_cores
+from driftlab.cli.options import dask_address, db_url, finite, key_values, machine_cores, prune_rule
 
 SUMMARY_KEYS = ("profile_id", "plant_model", "vehicle_id", "score", "completed", "episodes", "per_point", "start",
                 "candidates", "window", "weights", "wall_s")
@@ -39,7 +39,7 @@ def _print_event(event: dict[str, Any]) -> None:
         if p.get("step") == "theta":
             sys.stderr.write(f"[theta {n}] best score {p['best_score']:.3f}\n")
         else:
-            sys.stderr.write(f"[{n}] best score {p['best_score']:.3f} ({p['best_completed']}/{p['episodes']} "
+            sys.stderr.write(f"[{n}] best score {p['best_score']:.3f} ({p['best_completed']}/{p['best_episodes']} "
                              f"completed), last {p['last_score']:.3f} ({p['last_completed']}/{p['episodes']})\n")
     sys.stderr.flush()
 
@@ -53,6 +53,7 @@ def request_from_args(args: argparse.Namespace):
         plant=args.plant, sets=key_values(args.set or [], "--set"), points=args.points, iterations=args.iterations,
         seeds=args.seeds, seed=args.seed, rounds=args.rounds, one_set=args.one_set,
         theta={k: v for k, v in Theta.from_mapping(theta).as_dict().items() if k in theta},
+        prune=prune_rule(args.prune).to_dict(),
         command="driftlab " + " ".join(shlex.quote(a) for a in args.argv))
 
 
@@ -115,6 +116,9 @@ def add_calibrate_parser(sub, db_help: str, dask_help: str, int_in, plant_choice
                           "theta gets a second): each round after the first learns the theta a job "
                           "would learn there with the last round's weights, then searches the weights again for it, "
                           "a decade around the last round's")
+    cal.add_argument("--prune", metavar="off|CONFIDENCE,MIN_SEEDS",
+                     help="stop a weight set whose first seeds are worse than the best set's on the same seeds with "
+                          "confidence (default: on, 0.95,2; off: every set runs every seed)")
     cal.add_argument("--one-set", action="store_true",
                      help="one weight set for all the points (default: each point searched on its own and stored as "
                           "a profile of its own, which the jobs at that drift take)")

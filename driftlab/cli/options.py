@@ -238,3 +238,20 @@ def add_job_options(parser: argparse.ArgumentParser) -> None:
                         help="config override, e.g. plant.steer_lag_s=0.02")
     parser.add_argument("--bound", action="append", metavar="NAME=LO:HI", help="theta bound, e.g. k=0:0.1 or "
                         "model_c_scale=0.9:1.2")
+
+
+def prune_rule(text: str | None):
+    """``--prune off`` or ``--prune CONFIDENCE,MIN_SEEDS``: a job's or a calibration's prune rule (None: default)."""
+    from driftlab.core.pruning import PruneRule
+
+    if text is None:
+        return PruneRule()
+    if text == "off":
+        return PruneRule(enabled=False)
+    confidence, _, seeds = text.partition(",")
+    try:
+        level, count = float(confidence), int(seeds)
+    except ValueError:
+        raise ConfigError(f"--prune must be off or CONFIDENCE,MIN_SEEDS, e.g. 0.95,2; got {text!r}",
+                          field="prune") from None
+    return PruneRule(confidence=level, min_seeds=count)  # its ranges, naming the field

@@ -8,7 +8,16 @@ import os
 import sys
 import time
 
-from driftlab.cli.options import dask_address, db_url, episode_config, finite, key_values, settings, stored_db_url
+from driftlab.cli.options import (
+    dask_address,
+    db_url,
+    episode_config,
+    finite,
+    key_values,
+    prune_rule,
+    settings,
+    stored_db_url,
+)
 from driftlab.cli.shutdown import raise_if_terminated, stop_on_sigterm
 from driftlab.core.drivability import check_drivable
 from driftlab.core.errors import ConfigError
@@ -38,23 +47,6 @@ def tuning_spec(args: argparse.Namespace):
                       local_phase=None if args.local_phase is None else args.local_phase == "on",
                       deterministic=bool(args.deterministic), stop=stop_rules(args),
                       prune=prune_rule(getattr(args, "prune", None)))
-
-
-def prune_rule(text: str | None):
-    """``--prune off`` or ``--prune CONFIDENCE,MIN_SEEDS`` as the job's prune rule (None: the default)."""
-    from driftlab.core.pruning import PruneRule
-
-    if text is None:
-        return PruneRule()
-    if text == "off":
-        return PruneRule(enabled=False)
-    confidence, _, seeds = text.partition(",")
-    try:
-        level, count = float(confidence), int(seeds)
-    except ValueError:
-        raise ConfigError(f"--prune must be off or CONFIDENCE,MIN_SEEDS, e.g. 0.95,2; got {text!r}",
-                          field="prune") from None
-    return PruneRule(confidence=level, min_seeds=count)  # its ranges, naming the field
 
 
 def stop_rules(args: argparse.Namespace):

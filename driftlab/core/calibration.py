@@ -28,6 +28,7 @@ from driftlab.core.drivability import drift_window, drivable_reason
 from driftlab.core.episode import failure_penalty
 from driftlab.core.errors import ConfigError
 from driftlab.core.mpc_config import MpcConfig
+from driftlab.core.pruning import PruneRule
 from driftlab.core.statuses import EpisodeStatus
 from driftlab.core.track import TILED_RADIUS_SHARES
 
@@ -187,8 +188,12 @@ def mean_penalized_J(episodes: Sequence[EpisodeScore]) -> float:
 
 @dataclass
 class WeightSetResult:
+    """A weight set's episodes; ``pruned``: it stopped after its first seeds, clearly worse than the best set on the
+    same seeds (:func:`calibrate`), and is scored on those."""
+
     weights: dict[str, float]
     episodes: list[EpisodeScore]
+    pruned: bool = False
 
     @property
     def score(self) -> float:
@@ -235,14 +240,17 @@ class Calibration:
 
 def calibrate(base: EpisodeConfig, points: Sequence[tuple[CalibrationPoint, EpisodeConfig]], run_batch: RunBatch, *,
               iterations: int = 150, seeds: int = 3, seed: int = 0, known: Sequence[MpcConfig] = (),
-              theta: Theta | None = None, on_progress: Callable[[Calibration], None] | None = None) -> Calibration:
+              theta: Theta | None = None, on_progress: Callable[[Calibration], None] | None = None,
+              prune: PruneRule | None = None) -> Calibration:
     """Search the MPC weights for ``points`` (the drivable ones, with their configs, :func:`split_drivable`).
 
     The first weight set is ``base``'s own (the warm start); then each of ``known`` (weight sets that drive other
     cars: what a calibration of a similar car found is a better guess than a random one), clipped into the box
     around ``base``'s; the next of the optimizer's ``seed_points`` start near ``base``'s (its local phase), then the
     GP and expected improvement take over. Every set drives ``theta`` (default: the untuned one); a theta a job
-    learned at the point lets the weights be searched for the flick that job found.
+    learned at the point lets the weights be searched for the flick that job found. With ``prune`` a set runs its
+    first ``min_seeds`` seeds at each point, and stops there when it is clearly worse than the best set on those
+    seeds (driftlab.core.pruning, as a job's robust evaluation): it is told to the optimizer as its mean over them.
     """
     calibration = Calibration([p for p, _ in points], [CALIBRATION_SEED_BASE + j for j in range(seeds)])
     bounds = search_bounds(base.mpc)
@@ -263,17 +271,39 @@ def calibrate(base: EpisodeConfig, points: Sequence[tuple[CalibrationPoint, Epis
     for _ in range(iterations):
         x = optimizer.ask()
         weights = weights_of(x)
-        batch = [(theta_values, {**doc, "mpc": {**doc["mpc"], **weights}}, s)
-                 for doc in documents for s in calibration.seeds]
-        outcomes = run_batch(batch)
-        episodes = [EpisodeScore(i // len(calibration.seeds), s, status, j, fraction, error)
-                    for i, ((_, _, s), (status, j, fraction, error)) in enumerate(zip(batch, outcomes, strict=True))]
-        result = WeightSetResult(weights, episodes)
+        batch = [(point, (theta_values, {**doc, "mpc": {**doc["mpc"], **weights}}, s))
+                 for point, doc in enumerate(documents) for s in calibration.seeds]
+        result = _scored(weights, batch, run_batch, calibration.best, prune or PruneRule(enabled=False),
+                         calibration.seeds)
         calibration.tried.append(result)
         optimizer.tell(x, result.score, result.score)
         if on_progress is not None:
             on_progress(calibration)
     return calibration
+
+
+def _scored(weights: dict[str, float], batch: list[tuple[int, tuple[dict[str, float], dict[str, Any], int]]],
+            run_batch: RunBatch, best: WeightSetResult | None, prune: PruneRule, seeds: list[int]
+            ) -> WeightSetResult:
+    """A weight set's episodes (``batch``: (point, episode)): all at once, or with ``prune`` and a best set to pair
+    with, the first seeds at every point first, the rest only when the paired test does not stop it."""
+    first_seeds = set(seeds[:prune.min_seeds])
+    if not prune.enabled or best is None or len(seeds) <= prune.min_seeds:
+        return WeightSetResult(weights, _run(batch, run_batch))
+    head = _run([b for b in batch if b[1][2] in first_seeds], run_batch)
+    incumbent = {(e.point, e.seed): e.penalized_J for e in best.episodes}
+    if prune.stops({(e.point, e.seed): e.penalized_J for e in head}, incumbent, best.score):
+        return WeightSetResult(weights, head, pruned=True)
+    tail = _run([b for b in batch if b[1][2] not in first_seeds], run_batch)
+    order = {(point, episode[2]): i for i, (point, episode) in enumerate(batch)}
+    return WeightSetResult(weights, sorted(head + tail, key=lambda e: order[e.point, e.seed]))
+
+
+def _run(batch: list[tuple[int, tuple[dict[str, float], dict[str, Any], int]]],
+         run_batch: RunBatch) -> list[EpisodeScore]:
+    outcomes = run_batch([episode for _, episode in batch])
+    return [EpisodeScore(point, episode[2], *outcome) for (point, episode), outcome in zip(batch, outcomes,
+                                                                                           strict=True)]
 
 
 # Fresh seeds the chosen weights are checked on at their points (a block neither the search's seeds nor any job's or

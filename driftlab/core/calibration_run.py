@@ -38,6 +38,7 @@ from driftlab.core.errors import ConfigError, OutsideDriftWindowError
 from driftlab.core.limits import check_int
 from driftlab.core.mpc_config import MpcConfig
 from driftlab.core.plants import entry_of
+from driftlab.core.pruning import PruneRule
 
 Event = Callable[[dict[str, Any]], None]
 Store = Callable[[dict[str, Any]], dict[str, Any]]  # a profile's document -> it stored, with its ``profile_id``
@@ -69,8 +70,9 @@ class CalibrationRequest:
     """What to calibrate: the car (``plant`` preset and ``sets``, dotted config keys), the points
     (``points``: 'SIDESLIP@RADIUS,...'; default :func:`driftlab.core.calibration.default_points`), the search
     (``iterations`` weight sets per search, ``seeds`` episodes per point, the optimizer's ``seed``), ``rounds``
-    per point, ``one_set`` (one weight set for all the points) and the ``theta`` every set drives (default the
-    untuned one). ``command`` is how it was asked for, stored in every profile."""
+    per point, ``one_set`` (one weight set for all the points), the ``theta`` every set drives (default the
+    untuned one) and ``prune``, the early stop of a losing weight set (driftlab.core.pruning.PruneRule's fields; the
+    ones not given take its defaults, on). ``command`` is how it was asked for, stored in every profile."""
 
     plant: str
     sets: dict[str, Any] = field(default_factory=dict)
@@ -81,6 +83,7 @@ class CalibrationRequest:
     rounds: int = 1
     one_set: bool = False
     theta: dict[str, float] = field(default_factory=dict)
+    prune: dict[str, Any] = field(default_factory=dict)
     command: str = ""
 
     def validate(self) -> EpisodeConfig:
@@ -92,6 +95,7 @@ class CalibrationRequest:
             raise ConfigError("rounds: a round learns a theta at one point; with one_set there are several (use "
                               "rounds 1)", field="rounds")
         Theta.from_mapping(self.theta)
+        self.prune_rule()
         # A car that cannot drift at its preset's sideslip is calibrated around the middle of its window.
         try:
             config = overrides_inside_window(preset_config(self.plant), self.sets)
@@ -109,6 +113,9 @@ class CalibrationRequest:
             except ConfigError as exc:
                 raise ConfigError(f"points: {point.label()}: {exc}", field="points") from None
         return config
+
+    def prune_rule(self) -> PruneRule:
+        return PruneRule.from_dict(self.prune)
 
     def as_dict(self) -> dict[str, Any]:
         return asdict(self)
@@ -233,7 +240,8 @@ class _GroupProgress:
             best = min((c.best for c in self.tried.values()), key=lambda r: (r.score, -r.completed))
             last = calibration.tried[-1]
             self.run.progress(tried=sum(len(c.tried) for c in self.tried.values()), of=self.of,
-                              best_score=best.score, best_completed=best.completed, last_score=last.score,
+                              best_score=best.score, best_completed=best.completed,
+                              best_episodes=len(best.episodes), last_score=last.score,
                               last_completed=last.completed, episodes=len(last.episodes))
 
 
@@ -290,7 +298,7 @@ def _search_candidate(run: _Run, base: EpisodeConfig, inside: list[tuple[Calibra
         try:
             return calibrate(base, inside, run.run_batch, iterations=request.iterations, seeds=request.seeds,
                              seed=request.seed, known=[mpc for _, mpc in run.known], theta=theta,
-                             on_progress=on_progress)
+                             on_progress=on_progress, prune=request.prune_rule())
         except ConfigError:
             unfit = unfittable(inside)  # which point's fit failed: found only after a failure
             if not unfit:
@@ -358,6 +366,9 @@ def _calibrate_group(run: _Run, centre: EpisodeConfig, points: Sequence[Calibrat
         "points": [asdict(p) for p in calibration.points],
         "skipped": [{**asdict(p), "reason": reason} for p, reason in outside],
         "window": window, "seeds": calibration.seeds, "iterations": request.iterations,
+        # What the candidates' searches ran: the weight sets the prune rule stopped early, and every episode.
+        "pruned_sets": sum(r.pruned for _, c, _, _ in candidates for r in c.tried),
+        "search_episodes": sum(len(r.episodes) for _, c, _, _ in candidates for r in c.tried),
         "theta": "untuned" if theta == Theta() else theta.as_dict(),
         "command": request.command, "driftlab_version": version("driftlab")}
 

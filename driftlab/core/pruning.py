@@ -41,13 +41,13 @@ CONFIDENCE_LIMITS = (0.5, 0.9999)
 MIN_SEEDS_LIMITS = (2, 64)  # a paired t-test needs two pairs (one degree of freedom)
 
 
-def clearly_worse(candidate_J: Mapping[int, float], incumbent_J: Mapping[int, float], *, best_J: float,
+def clearly_worse(candidate_J: Mapping[Any, float], incumbent_J: Mapping[Any, float], *, best_J: float,
                   confidence: float = DEFAULT_CONFIDENCE, min_seeds: int = DEFAULT_MIN_SEEDS) -> bool:
     """Whether the candidate is worse than the incumbent with ``confidence``, on the seeds both ran.
 
     Args:
-        candidate_J: J of each seed the candidate has completed, by seed.
-        incumbent_J: J of each seed the incumbent (the best evaluation so far) ran, by seed.
+        candidate_J: J of each seed the candidate has completed, by seed (a calibration's: by (point, seed)).
+        incumbent_J: J of each seed the incumbent (the best evaluation so far) ran, by the same key.
         best_J: the incumbent's J as stored (its mean over all its seeds, its confirmation seeds included).
         confidence: 1 - the p-value below which the test decides "worse".
         min_seeds: paired seeds before anything is decided.
@@ -99,7 +99,7 @@ class PruneRule:
             raise ConfigError(f"prune.min_seeds must be an integer in [{n_lo}, {n_hi}], got {n!r}",
                               field="prune.min_seeds")
 
-    def stops(self, candidate_J: Mapping[int, float], incumbent_J: Mapping[int, float] | None,
+    def stops(self, candidate_J: Mapping[Any, float], incumbent_J: Mapping[Any, float] | None,
               best_J: float | None) -> bool:
         """Whether the candidate stops now (never without an incumbent, nor when the rule is off)."""
         if not self.enabled or incumbent_J is None or best_J is None:

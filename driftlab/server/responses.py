@@ -280,9 +280,10 @@ class Calibration(BaseModel):
     id: int
     status: Literal["queued", "running", "finished", "failed", "cancelled"]
     request: dict[str, Any] = Field(description="plant, sets (dotted config keys), points, iterations, seeds, seed, "
-                                    "rounds, one_set, theta, command")
+                                    "rounds, one_set, theta, prune, command")
     progress: dict[str, Any] | None = Field(default=None, description="the latest: group of groups, round of rounds, "
-                                            "step (weights or theta), tried of of, best_score, best_completed")
+                                            "step (weights or theta), tried of of (every candidate model's, searched "
+                                            "side by side), best_score, best_completed of best_episodes")
     messages: list[str] = Field(description="what `driftlab calibrate` prints, newest last")
     profile_ids: list[int] = Field(description="the profiles it stored so far (GET /api/profiles/{id})")
     error: str | None = None

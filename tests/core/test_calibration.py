@@ -128,3 +128,33 @@ def test_a_round_learns_the_theta_a_job_would_learn_at_the_point():
     theta, score = learn_theta(EpisodeConfig(), run_batch, iterations=30, seeds=2,
                                on_progress=lambda n, best: progress.append(n))
     assert theta.dV > 0.1 and score < 0.0 and progress == list(range(1, 31))
+
+
+def test_a_weight_set_clearly_worse_on_its_first_seeds_stops_there_and_one_that_may_be_best_runs_them_all():
+    """The landscape above, three seeds a point, the job's prune rule (0.95, 2 seeds): a set worse than the best one
+    on the same seeds (failing where it completes, or completing further from the optimum) stops after the first two
+    seeds at each point, scored on them; the best ran every seed."""
+    from driftlab.core.pruning import PruneRule
+
+    base = EpisodeConfig()
+    points = [(CalibrationPoint(0.4, 44.0), base), (CalibrationPoint(0.4, 30.0), base)]
+
+    def run_batch(batch):
+        out = []
+        for _, doc, seed in batch:
+            x = math.log10(doc["mpc"]["q_sideslip"])
+            ok = 1.6 < x < 2.6
+            out.append(("completed" if ok else "spun_out", (x - 2.2) ** 2 - 1.0 + 0.01 * (seed % 3),
+                        1.0 if ok else 0.4 + 0.01 * (seed % 5), 0.1))
+        return out
+
+    pruned_run = calibrate(base, points, run_batch, iterations=40, seeds=3, seed=1, prune=PruneRule())
+    first_two = set(pruned_run.seeds[:2])
+    best, pruned = pruned_run.best, [r for r in pruned_run.tried if r.pruned]
+    assert not best.pruned and len(best.episodes) == 2 * 3
+    assert pruned and all(len(r.episodes) == 2 * 2 and {e.seed for e in r.episodes} == first_two for r in pruned)
+    assert all(r.score > best.score for r in pruned) and any(r.completed == 0 for r in pruned)
+    assert all(len(r.episodes) == 6 for r in pruned_run.tried if not r.pruned)
+    everything = calibrate(base, points, run_batch, iterations=40, seeds=3, seed=1, prune=PruneRule(enabled=False))
+    assert not any(r.pruned for r in everything.tried) and all(len(r.episodes) == 6 for r in everything.tried)
+    assert 1.6 < math.log10(best.weights["q_sideslip"]) < 2.6

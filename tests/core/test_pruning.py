@@ -83,7 +83,7 @@ def test_a_bad_prune_block_is_refused_naming_the_field_and_range(block, field):
 
 
 def test_the_rule_at_the_api_and_the_cli_names_its_field(tmp_path):
-    from driftlab.cli.tune import prune_rule
+    from driftlab.cli.options import prune_rule
     from tests.server.conftest import in_process_client
 
     with in_process_client(tmp_path / "api.db") as api:

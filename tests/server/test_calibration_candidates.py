@@ -59,6 +59,8 @@ def _calibrate(database, one_at_a_time: bool):
 def test_the_candidate_models_are_searched_side_by_side_and_find_what_they_find_one_at_a_time(tmp_path):
     side_by_side, events, found = _calibrate(tmp_path / "side_by_side.db", one_at_a_time=False)
     assert len(found["candidates"]) == 4
+    # 2 seeds a set: the prune rule's first 2 seeds are all of them, so every set runs every seed.
+    assert found["search_episodes"] == 4 * 5 * 2 and found["pruned_sets"] == 0
     assert side_by_side.most >= 2  # a search's batch ran while another's did
     weights = [e["progress"] for e in events if "progress" in e and e["progress"]["step"] == "weights"]
     assert [p["tried"] for p in weights] == list(range(1, 4 * 5 + 1)) and {p["of"] for p in weights} == {4 * 5}

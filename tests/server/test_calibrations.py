@@ -32,6 +32,8 @@ def _run_queued(api, executor):
                                                 ({"points": "0.5/44"}, "points"), ({"points": "0@0"}, "points"),
                                                 ({"plant": "nope"}, "plant"), ({"theta": {"k": False}}, "k"),
                                                 ({"theta": {"nope": 1.0}}, "nope"),
+                                                ({"prune": {"confidence": 2.0}}, "confidence"),
+                                                ({"prune": {"min_seeds": 1}}, "min_seeds"),
                                                 ({"config": {"plant.mass_scale": "1.1"}}, "plant.mass_scale"),
                                                 ({"iterations": 5000, "seeds": 64, "rounds": 3},
                                                  "DRIFTLAB_MAX_EPISODES_PER_STUDY"),

@@ -16,7 +16,7 @@ from driftlab.core.plants import installed_names
 from driftlab.server import quotas
 from driftlab.server.responses import Calibration, ProfileSummary, errors
 from driftlab.server.routes.deps import factory, require_token, wake_runner
-from driftlab.server.schemas import check_document_types
+from driftlab.server.schemas import PruneCreate, check_document_types
 from driftlab.services import calibration_queue
 from driftlab.services.profiles import list_profile_summaries, profile_document
 
@@ -59,6 +59,8 @@ class CalibrationCreate(BaseModel):
     one_set: bool = Field(default=False, strict=True)
     theta: ThetaGiven = Field(default_factory=ThetaGiven, description="the theta every weight set drives (any "
                               "subset; default the untuned one)")
+    prune: PruneCreate | None = Field(default=None, description="stop a weight set whose first seeds are worse than "
+                                      "the best set's on the same seeds with confidence (default: on, 0.95, 2 seeds)")
 
 
 @router.post("/api/calibrations", status_code=202, dependencies=[Depends(require_token)],
@@ -74,6 +76,7 @@ def start_calibration(body: CalibrationCreate, db: Factory, request: Request) ->
                                      iterations=body.iterations, seeds=body.seeds, seed=body.seed,
                                      rounds=body.rounds, one_set=body.one_set,
                                      theta=body.theta.model_dump(exclude_none=True),
+                                     prune=body.prune.model_dump() if body.prune is not None else {},
                                      command=f"POST /api/calibrations {body.model_dump_json(exclude_defaults=True)}")
     try:
         out = calibration_queue.queue(db, calibration)

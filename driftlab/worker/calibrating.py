@@ -76,9 +76,7 @@ class _Reporter:
         """Between episodes: stop when asked, renewing the lease while a batch waits."""
         if self.should_stop():
             raise CalibrationStopped
-        with self.lock:
-            due = time.monotonic() - self.last >= lease.HEARTBEAT_S
-        if due:
+        if time.monotonic() - self.last >= lease.HEARTBEAT_S:
             self.flush()
 
 

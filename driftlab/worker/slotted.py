@@ -21,41 +21,24 @@ from driftlab.worker.slots import EpisodeSlots
 Task = tuple[dict[str, float], dict[str, Any], int]  # (theta, config document, seed): one episode
 
 
-class _Wakes:
-    """Sets the wake of every run of one owner in progress: a calibration runs its candidate models' batches from
-    several threads at once, and each waits on an event of its own (one shared event, cleared by one run, would
-    leave another asleep until its heartbeat)."""
-
-    def __init__(self) -> None:
-        self._lock = threading.Lock()
-        self._events: set[threading.Event] = set()
-
-    def add(self, event: threading.Event) -> None:
-        with self._lock:
-            self._events.add(event)
-
-    def discard(self, event: threading.Event) -> None:
-        with self._lock:
-            self._events.discard(event)
-
-    def set(self) -> None:
-        with self._lock:
-            for event in self._events:
-                event.set()
-
-
 class SlottedEpisodes:
     """``owner``'s part of the shared slots while the ``with`` block runs (joined on entry, left on exit: its share
     goes back to the others, whatever it still had in flight is freed). :meth:`run` may be called from several
-    threads at once; their episodes share the owner's part."""
+    threads at once (a calibration's candidate searches), their episodes sharing the owner's part: each run waits on
+    an event of its own, as one shared event cleared by one run would leave another asleep until its heartbeat."""
 
     def __init__(self, executor: EpisodeExecutor, slots: EpisodeSlots, owner: Hashable) -> None:
         self.executor, self.slots, self.owner = executor, slots, owner
-        self.wakes = _Wakes()
+        self.waiting: set[threading.Event] = set()  # the event of each run in progress
 
     def __enter__(self) -> SlottedEpisodes:
-        self.slots.join(self.owner, self.wakes)
+        self.slots.join(self.owner, self)
         return self
+
+    def set(self) -> None:
+        """Wakes every run in progress: a slot it may use became free (EpisodeSlots' wake)."""
+        for event in list(self.waiting):
+            event.set()
 
     def __exit__(self, *exc_info: object) -> None:
         self.slots.leave(self.owner)
@@ -70,7 +53,7 @@ class SlottedEpisodes:
         waiting.reverse()  # popped from the end: submitted in the order given
         in_flight: dict[Future[EpisodeOutcome], int] = {}
         wake = threading.Event()
-        self.wakes.add(wake)
+        self.waiting.add(wake)
         try:
             while waiting or in_flight:
                 while waiting and self.slots.try_take(self.owner):
@@ -83,13 +66,13 @@ class SlottedEpisodes:
                 for future in [f for f in in_flight if f.done()]:
                     index = in_flight.pop(future)
                     self.slots.give_back(self.owner)
-                    self.wakes.set()  # this owner's runs in other threads may take the slot (EpisodeSlots wakes others)
+                    self.set()  # this owner's runs in other threads may take the slot (EpisodeSlots wakes others)
                     on_result(index, future.result())
                 if not go_on():
                     return False
             return True
         finally:
-            self.wakes.discard(wake)
+            self.waiting.discard(wake)
             for future in in_flight:
                 future.cancel()
 

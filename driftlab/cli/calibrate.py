@@ -45,7 +45,7 @@ def _print_event(event: dict[str, Any]) -> None:
 
 
 def request_from_args(args: argparse.Namespace):
-    from driftlab.core.calibration_run import CalibrationRequest
+    from driftlab.core.calibration_request import CalibrationRequest
     from driftlab.core.config import Theta
 
     theta = key_values(args.theta.split(",") if args.theta else [], "--theta")

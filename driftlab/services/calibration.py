@@ -8,7 +8,8 @@ from typing import Any
 from sqlalchemy.orm import Session, sessionmaker
 
 from driftlab.core.calibration import RunBatch
-from driftlab.core.calibration_run import CalibrationRequest, Event
+from driftlab.core.calibration_request import CalibrationRequest
+from driftlab.core.calibration_run import Event
 from driftlab.core.calibration_run import run_calibration as run_calibration_on
 from driftlab.core.mpc_config import MpcConfig
 from driftlab.db import profiles, storage

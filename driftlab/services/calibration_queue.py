@@ -7,7 +7,7 @@ from typing import Any
 
 from sqlalchemy.orm import Session, sessionmaker
 
-from driftlab.core.calibration_run import CalibrationRequest
+from driftlab.core.calibration_request import CalibrationRequest
 from driftlab.db import calibrations, storage
 from driftlab.db.calibrations import CalibrationBusy
 from driftlab.db.models import Calibration

@@ -12,7 +12,8 @@ from typing import Any
 
 from sqlalchemy.orm import Session, sessionmaker
 
-from driftlab.core.calibration_run import CalibrationRequest, CalibrationStopped
+from driftlab.core.calibration_request import CalibrationRequest
+from driftlab.core.calibration_run import CalibrationStopped
 from driftlab.core.errors import ConfigError
 from driftlab.db import calibrations, lease, storage
 from driftlab.db.models import Calibration, WorkStatus

@@ -5,7 +5,7 @@ import math
 import threading
 import time
 
-from driftlab.core.calibration_run import CalibrationRequest
+from driftlab.core.calibration_request import CalibrationRequest
 from driftlab.db import storage
 from driftlab.services.calibration import run_calibration
 

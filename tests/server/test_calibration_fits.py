@@ -3,7 +3,7 @@ each point's model with its first episode, so the episodes here are scripted but
 
 import pytest
 
-from driftlab.core.calibration_run import CalibrationRequest
+from driftlab.core.calibration_request import CalibrationRequest
 from driftlab.core.configure import config_from_dict, fitted
 from driftlab.core.errors import ConfigError
 from driftlab.db import storage

@@ -4,7 +4,7 @@ last one's weights when they completed something, and every round is a stored pr
 
 import pytest
 
-from driftlab.core.calibration_run import CalibrationRequest
+from driftlab.core.calibration_request import CalibrationRequest
 from driftlab.db import profiles, storage
 from driftlab.services.calibration import run_calibration
 

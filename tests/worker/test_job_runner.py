@@ -252,7 +252,7 @@ def test_a_study_a_job_a_rescore_and_a_calibration_run_at_once_on_one_runner(fac
     """Every kind of leased work runs on its own thread within its share of the shared episode slots: while a
     robustness study's grid runs, the runner still claims a job, a rescore and a calibration, and all four have
     episodes in flight together; none of them waits for another to end."""
-    from driftlab.core.calibration_run import CalibrationRequest
+    from driftlab.core.calibration_request import CalibrationRequest
     from driftlab.db import calibrations, rescores
     from driftlab.db.models import Calibration, Rescore
 

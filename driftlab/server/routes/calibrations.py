@@ -9,7 +9,7 @@ from fastapi import APIRouter, Depends, HTTPException, Path, Request, Response
 from pydantic import BaseModel, ConfigDict, Field
 from sqlalchemy.orm import Session, sessionmaker
 
-from driftlab.core.calibration_run import LIMITS, CalibrationRequest
+from driftlab.core.calibration_request import LIMITS, CalibrationRequest
 from driftlab.core.config import dotted_config
 from driftlab.core.configure import PLANT_PRESETS
 from driftlab.core.plants import installed_names

@@ -16,6 +16,7 @@ taken as the main drift: no car holds a wheel spinning backwards without a torqu
 from __future__ import annotations
 
 import math
+from collections.abc import Callable
 from dataclasses import dataclass
 from functools import lru_cache
 from itertools import product
@@ -24,6 +25,7 @@ import numpy as np
 from numba import njit
 from scipy.optimize import root
 
+from driftlab.core import results_cache_folder
 from driftlab.core.commonroad.parameters import (
     CR_ACCEL_MAX,
     CR_CG_TO_FRONT,
@@ -112,11 +114,32 @@ def _physical(x, cp) -> bool:
             and acceleration_constraints(speed, accel, cp) == accel)
 
 
-def plant_drifts(radius_m: float, sideslip_rad: float, cp: np.ndarray) -> tuple[list[PlantDrift], list[PlantDrift]]:
+Family = tuple[tuple[PlantDrift, ...], tuple[PlantDrift, ...]]
+
+
+def plant_drifts(radius_m: float, sideslip_rad: float, cp: np.ndarray) -> Family:
     """Every distinct steady drift at ``radius_m`` and ``sideslip_rad`` (beta < 0: left-hand, > 0: right-hand),
-    fastest first: (the ones a car can hold, the ones held only by a backward-turning front wheel), from one solve."""
+    fastest first: (the ones a car can hold, the ones held only by a backward-turning front wheel), from one solve.
+
+    A family takes 140 MINPACK solves (30-60 ms, most of it the solver's calls back into Python), and every process
+    that checks or fits a car at a drift needs the same ones (the CLI, the server, a calibration's checks): each is
+    solved once and kept on disk for the others (:func:`_solved_on_disk`), keyed by the car's packed parameters and
+    the drift."""
+    return _solved_on_disk()(float(radius_m), float(sideslip_rad),  # one compiled signature
+                             np.ascontiguousarray(cp, dtype=np.float64))
+
+
+@lru_cache(maxsize=1)
+def _solved_on_disk() -> Callable[[float, float, np.ndarray], Family]:
+    """:func:`_solve` memoized by joblib in driftlab's cache of solved results (driftlab.core), or not at all where
+    no cache folder can be made; loaded at the first family, so that a process that solves none imports no joblib."""
+    from joblib import Memory
+
+    return Memory(results_cache_folder("drift_families"), verbose=0).cache(_solve)
+
+
+def _solve(radius_m: float, sideslip_rad: float, cp: np.ndarray) -> Family:
     found: list[np.ndarray] = []
-    radius_m, sideslip_rad = float(radius_m), float(sideslip_rad)  # one compiled signature
     wheel = cp[CR_WHEEL_RADIUS]
     side = -1.0 if sideslip_rad < 0 else 1.0
     for speed, steer, slip in product(_GUESS_SPEEDS_MPS, _GUESS_STEERS_RAD, _GUESS_REAR_SLIPS):
@@ -130,7 +153,8 @@ def plant_drifts(radius_m: float, sideslip_rad: float, cp: np.ndarray) -> tuple[
         if all(np.max(np.abs(sol.x[:2] - f[:2])) > 1e-5 for f in found):
             found.append(sol.x)
     drifts = sorted((_drift(x, radius_m, sideslip_rad, cp) for x in found), key=lambda d: -d.speed_mps)
-    return [d for d in drifts if d.front_wheel_radps >= 0.0], [d for d in drifts if d.front_wheel_radps < 0.0]
+    return (tuple(d for d in drifts if d.front_wheel_radps >= 0.0),
+            tuple(d for d in drifts if d.front_wheel_radps < 0.0))
 
 
 def _drift(x, radius_m, sideslip_rad, cp) -> PlantDrift:
@@ -147,10 +171,9 @@ def _drift(x, radius_m, sideslip_rad, cp) -> PlantDrift:
 
 @lru_cache(maxsize=256)
 def _family(car: int | ParameterSet, radius_m: float, sideslip_rad: float, friction_scale: float,
-            mass_scale: float, right: bool) -> tuple[tuple[PlantDrift, ...], tuple[PlantDrift, ...]]:
+            mass_scale: float, right: bool) -> Family:
     cp = pack_commonroad(car, friction_scale=friction_scale, mass_scale=mass_scale)
-    holdable, frozen = plant_drifts(radius_m, abs(sideslip_rad) if right else -abs(sideslip_rad), cp)
-    return tuple(holdable), tuple(frozen)
+    return plant_drifts(radius_m, abs(sideslip_rad) if right else -abs(sideslip_rad), cp)
 
 
 def commonroad_drifts(car: int | ParameterSet, radius_m: float, sideslip_rad: float,
@@ -177,7 +200,7 @@ def unlimited_drive_drifts(car: int | ParameterSet, radius_m: float, sideslip_ra
     engine is what it lacks (driftlab.core.commonroad.window)."""
     cp = pack_commonroad(car)
     cp[CR_ACCEL_MAX] = math.inf  # acceleration_constraints then passes any drive (and braking: none in a drift)
-    return tuple(plant_drifts(radius_m, abs(sideslip_rad) if right else -abs(sideslip_rad), cp)[0])
+    return plant_drifts(radius_m, abs(sideslip_rad) if right else -abs(sideslip_rad), cp)[0]
 
 
 def drive_cap_mps2(car: int | ParameterSet, speed_mps: float) -> float:

@@ -179,7 +179,8 @@ def test_robust_evaluation_stores_each_seed_and_rescore_uses_fresh_ones(tmp_path
     # Two seeds per evaluation, and a best so far is confirmed on the default 4 more.
     assert [s["seed"] for s in best["seeds"]] == [0, 1, 2, 3, 4, 5]
     assert best["J"] == pytest.approx(sum(s["J"] for s in best["seeds"]) / 6, abs=1e-12)
-    for sample in best["seeds"]:  # each episode of the evaluation, re-run in a fresh process
+    # An evaluation's episode and a confirmation's, each re-run in a fresh process (the others are run alike).
+    for sample in (best["seeds"][0], best["seeds"][-1]):
         episode = json.loads(_run("episode", "--theta", _theta_arg(best["theta"]), "--seed",
                                   str(sample["seed"])).stdout)
         assert episode["J"] == sample["J"]

@@ -5,8 +5,8 @@ change to the plant left the episode loop's cached kernel running the old plant,
 developing the CommonRoad plants). Unless NUMBA_CACHE_DIR is set, the cache therefore lives in a folder named
 after a hash of this package's sources, so that any change to any of them compiles afresh.
 
-The solved drift families of the CommonRoad plants (driftlab.core.commonroad.equilibrium) are kept the same way,
-in :func:`results_cache_folder`: the only files this package writes are these two caches of pure results.
+Solved results that many processes repeat are kept the same way (driftlab.core.results_cache): the only files this
+package writes are these two caches of pure results.
 """
 
 from __future__ import annotations
@@ -19,7 +19,8 @@ from pathlib import Path
 
 
 @lru_cache(maxsize=1)
-def _source_hash() -> str:
+def source_hash() -> str:
+    """A hash of this package's sources (every ``.py`` under driftlab/core)."""
     digest = hashlib.sha256()
     root = Path(__file__).parent
     for path in sorted(root.rglob("*.py")):
@@ -28,10 +29,10 @@ def _source_hash() -> str:
     return digest.hexdigest()[:16]
 
 
-def _cache_folder(kind: str, source_hash: str) -> str | None:
-    """``$XDG_CACHE_HOME/driftlab/<kind>/<source_hash>``, made if missing; None where no cache home is writable."""
+def cache_folder(kind: str, name: str) -> str | None:
+    """``$XDG_CACHE_HOME/driftlab/<kind>/<name>``, made if missing; None where no cache home is writable."""
     cache_home = os.environ.get("XDG_CACHE_HOME") or os.path.join(os.path.expanduser("~"), ".cache")
-    folder = os.path.join(cache_home, "driftlab", kind, source_hash)
+    folder = os.path.join(cache_home, "driftlab", kind, name)
     try:
         os.makedirs(folder, exist_ok=True)
     except OSError:
@@ -39,19 +40,10 @@ def _cache_folder(kind: str, source_hash: str) -> str | None:
     return folder
 
 
-def results_cache_folder(kind: str) -> str | None:
-    """The folder of a cache of solved results (None: keep none), one per hash of this package's sources and per
-    NumPy and SciPy release, so that no changed solver or residual reads another's answers."""
-    import numpy
-    import scipy
-
-    return _cache_folder(kind, f"{_source_hash()}-numpy{numpy.__version__}-scipy{scipy.__version__}")
-
-
 def _use_a_cache_per_source() -> None:
     if os.environ.get("NUMBA_CACHE_DIR"):
         return  # the user's (the Docker image sets one at build time)
-    folder = _cache_folder("numba", _source_hash())
+    folder = cache_folder("numba", source_hash())
     if folder is None:
         return  # no writable cache home: numba's default, beside the sources
     os.environ["NUMBA_CACHE_DIR"] = folder  # worker processes inherit it

@@ -16,7 +16,6 @@ taken as the main drift: no car holds a wheel spinning backwards without a torqu
 from __future__ import annotations
 
 import math
-from collections.abc import Callable
 from dataclasses import dataclass
 from functools import lru_cache
 from itertools import product
@@ -25,7 +24,6 @@ import numpy as np
 from numba import njit
 from scipy.optimize import root
 
-from driftlab.core import results_cache_folder
 from driftlab.core.commonroad.parameters import (
     CR_ACCEL_MAX,
     CR_CG_TO_FRONT,
@@ -47,6 +45,7 @@ from driftlab.core.commonroad.std import (
     rear_tyre_state,
     std_derivatives,
 )
+from driftlab.core.results_cache import kept_on_disk
 
 _GUESS_SPEEDS_MPS = (8.0, 10.0, 12.0, 14.0, 17.0, 20.0, 23.0)
 _GUESS_STEERS_RAD = (-0.9, -0.6, -0.3, 0.0, 0.2)
@@ -123,21 +122,12 @@ def plant_drifts(radius_m: float, sideslip_rad: float, cp: np.ndarray) -> Family
 
     A family takes 140 MINPACK solves (30-60 ms, most of it the solver's calls back into Python), and every process
     that checks or fits a car at a drift needs the same ones (the CLI, the server, a calibration's checks): each is
-    solved once and kept on disk for the others (:func:`_solved_on_disk`), keyed by the car's packed parameters and
-    the drift."""
-    return _solved_on_disk()(float(radius_m), float(sideslip_rad),  # one compiled signature
-                             np.ascontiguousarray(cp, dtype=np.float64))
+    solved once and kept on disk for the others (driftlab.core.results_cache)."""
+    return _solve(float(radius_m), float(sideslip_rad),  # one compiled signature
+                  np.ascontiguousarray(cp, dtype=np.float64))
 
 
-@lru_cache(maxsize=1)
-def _solved_on_disk() -> Callable[[float, float, np.ndarray], Family]:
-    """:func:`_solve` memoized by joblib in driftlab's cache of solved results (driftlab.core), or not at all where
-    no cache folder can be made; loaded at the first family, so that a process that solves none imports no joblib."""
-    from joblib import Memory
-
-    return Memory(results_cache_folder("drift_families"), verbose=0).cache(_solve)
-
-
+@kept_on_disk
 def _solve(radius_m: float, sideslip_rad: float, cp: np.ndarray) -> Family:
     found: list[np.ndarray] = []
     wheel = cp[CR_WHEEL_RADIUS]

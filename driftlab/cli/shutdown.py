@@ -25,3 +25,10 @@ def raise_if_terminated() -> None:
     evaluation, this stops the run one evaluation later."""
     if _terminated.is_set():
         raise KeyboardInterrupt
+
+
+def stop_if_terminated() -> bool:
+    """A ``should_stop`` for the loops that poll one (a robustness study's, driftlab.worker.study_runner): raises
+    as :func:`raise_if_terminated` does, on the loop's own thread, where Ctrl-C would land; False otherwise."""
+    raise_if_terminated()
+    return False

@@ -14,6 +14,7 @@ import time
 from typing import Any
 
 from driftlab.cli.options import key_values, name_text, settings
+from driftlab.cli.shutdown import raise_if_terminated, stop_if_terminated, stop_on_sigterm
 from driftlab.core.errors import ConfigError
 from driftlab.core.statuses import StudyKind
 
@@ -77,7 +78,8 @@ def _open_study(factory, args: argparse.Namespace, tuning_spec, runner: str) -> 
 def _run_seeds_jobs(factory, study_id: int, executor, workers, runner: str) -> None:
     """Runs the study's unfinished jobs at once on the server runner's scheduler (driftlab.worker.job_pool): one
     thread and one optimizer per job, the workers shared fairly, at most as many jobs at once as workers, the next
-    one starting when one finishes. Ctrl-C: what is asked completes, then the jobs are paused."""
+    one starting when one finishes. Ctrl-C or SIGTERM (also one lost in a finalizer, driftlab.cli.shutdown): what is
+    asked completes, then the jobs are paused."""
     import threading
 
     from driftlab.db import lifecycle, storage, studies
@@ -109,10 +111,12 @@ def _run_seeds_jobs(factory, study_id: int, executor, workers, runner: str) -> N
     try:
         start(todo[:pool.free])
         for job in todo[len(started):]:
-            done.acquire()
+            while not done.acquire(timeout=0.2):
+                raise_if_terminated()
             start([job])
         while pool.running:
             pool.join(timeout_s=0.2)
+            raise_if_terminated()
     except KeyboardInterrupt:
         stop.set()
         pool.join()
@@ -139,7 +143,8 @@ def _run_cells(factory, study_id: int, executor, workers, runner: str) -> None:
         if not studies.claim_study(session, study_id=study_id, runner=runner):
             raise lifecycle.LeaseHeld(f"study {study_id} is being run by another runner; pause it first")
     try:
-        run_study(factory, study_id, executor, runner=runner, slots=EpisodeSlots(workers))
+        run_study(factory, study_id, executor, runner=runner, slots=EpisodeSlots(workers),
+                  should_stop=stop_if_terminated)
     except KeyboardInterrupt:
         with storage.transaction(factory) as session:
             studies.release_study(session, study_id=study_id, runner=runner, status=WorkStatus.PAUSED)
@@ -177,8 +182,6 @@ def cmd_study(args: argparse.Namespace, tuning_spec, db_url: str, dask_address: 
             summary = study_views.study_summary(session, studies.get_study_by_name(session, name=args.name))
         print(json.dumps(brief_summary(summary, args.every)))
         return 0
-    from driftlab.cli.shutdown import stop_on_sigterm
-
     stop_on_sigterm()
     runner = lifecycle.new_runner_id("study")
     study_id = _open_study(factory, args, tuning_spec, runner)

@@ -248,6 +248,40 @@ def test_the_cli_runs_a_seeds_studys_jobs_at_once_too(factory):
     assert again.peak == 0  # every job was finished: nothing ran again
 
 
+@pytest.mark.parametrize("kind", ["seeds", "robustness"])
+def test_a_sigterm_lost_in_a_finalizer_pauses_a_cli_study(factory, kind):
+    """SIGTERM whose KeyboardInterrupt Python dropped (it landed in a finalizer: driftlab.cli.shutdown) still stops
+    `driftlab study` at its next check, and the study is left paused, not run to its end."""
+    from driftlab.cli import shutdown
+    from driftlab.cli.study import _run_cells, _run_seeds_jobs
+
+    doc = ({"kind": "seeds", "seeds": [1, 2], "spec": SPEC} if kind == "seeds" else
+           {"kind": "robustness", "theta": {"k": 0.05}, "robust_samples": 2,
+            "grid": {"plant.mass_scale": [0.9, 1.0, 1.1]}})
+    with storage.transaction(factory) as session:
+        study_id = start_study(session, doc=doc).id
+        job_ids = [j.id for j in studies.study_jobs(session, study_id=study_id)]
+    cluster = FakeCluster(workers=2, gate_s=0.0)
+    shutdown._terminated.set()
+    try:
+        with pytest.raises(KeyboardInterrupt):
+            if kind == "seeds":
+                _run_seeds_jobs(factory, study_id, cluster, cluster.workers, "cli-test")
+            else:
+                _run_cells(factory, study_id, cluster, cluster.workers, "cli-test")
+    finally:
+        shutdown._terminated.clear()
+        cluster.shutdown()
+    with storage.snapshot(factory) as session:
+        study = studies.get_study(session, study_id=study_id)
+        if kind == "seeds":
+            assert {_status(factory, job_id)[0] for job_id in job_ids} <= {"paused", "queued"}
+            assert all(len(_indices(factory, job_id)) < SPEC["iterations"] for job_id in job_ids)
+        else:
+            assert study.status == "paused"
+            assert any(c.status == studies.PENDING for c in studies.cells(session, study_id=study_id))
+
+
 def test_a_study_a_job_a_rescore_and_a_calibration_run_at_once_on_one_runner(factory):
     """Every kind of leased work runs on its own thread within its share of the shared episode slots: while a
     robustness study's grid runs, the runner still claims a job, a rescore and a calibration, and all four have

@@ -12,6 +12,7 @@ import sys
 from typing import Any
 
 from driftlab.cli.options import dask_address, db_url, finite, key_values, machine_cores, prune_rule
+from driftlab.cli.shutdown import raise_if_terminated, stop_on_sigterm
 
 SUMMARY_KEYS = ("profile_id", "plant_model", "vehicle_id", "score", "completed", "episodes", "per_point", "start",
                 "candidates", "window", "weights", "wall_s")
@@ -22,6 +23,7 @@ def run_batch_on(executor):
     from driftlab.worker.calibrating import calibration_score
 
     def run(batch):
+        raise_if_terminated()  # a SIGTERM lost in a finalizer stops the calibration at its next batch
         futures = [executor.submit(theta, doc, seed) for theta, doc, seed in batch]
         return [calibration_score(future.result()) for future in futures]
     return run
@@ -70,6 +72,7 @@ def cmd_calibrate(args: argparse.Namespace) -> int:
     except ConfigError as exc:  # the request's own field names, as the CLI spells them
         raise ConfigError(str(exc).replace("one_set", "--one-set").replace("rounds:", "--rounds:")
                           .replace("points:", "--points:"), field=exc.field) from None
+    stop_on_sigterm()
     factory = storage.open_database(db_url(args.db))
     address = dask_address(args)
     executor, _ = open_executor(args.workers or (None if address else machine_cores()), address)
@@ -78,6 +81,10 @@ def cmd_calibrate(args: argparse.Namespace) -> int:
             documents = run_calibration(request, factory, run_batch_on(executor), on_event=_print_event)
         except ConfigError as exc:
             raise ConfigError(str(exc).replace("points:", "--points:", 1), field=exc.field) from None
+    except KeyboardInterrupt:  # Ctrl-C or SIGTERM
+        sys.stderr.write("\ncalibration stopped: the profiles of the points it finished are stored, the point in "
+                         "progress is not\n")
+        return 130
     finally:
         executor.shutdown()
         storage.close_database(factory)

@@ -49,8 +49,14 @@ class LocalProcessExecutor:
         """Ends the workers at once: an episode in flight is dropped (whoever takes its work up runs it again), as
         a stop within Docker's 10 s grace needs; waiting for it took up to an episode's time on a loaded machine."""
         processes = list((self.pool._processes or {}).values())  # the pool has no public terminate before 3.14
+        results = self.pool._result_queue
         self.pool.shutdown(wait=False, cancel_futures=True)
         for process in processes:
             process.terminate()
         for process in processes:
             process.join(timeout=5)
+        if results is not None and not any(process.is_alive() for process in processes):
+            # A worker ended while it wrote a result leaves part of a message in the pipe, and the pool's manager
+            # thread waits for the rest of it for ever (and the interpreter, at its exit, for that thread). Ours is
+            # the last end that writes: closing it ends that read.
+            results._writer.close()

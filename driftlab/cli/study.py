@@ -115,8 +115,8 @@ def _run_seeds_jobs(factory, study_id: int, executor, workers, runner: str) -> N
                 raise_if_terminated()
             start([job])
         while pool.running:
-            pool.join(timeout_s=0.2)
             raise_if_terminated()
+            pool.join(timeout_s=0.2)
     except KeyboardInterrupt:
         stop.set()
         pool.join()

@@ -56,7 +56,5 @@ class LocalProcessExecutor:
         for process in processes:
             process.join(timeout=5)
         if results is not None and not any(process.is_alive() for process in processes):
-            # A worker ended while it wrote a result leaves part of a message in the pipe, and the pool's manager
-            # thread waits for the rest of it for ever (and the interpreter, at its exit, for that thread). Ours is
-            # the last end that writes: closing it ends that read.
-            results._writer.close()
+            # A worker ended mid-result leaves the pool's manager thread (joined at exit) reading the rest for ever:
+            results._writer.close()  # ours is the last writing end, and closing it ends that read

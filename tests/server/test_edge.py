@@ -251,7 +251,11 @@ def test_sigterm_stops_tune_like_ctrl_c(tmp_path):
         time.sleep(0.2)
     workers = [c.pid for c in psutil.Process(proc.pid).children(recursive=True)]
     proc.send_signal(signal.SIGTERM)
-    _, err = proc.communicate(timeout=60)
+    try:
+        _, err = proc.communicate(timeout=60)
+    except subprocess.TimeoutExpired:  # ended here, not left running without its parent
+        proc.kill()
+        _, err = proc.communicate()
     assert proc.returncode == 130, err
     with sqlite3.connect(db) as connection:
         status, runner = connection.execute("SELECT status, runner_id FROM jobs WHERE name = 'term'").fetchone()

@@ -119,7 +119,7 @@ def windows_text(model: Any, vehicle_id: int, window: CircleWindow) -> str:
             f"{range_text(window.job)}")
 
 
-@kept_on_disk  # 0.1-0.5 s, 3-5 s with the drive coupling (~460 of the model's equilibria): once for all processes
+@kept_on_disk  # 0.1-0.4 s, ~3 s with the drive coupling (~460 of the model's equilibria): once for all processes
 def _fit(vehicle_id: int, radius_m: float, sideslip_rad: float, model: Any, drive_coupling: bool) -> VehicleParams:
     left = _main_drift(vehicle_id, radius_m, sideslip_rad, False, model)
     right = _main_drift(vehicle_id, radius_m, sideslip_rad, True, model)

@@ -15,9 +15,9 @@ from dataclasses import dataclass
 
 import numpy as np
 from numba import njit
-from scipy.optimize import root
 
 from driftlab.core.errors import NoEquilibriumError
+from driftlab.core.minpack import hybr
 from driftlab.core.vehicle import (
     P_STEER_OFFSET,
     P_TYRE_B,
@@ -132,10 +132,10 @@ def has_drift_equilibrium(radius_m: float, sideslip_rad: float, p: np.ndarray) -
 def _countersteer_drifts(radius_m: float, left_beta: float, p: np.ndarray) -> Iterator[Equilibrium]:
     """The countersteer drift each start converges to (left-hand form), in the starts' order."""
     for v0, d0, f0 in itertools.product(_START_SPEEDS_MPS, _START_STEERS_RAD, _START_DRIVE_KN):
-        sol = root(_residual, np.array([v0, d0, f0]), args=(radius_m, left_beta, p), method="hybr")
-        if not np.all(np.isfinite(sol.x)) or np.max(np.abs(_residual(sol.x, radius_m, left_beta, p))) > 1e-7:
+        x, _ = hybr(_residual, np.array([v0, d0, f0]), (radius_m, left_beta, p))
+        if not np.all(np.isfinite(x)) or np.max(np.abs(_residual(x, radius_m, left_beta, p))) > 1e-7:
             continue
-        speed, steer, drive_kn = sol.x
+        speed, steer, drive_kn = x
         if speed <= 0.5:
             continue
         eq = Equilibrium(speed, left_beta, speed / radius_m, steer, drive_kn * 1e3)
@@ -146,8 +146,7 @@ def _countersteer_drifts(radius_m: float, left_beta: float, p: np.ndarray) -> It
 def _polish(eq: Equilibrium, radius_m: float, p: np.ndarray) -> Equilibrium:
     """A few Newton steps with tight tolerance so residuals sit below _RESIDUAL_TOL."""
     x0 = np.array([eq.speed_mps, eq.steer_rad, eq.drive_force_n * 1e-3])
-    sol = root(_residual, x0, args=(radius_m, eq.sideslip_rad, p), method="hybr", options={"xtol": 1e-14})
-    speed, steer, drive_kn = sol.x
+    (speed, steer, drive_kn), _ = hybr(_residual, x0, (radius_m, eq.sideslip_rad, p), xtol=1e-14)
     return Equilibrium(speed, eq.sideslip_rad, speed / radius_m, steer, drive_kn * 1e3)
 
 

@@ -4,7 +4,8 @@ Surrogate (:mod:`driftlab.core.surrogate`): a GP (ARD Matern 5/2 plus noise) on 
 and normalized outputs. Acquisition (:mod:`driftlab.core.acquisition`): expected improvement times the
 probability of success when some evaluations failed (as MATLAB bayesopt's error constraint does), so a failed
 evaluation never enters the regression as an invented number. P(success) comes from a Laplace GP classifier
-(scikit-learn's; a least-squares label GP, tried, let twice as many proposals into a failing region) conditioned
+(scikit-learn's arithmetic, :mod:`driftlab.core.failure_model`; a least-squares label GP, tried, let twice as many
+proposals into a failing region) conditioned
 on at most ``_CLASSIFIER_POINTS`` evaluations: every failure and a spread of the successes. Seed points: a
 scrambled Latin hypercube.
 
@@ -27,19 +28,15 @@ Batch: points asked and not yet told are pending; the next ask treats them as ob
 from __future__ import annotations
 
 import math
-import warnings
 from collections.abc import Callable, Mapping, Sequence
 
 import numpy as np
 from scipy.optimize import minimize
 from scipy.stats import qmc
-from sklearn.exceptions import ConvergenceWarning
-from sklearn.gaussian_process import GaussianProcessClassifier
-from sklearn.gaussian_process.kernels import RBF, ConstantKernel
 
 from driftlab.core.acquisition import constrained_ei, expected_improvement, failure_clearance
 from driftlab.core.errors import ConfigError
-from driftlab.core.failure_model import SuccessProbability, bounded_lbfgs
+from driftlab.core.failure_model import LabelKernel, SuccessProbability
 from driftlab.core.limits import check_int
 from driftlab.core.nearest import farthest_point_order, nearest_squared_distances
 from driftlab.core.surrogate import GaussianProcess, Hyperparameters, fit_hyperparameters
@@ -126,7 +123,7 @@ class BayesianOptimizer:
         self._hyper_at = -1  # no fit yet: the defaults until the first boundary
         self._regression_hp = Hyperparameters.default(self.dim)
         self._clf_at = -1
-        self._label_hp = None
+        self._label_kernel = LabelKernel.start(self.dim)
 
     # -- public interface -------------------------------------------------------------------------------
     def ask(self) -> dict[str, float]:
@@ -307,22 +304,13 @@ class BayesianOptimizer:
         boundary = self._boundary()
         if self._clf_at != boundary:
             ok_prefix = ok[:boundary]
+            self._label_kernel = LabelKernel.start(self.dim)
             if 0 < ok_prefix.sum() < boundary:
-                kernel = ConstantKernel(4.0, (1e-1, 1e3)) * RBF(np.full(self.dim, 0.3), (0.05, 5.0))
                 chosen = self._classifier_indices(x[:boundary], ok_prefix, _HYPER_FIT_POINTS)
-                clf = GaussianProcessClassifier(kernel, optimizer=bounded_lbfgs, random_state=self.seed)
-                with warnings.catch_warnings():
-                    warnings.simplefilter("ignore", ConvergenceWarning)
-                    clf.fit(x[chosen], ok_prefix[chosen].astype(int))
-                self._label_hp = clf.kernel_
-            else:
-                self._label_hp = ConstantKernel(4.0) * RBF(np.full(self.dim, 0.3))
+                self._label_kernel = self._label_kernel.fitted(x[chosen], ok_prefix[chosen].astype(int))
             self._clf_at = boundary
         chosen = self._classifier_indices(x, ok, _CLASSIFIER_POINTS)
-        # warm_start: sklearn searches the Laplace mode twice in one fit (for the likelihood, then for
-        # prediction); the second search starts from the first one's mode. Nothing carries over between fits.
-        classifier = GaussianProcessClassifier(self._label_hp, optimizer=None, warm_start=True)
-        return SuccessProbability(classifier.fit(x[chosen], ok[chosen].astype(int)))
+        return SuccessProbability.conditioned(self._label_kernel, x[chosen], ok[chosen].astype(int))
 
     def _acquisition(self, gp: GaussianProcess, classifier: SuccessProbability | None, best: float,
                      failed: np.ndarray, x: np.ndarray) -> np.ndarray:

@@ -14,8 +14,9 @@ from dataclasses import dataclass
 from typing import Literal, overload
 
 import numpy as np
-from scipy.linalg import cho_solve, cholesky, solve_triangular
 from scipy.optimize import minimize
+
+from driftlab.core.lapack import cho_solve_lower, cholesky_lower, solve_lower
 
 _SQRT5 = math.sqrt(5.0)
 # Bounds of the log hyperparameters: length scales (unit cube), signal variance and noise variance (both on the
@@ -68,12 +69,12 @@ def log_marginal_likelihood(log_hp: np.ndarray, x: np.ndarray, y: np.ndarray) ->
     k_f = hp.signal_variance * (1.0 + _SQRT5 * r + (5.0 / 3.0) * r * r) * e
     k = k_f + hp.noise_variance * np.eye(n)
     try:
-        chol = cholesky(k, lower=True, check_finite=False)
+        chol = cholesky_lower(k)
     except np.linalg.LinAlgError:
         return -1e25, np.zeros_like(log_hp)
-    alpha = cho_solve((chol, True), y, check_finite=False)
+    alpha = cho_solve_lower(chol, y)
     lml = -0.5 * y @ alpha - np.log(np.diag(chol)).sum() - 0.5 * n * math.log(2.0 * math.pi)
-    inner = np.outer(alpha, alpha) - cho_solve((chol, True), np.eye(n), check_finite=False)
+    inner = np.outer(alpha, alpha) - cho_solve_lower(chol, np.eye(n))
     grad = np.empty(dim + 2)
     # d k / d log(l_i) = s^2 (5/3) (1 + sqrt5 r) exp(-sqrt5 r) (x_i - x'_i)^2 / l_i^2
     radial = hp.signal_variance * (5.0 / 3.0) * (1.0 + _SQRT5 * r) * e
@@ -116,8 +117,8 @@ class GaussianProcess:
         self.x = np.asarray(x, float)
         self.z = (np.asarray(y, float) - self.y_mean) / self.y_std
         k = matern52(self.x, self.x, hp) + (hp.noise_variance + 1e-10) * np.eye(len(self.x))
-        self.chol = cholesky(k, lower=True, check_finite=False)
-        self.alpha = cho_solve((self.chol, True), self.z, check_finite=False)
+        self.chol = cholesky_lower(k)
+        self.alpha = cho_solve_lower(self.chol, self.z)
 
     @overload
     def predict(self, xq: np.ndarray, return_std: Literal[True] = ...) -> tuple[np.ndarray, np.ndarray]: ...
@@ -131,7 +132,7 @@ class GaussianProcess:
         mean = k_star.T @ self.alpha
         if not return_std:
             return self.y_mean + self.y_std * mean, None
-        v = solve_triangular(self.chol, k_star, lower=True, check_finite=False)
+        v = solve_lower(self.chol, k_star)
         var = np.maximum(self.hp.signal_variance - np.einsum("ij,ij->j", v, v), 1e-18)
         return self.y_mean + self.y_std * mean, self.y_std * np.sqrt(var)
 
@@ -143,13 +144,13 @@ class GaussianProcess:
         out.hp, out.y_mean, out.y_std = hp, self.y_mean, self.y_std
         out.x = np.vstack([self.x, x_new])
         out.z = np.concatenate([self.z, (np.asarray(y_new, float) - self.y_mean) / self.y_std])
-        cross = solve_triangular(self.chol, matern52(self.x, x_new, hp), lower=True, check_finite=False)
+        cross = solve_lower(self.chol, matern52(self.x, x_new, hp))
         corner = matern52(x_new, x_new, hp) + (hp.noise_variance + 1e-10) * np.eye(len(x_new)) - cross.T @ cross
         n, q = len(self.x), len(x_new)
         chol = np.zeros((n + q, n + q))
         chol[:n, :n] = self.chol
         chol[n:, :n] = cross.T
-        chol[n:, n:] = cholesky(corner + 1e-12 * np.eye(q), lower=True, check_finite=False)
+        chol[n:, n:] = cholesky_lower(corner + 1e-12 * np.eye(q))
         out.chol = chol
-        out.alpha = cho_solve((chol, True), out.z, check_finite=False)
+        out.alpha = cho_solve_lower(chol, out.z)
         return out

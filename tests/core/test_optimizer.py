@@ -169,18 +169,52 @@ def test_the_surrogate_equals_sklearns_gp_and_its_likelihood_gradient_is_exact()
     np.testing.assert_allclose(grad, numeric, rtol=1e-5, atol=1e-5)
 
 
-def test_success_probability_equals_sklearns_predict_proba():
+def test_success_probability_is_sklearns_classifier_conditioned_and_predicting():
+    """The Laplace conditioning written out gives sklearn's factors to the bit (so every proposal is what it was
+    through sklearn's estimator), and P(success) its predict_proba."""
     from sklearn.gaussian_process import GaussianProcessClassifier
     from sklearn.gaussian_process.kernels import RBF, ConstantKernel
 
-    from driftlab.core.failure_model import SuccessProbability
+    from driftlab.core.failure_model import LabelKernel, SuccessProbability
 
     rng = np.random.default_rng(3)
     x = rng.random((300, 4))
     ok = (x[:, 0] + x[:, 3] < 1.2).astype(int)
-    clf = GaussianProcessClassifier(ConstantKernel(4.0) * RBF(np.full(4, 0.3)), optimizer=None).fit(x, ok)
-    query = rng.random((500, 4))
-    np.testing.assert_allclose(SuccessProbability(clf)(query), clf.predict_proba(query)[:, 1], atol=1e-10)
+    for constant, length_scales in ((4.0, np.full(4, 0.3)), (2.7182818, np.array([0.31, 0.07, 1.9, 0.45]))):
+        kernel = ConstantKernel(constant) * RBF(length_scales)
+        clf = GaussianProcessClassifier(kernel, optimizer=None, warm_start=True).fit(x, ok)
+        ours = SuccessProbability.conditioned(LabelKernel(constant, length_scales), x, ok)
+        fitted = clf.base_estimator_
+        assert np.array_equal(ours.coef, fitted.y_train_ - fitted.pi_)
+        assert np.array_equal(ours.w_sr, fitted.W_sr_)
+        assert np.array_equal(ours.chol_lower, fitted.L_)
+        query = rng.random((500, 4))
+        np.testing.assert_allclose(ours(query), clf.predict_proba(query)[:, 1], atol=1e-10)
+
+
+@pytest.mark.parametrize("dim", [1, 4])
+def test_the_label_kernel_fit_is_sklearns_to_the_bit(dim):
+    """The classifier's kernel learnt without sklearn's estimator: the same L-BFGS-B iterates on the same
+    likelihood and gradient, so the same kernel (and every proposal as before)."""
+    import warnings
+
+    from sklearn.exceptions import ConvergenceWarning
+    from sklearn.gaussian_process import GaussianProcessClassifier
+    from sklearn.gaussian_process.kernels import RBF, ConstantKernel
+
+    from driftlab.core.failure_model import LabelKernel, bounded_lbfgs
+
+    rng = np.random.default_rng(dim)
+    x = rng.random((80, dim))
+    ok = (x[:, 0] + 0.3 * rng.standard_normal(80) < 0.6).astype(int)
+    kernel = ConstantKernel(4.0, (1e-1, 1e3)) * RBF(np.full(dim, 0.3), (0.05, 5.0))
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore", ConvergenceWarning)
+        reference = GaussianProcessClassifier(kernel, optimizer=bounded_lbfgs).fit(x, ok).kernel_
+    ours = LabelKernel.start(dim).fitted(x, ok)
+    assert ours.constant == reference.k1.constant_value
+    assert np.array_equal(ours.length_scales, np.squeeze(reference.k2.length_scale))
+    assert ours.constant != LabelKernel.start(dim).constant  # it moved
 
 
 def test_pending_points_enter_by_a_block_update_equal_to_a_full_refactorization():

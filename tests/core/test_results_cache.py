@@ -26,7 +26,7 @@ from driftlab.core.plants import plant_type
 if sys.argv[1] == "read":
     def _no_solve(*args, **kwargs):
         raise AssertionError("solved again")
-    equilibrium.root = model_equilibrium.root = _no_solve
+    equilibrium.hybr = model_equilibrium.hybr = _no_solve
 family = equilibrium.plant_drifts(44.0, -0.5, pack_commonroad(2, mass_scale=float(sys.argv[2])))
 print(json.dumps([[drift.as_dict() for drift in part] for part in family]))
 if sys.argv[3] == "fit":

@@ -22,7 +22,6 @@ from itertools import product
 
 import numpy as np
 from numba import njit
-from scipy.optimize import root
 
 from driftlab.core.commonroad.parameters import (
     CR_ACCEL_MAX,
@@ -45,6 +44,7 @@ from driftlab.core.commonroad.std import (
     rear_tyre_state,
     std_derivatives,
 )
+from driftlab.core.minpack import hybr
 from driftlab.core.results_cache import kept_on_disk
 
 _GUESS_SPEEDS_MPS = (8.0, 10.0, 12.0, 14.0, 17.0, 20.0, 23.0)
@@ -135,13 +135,13 @@ def _solve(radius_m: float, sideslip_rad: float, cp: np.ndarray) -> Family:
     for speed, steer, slip in product(_GUESS_SPEEDS_MPS, _GUESS_STEERS_RAD, _GUESS_REAR_SLIPS):
         ground = speed * math.cos(sideslip_rad) / wheel
         guess = np.array([speed, -side * steer, ground, ground * (1.0 - slip), 3.0])
-        sol = root(_residual, guess, args=(radius_m, sideslip_rad, cp), method="hybr", options={"xtol": 1e-12})
-        if not sol.success or np.max(np.abs(_residual(sol.x, radius_m, sideslip_rad, cp))) > 1e-7:
+        x, converged = hybr(_residual, guess, (radius_m, sideslip_rad, cp), xtol=1e-12)
+        if not converged or np.max(np.abs(_residual(x, radius_m, sideslip_rad, cp))) > 1e-7:
             continue
-        if not _physical(sol.x, cp):
+        if not _physical(x, cp):
             continue
-        if all(np.max(np.abs(sol.x[:2] - f[:2])) > 1e-5 for f in found):
-            found.append(sol.x)
+        if all(np.max(np.abs(x[:2] - f[:2])) > 1e-5 for f in found):
+            found.append(x)
     drifts = sorted((_drift(x, radius_m, sideslip_rad, cp) for x in found), key=lambda d: -d.speed_mps)
     return (tuple(d for d in drifts if d.front_wheel_radps >= 0.0),
             tuple(d for d in drifts if d.front_wheel_radps < 0.0))

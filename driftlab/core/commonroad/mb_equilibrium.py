@@ -13,11 +13,11 @@ import math
 from functools import lru_cache
 
 import numpy as np
-from scipy.optimize import root
 
 from driftlab.core.commonroad.equilibrium import PlantDrift, commonroad_drifts
 from driftlab.core.commonroad.mb import R_W, A, B, M, mb_derivatives, pack_mb
 from driftlab.core.commonroad.parameters import ParameterSet, package_parameters
+from driftlab.core.minpack import hybr
 
 _SUSPENSION = [6, 8, 11, 13, 16, 18, 21, 27, 28]  # roll, pitch, heave, front/rear axle roll and heave, compliance
 _STEADY = [3, 5, 10, 15, 20, 7, 9, 12, 14, 17, 19, 22, 23, 24]
@@ -51,14 +51,14 @@ def mb_main_drift(car: int | ParameterSet, radius_m: float, sideslip_rad: float,
     return None if found is None else found[0]
 
 
-def _physical(sol, radius_m: float, beta: float, cp) -> bool:
-    return bool(sol.success and np.max(np.abs(_residual(sol.x, radius_m, beta, cp))) < 1e-8 and sol.x[0] > 2.0
-                and min(sol.x[3], sol.x[4], sol.x[5]) >= 0.0)
+def _physical(x, converged: bool, radius_m: float, beta: float, cp) -> bool:
+    return bool(converged and np.max(np.abs(_residual(x, radius_m, beta, cp))) < 1e-8 and x[0] > 2.0
+                and min(x[3], x[4], x[5]) >= 0.0)
 
 
 def _solve(guess, radius_m: float, beta: float, cp):
-    sol = root(_residual, guess, args=(radius_m, beta, cp), method="hybr", options={"xtol": 1e-13})
-    return sol.x if _physical(sol, radius_m, beta, cp) else None
+    x, converged = hybr(_residual, guess, (radius_m, beta, cp), xtol=1e-13)
+    return x if _physical(x, converged, radius_m, beta, cp) else None
 
 
 def _solve_from_std(car: int | ParameterSet, radius_m: float, beta: float, cp, friction_scale: float,

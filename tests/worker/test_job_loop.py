@@ -192,10 +192,12 @@ class FailingSeedExecutor:
         pass
 
 
+@pytest.mark.parametrize("workers", [1, 2])
 @pytest.mark.parametrize("deterministic", [False, True])
-def test_a_failed_seed_ends_its_evaluation_unless_the_job_is_deterministic(tmp_path, deterministic):
+def test_a_failed_seed_ends_its_evaluation_unless_the_job_is_deterministic(tmp_path, deterministic, workers):
     """An evaluation fails once one seed fails, so its seeds not started yet are skipped and it is stored with
-    the seeds that ran; a deterministic job runs every seed (which ones had started would depend on timing)."""
+    the seeds that ran; a deterministic job runs every seed (which ones had started would depend on timing). The
+    first seed runs alone, also with a worker free beside it: a theta that fails there runs one episode."""
     factory = storage.open_database(f"sqlite:///{tmp_path / 'skip.db'}")
     spec = TuningSpec(iterations=10, seed_points=10, seed=0, robust_samples=4, confirm_samples=0,
                       deterministic=deterministic, bounds={"k": [0.0, 0.12]}, prune=PruneRule(enabled=False))
@@ -203,7 +205,7 @@ def test_a_failed_seed_ends_its_evaluation_unless_the_job_is_deterministic(tmp_p
         job_id = storage.create_job(session, name="skip", spec=spec.to_dict(), seed=spec.seed).id
     claim_job(factory, job_id, "runner")
     executor = FailingSeedExecutor()
-    assert run_job(factory, job_id, executor, runner="runner", workers=1) == "finished"
+    assert run_job(factory, job_id, executor, runner="runner", workers=workers) == "finished"
     with storage.snapshot(factory) as session:
         stored = storage.evaluations(session, job_id=job_id)
     failed = [e for e in stored if not e.completed]

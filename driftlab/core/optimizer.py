@@ -45,6 +45,11 @@ _CANDIDATES = 256
 _LOCAL_CANDIDATES = 128
 _LOCAL_STARTS = 2
 _LOCAL_ITERATIONS = 10
+# A local search also stops after this many evaluations of the acquisition: where it steps (P(success) crossing
+# _MIN_SUCCESS_PROBABILITY, the clearance from a failure) its forward-difference gradient misleads the line search,
+# which spent up to 133 evaluations (median 14) on a 500-run's asks; capped, a replay of 480 of them proposed the
+# same theta in 440 and an acquisition value within 1 % of the uncapped one in all but 20, for 27 % fewer.
+_LOCAL_EVALUATIONS = 30
 _HYPER_FIT_POINTS = 80  # hyperparameters from at most this many points; the GPs then condition on all
 _EI_XI = 0.0
 _MIN_SUCCESS_PROBABILITY = 0.5
@@ -345,7 +350,8 @@ class BayesianOptimizer:
 
         for start in starts:
             res = minimize(negative_with_gradient, start, jac=True, method="L-BFGS-B",
-                           bounds=list(zip(low, high, strict=True)), options={"maxiter": _LOCAL_ITERATIONS})
+                           bounds=list(zip(low, high, strict=True)),
+                           options={"maxiter": _LOCAL_ITERATIONS, "maxfun": _LOCAL_EVALUATIONS})
             if np.all(np.isfinite(res.x)) and -res.fun > best_v:
                 best_x, best_v = np.clip(res.x, low, high), -float(res.fun)
         if self._is_repeat(best_x):

@@ -192,6 +192,14 @@ def test_success_probability_is_sklearns_classifier_conditioned_and_predicting()
         np.testing.assert_allclose(ours(query), clf.predict_proba(query)[:, 1], atol=1e-10)
 
 
+def test_the_erf_approximation_is_sklearns():
+    from sklearn.gaussian_process import _gpc
+
+    from driftlab.core import failure_model
+
+    assert np.array_equal(failure_model.LAMBDAS, _gpc.LAMBDAS) and np.array_equal(failure_model.COEFS, _gpc.COEFS)
+
+
 @pytest.mark.parametrize("dim", [1, 4])
 def test_the_label_kernel_fit_is_sklearns_to_the_bit(dim):
     """The classifier's kernel learnt without sklearn's estimator: the same L-BFGS-B iterates on the same

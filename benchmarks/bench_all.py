@@ -214,7 +214,7 @@ def main() -> None:
                            args.rescore if robust else 0) for _ in range(args.runs)]
         run = {k: statistics.median(r[k] for r in runs) for k in runs[0]}
         name = "job default, 4+4 seeds" if robust else "paper's, one episode per evaluation"
-        show(f"500-run, 2 workers, {name}", run["wall_s"], "s", "<= 30 s" if robust else "<= 40 s")
+        show(f"500-run, 2 workers, {name}", run["wall_s"], "s", "<= 20 s" if robust else "<= 40 s")
         print(f"    where it goes: start-up {run['startup_s']:.1f} s (database, 2 worker processes); job loop "
               f"{run['loop_s']:.1f} s, of which in the main process: ask {run['ask_s']:.1f} s, tell "
               f"{run['tell_s']:.2f} s, storage {run['store_s']:.1f} s, the rest waiting for episodes; "

@@ -180,11 +180,9 @@ def _fitted_spec(factory: sessionmaker[Session], job_id: int) -> TuningSpec:
 
 def _may_ask(startable: bool) -> bool:
     """Whether to ask the next theta now: while no episode waits that a freed worker could start (a seed held back
-    for the prune rule or behind its evaluation's first seed does not count, :meth:`SeedQueue.any_startable`). So one
-    evaluation's first seed always waits ready, and a worker that frees up starts it at once instead of idling
-    through the ask (asked only once a worker was free, or while at most one evaluation was unfinished, the 2 workers
-    of the job default's 500-run idled ~30 % of the run). The optimizer knows no less than if it asked later: an
-    evaluation is told only once all of its seeds are in, so the next theta is asked with the unfinished ones pending
+    by :meth:`SeedQueue.any_startable`'s rules does not count), so a worker that frees up starts one at once instead of
+    idling through the ask (asked only once a worker was free, the 500-run's 2 workers idled ~30 % of it). The
+    optimizer knows no less: an evaluation is told once all its seeds are in, so the unfinished ones are pending
     either way; at most one more is pending than there are workers."""
     return not startable
 

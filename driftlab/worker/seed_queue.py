@@ -116,17 +116,12 @@ class SeedQueue:
                 return
 
     def _held_back(self, evaluation: PendingEvaluation, seed: int) -> bool:
-        """Whether a seed of the evaluation waits to start:
-        - until its first seed is back, outside a deterministic job: a failed seed fails the evaluation and drops
-          the seeds not started yet (:meth:`skip_unstarted`), but a seed started beside the first ran for nothing
-          when the first failed (in the job default's 500-run 115-210 evaluations failed on their first seed, and
-          the seeds run beside those failures were ~11 % of the episodes' simulated time); the workers take the
-          next evaluation's seeds meanwhile. Not in a deterministic job, which drops no seed on a failure;
-        - until its first ``min_seeds`` seeds are back, while the prune rule can stop the theta (it is on, and there
-          is a best to compare with): the rule decides on those, and a seed started before it did runs for nothing
-          if the theta stops (with 2 workers and 4 seeds, the third seed started as the first came back, so a
-          stopped theta ran 3 episodes instead of 2).
-        Never a would-be best's confirmation seeds: every seed before them is back."""
+        """Whether a seed of the evaluation waits to start: until its first seed is back (not in a deterministic job,
+        which drops no seed on a failure): a seed started beside a first that failed ran for nothing (in the job
+        default's 500-run, ~11 % of the episodes' simulated time); and until its first ``min_seeds`` are back while
+        the prune rule can stop the theta (it is on, there is a best), or a seed started before the rule decided
+        runs for nothing if the theta stops. The workers take the next theta's seeds meanwhile. A would-be best's
+        confirmation seeds start at once: every seed before them is back."""
         first = evaluation.seeds[0]
         if not self.deterministic and seed != first and first not in evaluation.outcomes:
             return True

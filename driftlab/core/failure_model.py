@@ -15,8 +15,9 @@ from driftlab.core.lapack import cho_solve_lower, cholesky_lower, solve_lower
 
 CLASSIFIER_FIT_ITERATIONS = 20
 # Williams & Barber's approximation of the logistic by five error functions, as sklearn's predict_proba takes it
-# (GPML section 3.9): the erf scales and their least-squares weights, sklearn's constants (its _gpc module, which
-# loading took ~1.5 s of a core in every process that asks).
+# (GPML section 3.9): the erf scales, and the weights of the least-squares fit of logistic(x) by (erf(lambda x) + 1) / 2
+# at x = 0, 0.6, 2, 3.5, 4.5, inf, as sklearn rounded them (tests/core/test_optimizer.py fits them again and compares
+# with sklearn's). Copied, not imported: importing sklearn's _gpc module took ~0.45 s more in every process that asks.
 LAMBDAS = np.array([0.41, 0.4, 0.37, 0.44, 0.39])[:, np.newaxis]
 COEFS = np.array([-1854.8214151, 3516.89893646, 221.29346712, 128.12323805, -2010.49422654])[:, np.newaxis]
 _NEWTON_ITERATIONS = 100  # sklearn's max_iter_predict
@@ -71,9 +72,7 @@ class LabelKernel:
         return LabelKernel.from_log_parameters(self.log_parameters)
 
     def gram(self, x: np.ndarray) -> np.ndarray:
-        k = squareform(np.exp(-0.5 * pdist(x / self.length_scales, metric="sqeuclidean")))
-        np.fill_diagonal(k, 1)
-        return self.constant * k
+        return self.constant * _rbf_gram(x, self.length_scales)[1]
 
     def cross(self, a: np.ndarray, b: np.ndarray) -> np.ndarray:
         return self.constant * np.exp(-0.5 * cdist(a / self.length_scales, b / self.length_scales,
@@ -112,21 +111,27 @@ class _Mode:
     a: np.ndarray
 
 
+def _rbf_gram(x: np.ndarray, length_scales: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """The squared scaled distances (condensed) and the unit RBF Gram matrix, as sklearn's RBF computes them."""
+    dists = pdist(x / length_scales, metric="sqeuclidean")
+    k = squareform(np.exp(-0.5 * dists))
+    np.fill_diagonal(k, 1)
+    return dists, k
+
+
 def _kernel_and_gradient(theta: np.ndarray, x: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     """K and dK/dtheta of ``ConstantKernel * RBF`` at log-parameters theta, as sklearn's Product computes them."""
-    constant, length_scales = np.exp(theta[0]), np.squeeze(np.exp(theta[1:])).astype(float)
-    dists = pdist(x / length_scales, metric="sqeuclidean")
-    k_rbf = squareform(np.exp(-0.5 * dists))
-    np.fill_diagonal(k_rbf, 1)
+    kernel = LabelKernel.from_log_parameters(theta)
+    constant, length_scales = kernel.constant, kernel.length_scales
+    dists, k_rbf = _rbf_gram(x, length_scales)
     if length_scales.ndim == 0:  # one dimension: sklearn's isotropic gradient
         rbf_gradient = (k_rbf * squareform(dists))[:, :, np.newaxis]
     else:
         rbf_gradient = (x[:, np.newaxis, :] - x[np.newaxis, :, :]) ** 2 / (length_scales**2)
         rbf_gradient *= k_rbf[..., np.newaxis]
-    constant_block = np.full(k_rbf.shape, constant)
-    gradient = np.dstack((np.full((*k_rbf.shape, 1), constant) * k_rbf[:, :, np.newaxis],
-                          rbf_gradient * constant_block[:, :, np.newaxis]))
-    return constant_block * k_rbf, gradient
+    # sklearn multiplies by an array full of c: the same products as by c itself
+    gradient = np.dstack((constant * k_rbf[:, :, np.newaxis], rbf_gradient * constant))
+    return constant * k_rbf, gradient
 
 
 def _negative_lml(theta: np.ndarray, x: np.ndarray, labels: np.ndarray) -> tuple[float, np.ndarray]:
@@ -153,8 +158,8 @@ class SuccessProbability:
     Williams & Barber's erf approximation), but with a triangular solve against the stored Cholesky factor: sklearn
     solves it as a general matrix (an LU factorization of n x n per call), which made the acquisition's many small
     calls cost ~2 ms each at n = 400. Conditioned here rather than through sklearn's estimator, whose per-fit
-    validation, kernel objects and wrapped solves were most of an ask's classifier time (the kernel itself is
-    still learnt by sklearn's fit, :meth:`driftlab.core.optimizer.BayesianOptimizer._classifier`)."""
+    validation, kernel objects and wrapped solves were most of an ask's classifier time (its kernel is learnt the
+    same way, :meth:`LabelKernel.fitted`)."""
 
     def __init__(self, kernel: LabelKernel, x_train: np.ndarray, coef: np.ndarray, w_sr: np.ndarray,
                  chol_lower: np.ndarray) -> None:

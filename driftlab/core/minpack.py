@@ -16,10 +16,11 @@ import numpy as np
 from scipy.optimize import _minpack  # root's own binding; the public wrappers add only the overhead above
 
 _EPSILON = float(np.finfo(np.float64).eps)
+_ROOT_XTOL = 1.49012e-08  # root's default relative tolerance for hybr
 _CONVERGED = 1
 
 
-def hybr(residual: Callable[..., np.ndarray], x0: np.ndarray, args: tuple = (), xtol: float = 1.49012e-08
+def hybr(residual: Callable[..., np.ndarray], x0: np.ndarray, args: tuple = (), xtol: float = _ROOT_XTOL
          ) -> tuple[np.ndarray, bool]:
     """(x, converged) of ``root(residual, x0, args=args, method="hybr", options={"xtol": xtol})``."""
     start = np.asarray(x0, dtype=np.float64).flatten()  # a copy, as root makes: MINPACK iterates in place

@@ -84,8 +84,8 @@ def _close(key: str) -> None:
 
 
 def _warm() -> int:
-    """What a job's first open and ask would load otherwise, while the server starts: the optimizer (scikit-learn,
-    ~1.5 s of a core) and the episode module its known constraint calls (a theta whose corrected model has no drift
+    """What a job's first open and ask would load otherwise, while the server starts: the optimizer (scipy's
+    optimize and stats) and the episode module its known constraint calls (a theta whose corrected model has no drift
     is not asked) with that check's compiled functions (~1 s)."""
     import driftlab.core.optimizer  # noqa: F401
     from driftlab.core.config import EpisodeConfig

@@ -118,7 +118,7 @@ class SeedQueue:
     def _held_back(self, evaluation: PendingEvaluation, seed: int) -> bool:
         """Whether a seed of the evaluation waits to start: until its first seed is back (not in a deterministic job,
         which drops no seed on a failure): a seed started beside a first that failed ran for nothing (in the job
-        default's 500-run, ~11 % of the episodes' simulated time); and until its first ``min_seeds`` are back while
+        default's 500-run, 10-15 % of the episodes' simulated time); and until its first ``min_seeds`` are back while
         the prune rule can stop the theta (it is on, there is a best), or a seed started before the rule decided
         runs for nothing if the theta stops. The workers take the next theta's seeds meanwhile. A would-be best's
         confirmation seeds start at once: every seed before them is back."""

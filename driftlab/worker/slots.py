@@ -82,11 +82,6 @@ class EpisodeSlots:
     def _room(self, owner: Hashable) -> bool:
         return self._held[owner] < self._share(owner) and self._in_flight < self.capacity
 
-    def has_room(self, owner: Hashable) -> bool:
-        """Whether ``owner`` could start one more episode now."""
-        with self._lock:
-            return self._room(owner)
-
     def try_take(self, owner: Hashable) -> bool:
         """Count one more episode of ``owner`` in flight if its share and the capacity allow it."""
         with self._lock:

@@ -192,12 +192,16 @@ def test_success_probability_is_sklearns_classifier_conditioned_and_predicting()
         np.testing.assert_allclose(ours(query), clf.predict_proba(query)[:, 1], atol=1e-10)
 
 
-def test_the_erf_approximation_is_sklearns():
+def test_the_erf_approximation_is_sklearns_and_its_fit():
+    from scipy.special import erf, expit
     from sklearn.gaussian_process import _gpc
 
     from driftlab.core import failure_model
 
     assert np.array_equal(failure_model.LAMBDAS, _gpc.LAMBDAS) and np.array_equal(failure_model.COEFS, _gpc.COEFS)
+    x = np.array([0.0, 0.6, 2.0, 3.5, 4.5, np.inf])  # the fit the weights come from, as sklearn's source states it
+    weights = np.linalg.lstsq((erf(np.outer(x, failure_model.LAMBDAS[:, 0])) + 1) / 2, expit(x), rcond=None)[0]
+    np.testing.assert_allclose(failure_model.COEFS[:, 0], weights, rtol=1e-9)
 
 
 @pytest.mark.parametrize("dim", [1, 4])

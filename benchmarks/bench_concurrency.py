@@ -176,15 +176,23 @@ def started_runner(factory, executor, workers: int) -> JobRunner:
 
 
 def _at_once(factory, study_id, runner: JobRunner) -> None:
+    """Until the study is finished. The wall time ends when its last job does: the runner's jobs are watched in
+    memory every 2 ms (a database read every 50 ms added up to 50 ms, 4 % of a 16-worker run), the study's status
+    read once they have all stopped."""
     runner.wake()
+    seen_running = False
     while True:
-        with storage.snapshot(factory) as session:
-            status = studies.study_status(session, studies.get_study(session, study_id=study_id))
-        if status == "finished":
-            return
-        if status in ("failed", "paused"):
-            raise RuntimeError(f"the study is {status}")
-        time.sleep(0.05)
+        running = bool(runner.running_job_ids)
+        seen_running = seen_running or running
+        if not running and seen_running:
+            with storage.snapshot(factory) as session:
+                status = studies.study_status(session, studies.get_study(session, study_id=study_id))
+            if status == "finished":
+                return
+            if status in ("failed", "paused"):
+                raise RuntimeError(f"the study is {status}")
+            seen_running = False  # jobs still to claim: wait for the runner to start them
+        time.sleep(0.002)
 
 
 def measure(mode: str, db_dir: str, spec: dict, executor, workers: int) -> dict:

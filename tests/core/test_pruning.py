@@ -1,10 +1,14 @@
 """The early stop of a losing theta (driftlab.core.pruning): the paired test on known numbers, and its settings in
 the job document."""
 
+import warnings
+
+import numpy as np
 import pytest
+from scipy import stats
 
 from driftlab.core.errors import ConfigError
-from driftlab.core.pruning import DEFAULT_CONFIDENCE, DEFAULT_MIN_SEEDS, PruneRule, clearly_worse
+from driftlab.core.pruning import DEFAULT_CONFIDENCE, DEFAULT_MIN_SEEDS, PruneRule, clearly_worse, paired_t_pvalue
 from driftlab.core.tuning import TuningSpec
 
 # The best so far on the job's four seeds, and its stored J (the mean over its 4 + 4 seeds).
@@ -18,6 +22,26 @@ def test_a_clearly_worse_candidate_stops_once_it_has_the_minimum_seeds():
     assert clearly_worse({s: worse[s] for s in (0, 1)}, INCUMBENT, best_J=BEST_J, min_seeds=2)
     assert not clearly_worse({s: worse[s] for s in (0, 1)}, INCUMBENT, best_J=BEST_J, min_seeds=3)
     assert clearly_worse({s: worse[s] for s in (0, 1, 2)}, INCUMBENT, best_J=BEST_J, min_seeds=3)
+
+
+def test_the_paired_t_test_is_scipys_to_the_bit():
+    """The p-value the rule reads is scipy.stats.ttest_rel's (alternative "greater") to the last bit: random pairs of
+    J-like values at 2 to 9 seeds, pairs a shift apart (equal differences: t infinite, or nan with no difference),
+    and values far apart in size."""
+    rng = np.random.default_rng(3)
+    cases = []
+    for n in range(2, 10):
+        for _ in range(300):
+            theirs = rng.normal(-1.5, 0.1, n)
+            cases.append((theirs + rng.normal(rng.normal(0, 0.05), rng.uniform(1e-4, 0.2), n), theirs))
+        base = rng.normal(-1.5, 0.1, n)
+        cases += [(base + 0.25, base), (base, base), (base * 1e6 + rng.normal(0, 1, n), base)]
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore", RuntimeWarning)
+        for ours, theirs in cases:
+            expected = float(stats.ttest_rel(list(ours), list(theirs), alternative="greater").pvalue)
+            got = paired_t_pvalue(list(ours), list(theirs))
+            assert got == expected or (np.isnan(got) and np.isnan(expected)), (ours, theirs, got, expected)
 
 
 def test_pairs_by_seed_not_by_position():

@@ -44,3 +44,15 @@ def test_a_dead_runners_job_is_taken_over_once_its_heartbeat_is_older_than_the_t
     with storage.transaction(factory) as session:
         assert not lifecycle.heartbeat(session, job_id=job_id, runner="a")  # the dead runner, back, must stop
         assert lifecycle.heartbeat(session, job_id=job_id, runner="b")
+
+
+def test_a_runner_claims_what_it_has_room_for_oldest_first_in_one_look(factory):
+    with storage.transaction(factory) as session:
+        ids = [storage.create_job(session, name=f"j{i}", spec=TuningSpec(iterations=3).to_dict(), seed=i).id
+               for i in range(4)]
+        lifecycle.claim(session, job_id=ids[0], runner="a")
+    _heartbeat_ago(factory, ids[0], LEASE_TIMEOUT_S + 1.0)  # its runner died: claimable again, and the oldest
+    with storage.transaction(factory) as session:
+        assert lifecycle.claimable(session, limit=3) == ids[:3]
+        lifecycle.claim(session, job_id=ids[1], runner="b")
+        assert lifecycle.claimable(session, limit=9) == [ids[0], ids[2], ids[3]]

@@ -220,6 +220,26 @@ def test_a_robustness_study_runs_beside_a_job_and_both_finish(factory):
         assert all(c.status == "completed" for c in studies.cells(session, study_id=study_id))
 
 
+def test_a_wake_looks_for_every_kind_of_work_while_jobs_run(factory):
+    """A job's end looks only at the job queue; a request's wake (runner.wake(), as the API calls it) looks for
+    every kind of work: a robustness study queued while a job runs starts at the wake, long before the runner's
+    poll would look (a minute here)."""
+    job = _job(factory, "long", 4, 400)
+    cluster = FakeCluster(workers=2, gate_s=0.0)
+    runner = JobRunner(factory, workers=cluster.workers, poll_s=60.0, busy_poll_s=60.0)
+    runner.start(executor=cluster)
+    try:
+        _wait(lambda: runner.running_job_ids == [job] and _indices(factory, job), what="the job to run")
+        with storage.transaction(factory) as session:
+            study_id = start_study(session, doc={"kind": "robustness", "theta": {"k": 0.05}, "robust_samples": 2,
+                                                 "grid": {"plant.mass_scale": [0.9, 1.0]}}).id
+        runner.wake()
+        _wait(lambda: runner.current_study_id == study_id, timeout_s=20, what="the study to start at the wake")
+        assert runner.running_job_ids == [job]
+    finally:
+        runner.stop()
+
+
 def test_the_cli_runs_a_seeds_studys_jobs_at_once_too(factory):
     """`driftlab study seeds` runs the study's jobs as the server's runner does: side by side on the shared
     workers, never more episodes in flight than workers, each job numbered once; a finished job is not rerun."""

@@ -1,13 +1,12 @@
 """Bayesian optimization with an ask/tell interface (paper section III-C), minimizing.
 
-Surrogate (:mod:`driftlab.core.surrogate`): a GP (ARD Matern 5/2 plus noise) on inputs scaled to the unit cube
-and normalized outputs. Acquisition (:mod:`driftlab.core.acquisition`): expected improvement times the
-probability of success when some evaluations failed (as MATLAB bayesopt's error constraint does), so a failed
-evaluation never enters the regression as an invented number. P(success) comes from a Laplace GP classifier
-(scikit-learn's arithmetic, :mod:`driftlab.core.failure_model`; a least-squares label GP, tried, let twice as many
-proposals into a failing region) conditioned
-on at most ``_CLASSIFIER_POINTS`` evaluations: every failure and a spread of the successes. Seed points: a
-scrambled Latin hypercube.
+Surrogate (:mod:`driftlab.core.surrogate`): a GP (ARD Matern 5/2 plus noise) on inputs scaled to the unit cube and
+normalized outputs. Acquisition (:mod:`driftlab.core.acquisition`): expected improvement times the probability of
+success when some evaluations failed (as MATLAB bayesopt's error constraint does), so a failed evaluation never
+enters the regression as an invented number. P(success) comes from a Laplace GP classifier (scikit-learn's
+arithmetic, :mod:`driftlab.core.failure_model`; a least-squares label GP, tried, let twice as many proposals into a
+failing region) conditioned on at most ``_CLASSIFIER_POINTS`` evaluations: every failure and a spread of the
+successes. Seed points: a scrambled Latin hypercube.
 
 Determinism and resume: every proposal is a function of (seed, told history, pending points) only. The GP's
 hyperparameters are refit from a fixed starting point at history sizes that are multiples of ``refit_every``

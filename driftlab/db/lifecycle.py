@@ -22,8 +22,8 @@ from driftlab.db.models import EnqueuedTheta, Evaluation, Job, Rescore, Study, T
 from driftlab.db.storage import count_evaluations, get_job
 
 __all__ = ["HEARTBEAT_S", "LEASE_TIMEOUT_S", "WorkStatus", "LeaseHeld", "TransitionError", "claim", "claimable",
-           "delete_job", "extend", "heartbeat", "lease_is_live", "new_runner_id", "next_claimable", "release",
-           "request_pause", "requeue"]
+           "delete_job", "extend", "heartbeat", "lease_is_live", "new_runner_id", "release", "request_pause",
+           "requeue"]
 
 
 class LeaseHeld(TransitionError):
@@ -146,13 +146,9 @@ def delete_job(session: Session, *, job_id: int, with_its_study: bool = False) -
     session.execute(delete(Job).where(Job.id == job_id))
 
 
-def next_claimable(session: Session) -> int | None:
-    """The oldest queued job, or one whose runner died (not of a seeds study another runner holds)."""
-    return next(iter(claimable(session, limit=1)), None)
-
-
 def claimable(session: Session, *, limit: int) -> list[int]:
-    """The ``limit`` oldest of :func:`next_claimable`'s jobs (a runner claims what it has room for in one look)."""
+    """The ``limit`` oldest jobs that are queued, or whose runner died (not of a seeds study another runner holds):
+    a runner claims what it has room for in one look."""
     now = utcnow()
     stale = (Job.status == WorkStatus.RUNNING) & lease.is_stale(Job, now)
     query = (select(Job.id).where(or_(Job.status == WorkStatus.QUEUED, stale), ~_study_held_by_another(now, None))

@@ -28,7 +28,7 @@ def test_a_live_runners_job_is_neither_claimable_nor_taken(factory, age_s):
         lifecycle.claim(session, job_id=job_id, runner="a")
     _heartbeat_ago(factory, job_id, age_s)
     with storage.transaction(factory) as session:
-        assert lifecycle.next_claimable(session) is None
+        assert lifecycle.claimable(session, limit=1) == []
         with pytest.raises(lifecycle.LeaseHeld):
             lifecycle.claim(session, job_id=job_id, runner="b")
 
@@ -39,7 +39,7 @@ def test_a_dead_runners_job_is_taken_over_once_its_heartbeat_is_older_than_the_t
         lifecycle.claim(session, job_id=job_id, runner="a")
     _heartbeat_ago(factory, job_id, LEASE_TIMEOUT_S + 1.0)
     with storage.transaction(factory) as session:
-        assert lifecycle.next_claimable(session) == job_id
+        assert lifecycle.claimable(session, limit=1) == [job_id]
         assert lifecycle.claim(session, job_id=job_id, runner="b").runner_id == "b"
     with storage.transaction(factory) as session:
         assert not lifecycle.heartbeat(session, job_id=job_id, runner="a")  # the dead runner, back, must stop

@@ -95,7 +95,7 @@ def test_a_held_seeds_study_is_run_by_its_holder_only_until_the_holder_dies(fact
     with storage.transaction(factory) as session:
         studies.hold_seeds_study(session, study_id=study_id, runner="cli")
     with storage.transaction(factory) as session:
-        assert lifecycle.next_claimable(session) is None  # a server's runner leaves the study's jobs alone
+        assert lifecycle.claimable(session, limit=1) == []  # a server's runner leaves the study's jobs alone
         with pytest.raises(lifecycle.LeaseHeld, match="belongs to study 's'"):
             lifecycle.claim(session, job_id=ids[0], runner="server")
         with pytest.raises(lifecycle.LeaseHeld, match="being run by cli"):
@@ -113,7 +113,7 @@ def test_a_held_seeds_study_is_run_by_its_holder_only_until_the_holder_dies(fact
         session.get(Study, study_id).heartbeat_at = old
         storage.get_job(session, job_id=ids[0]).heartbeat_at = old
     with storage.transaction(factory) as session:
-        assert lifecycle.next_claimable(session) == ids[0]
+        assert lifecycle.claimable(session, limit=1) == [ids[0]]
         lifecycle.claim(session, job_id=ids[1], runner="server")
     with storage.transaction(factory) as session:
         studies.let_go_seeds_study(session, study_id=study_id, runner="cli")

@@ -36,7 +36,7 @@ from driftlab.core.commonroad.std import (
     acceleration_constraints,
     std_derivatives,
 )
-from driftlab.core.integrator import rk4_stage, rk4_update
+from driftlab.core.integrator import rk4_stage_into, rk4_update_into
 from driftlab.core.plant import (
     A_DRIVE_LAG,
     A_DRIVE_RATE,
@@ -66,16 +66,13 @@ def _rate(actual, command, lag_s, rate_limit):
 
 
 @njit(cache=True)
-def _integrated_derivatives(z, steer_cmd, drive_cmd, cp, act):
-    """d/dt of [STD's nine states, drive actuator force]."""
-    u = np.empty(2)
+def _integrated_derivatives_into(dz, z, steer_cmd, drive_cmd, cp, act, u):
+    """d/dt of [STD's nine states, drive actuator force], written into ``dz`` (``u``: STD's inputs, a buffer)."""
     u[0] = _rate(z[S_STEER], steer_cmd, act[A_STEER_LAG], act[A_STEER_RATE])
     u[1] = z[_DRIVE_SLOT] / cp[CR_MASS]
-    dz = np.empty(N_STD + 1)
     dz[:N_STD] = std_derivatives(z[:N_STD], u, cp)
     dz[_DRIVE_SLOT] = _rate(z[_DRIVE_SLOT], drive_cmd, act[A_DRIVE_LAG], act[A_DRIVE_RATE]) \
         if act[A_DRIVE_LAG] > 0.0 else 0.0
-    return dz
 
 
 @njit(cache=True)
@@ -90,12 +87,17 @@ def std_plant_step(state, steer_cmd, drive_cmd, duration_s, substep_s, cp, act):
         z[_DRIVE_SLOT] += min(max(drive_cmd - z[_DRIVE_SLOT], -reach), reach)
     n_sub = max(1, int(round(duration_s / substep_s)))
     h = duration_s / n_sub
+    k1, k2, k3, k4, stage = np.empty((5, N_STD + 1))  # allocated once a step, as in the DriftLab plant
+    u = np.empty(2)
     for _ in range(n_sub):
-        k1 = _integrated_derivatives(z, steer_cmd, drive_cmd, cp, act)
-        k2 = _integrated_derivatives(rk4_stage(z, 0.5 * h, k1), steer_cmd, drive_cmd, cp, act)
-        k3 = _integrated_derivatives(rk4_stage(z, 0.5 * h, k2), steer_cmd, drive_cmd, cp, act)
-        k4 = _integrated_derivatives(rk4_stage(z, h, k3), steer_cmd, drive_cmd, cp, act)
-        z = rk4_update(z, h, k1, k2, k3, k4)
+        _integrated_derivatives_into(k1, z, steer_cmd, drive_cmd, cp, act, u)
+        rk4_stage_into(stage, z, 0.5 * h, k1)
+        _integrated_derivatives_into(k2, stage, steer_cmd, drive_cmd, cp, act, u)
+        rk4_stage_into(stage, z, 0.5 * h, k2)
+        _integrated_derivatives_into(k3, stage, steer_cmd, drive_cmd, cp, act, u)
+        rk4_stage_into(stage, z, h, k3)
+        _integrated_derivatives_into(k4, stage, steer_cmd, drive_cmd, cp, act, u)
+        rk4_update_into(z, h, k1, k2, k3, k4)
         z[S_OMEGA_F] = max(0.0, z[S_OMEGA_F])
         z[S_OMEGA_R] = max(0.0, z[S_OMEGA_R])
     out = np.empty(N_STD_PLANT_STATES)

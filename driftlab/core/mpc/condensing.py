@@ -70,19 +70,21 @@ class ReferenceQp:
             power = aa @ power
             phi[k * n_z:(k + 1) * n_z] = power
             lam[k * n_z:(k + 1) * n_z] = lam_acc
-            for j in range(k + 1):
-                gamma[k * n_z:(k + 1) * n_z, j * N_U:(j + 1) * N_U] = a_pow_b[k - j]
+        # Gamma's block (k, j) is A^(k-j) B: each block column is the stack [B; AB; ...] shifted down j blocks.
+        stacked = np.vstack(a_pow_b)
+        for j in range(n_h):
+            gamma[j * n_z:, j * N_U:(j + 1) * N_U] = stacked[:(n_h - j) * n_z]
         # Q weighs [delta, Fxr] on the actuator states when modelled, else on the held commands.
         lag_part = [config.actuator_weights, np.zeros(N_U)] if self.models_lag else [config.actuator_weights]
         weights = np.concatenate([config.state_weights, *lag_part])
-        q_bar = np.kron(np.eye(n_h), np.diag(weights))
-        r_bar = np.kron(np.eye(n_h), np.diag(config.input_weights))
+        q_bar = np.diag(np.tile(weights, n_h))  # blkdiag(Q, ..., Q)
+        r_bar = np.diag(np.tile(config.input_weights, n_h))
         if config.terminal_cost:
             q_bar[-n_z:, -n_z:] = terminal_weight(aa, ba, np.diag(weights), np.diag(config.input_weights))
-        hessian = gamma.T @ q_bar @ gamma + r_bar
+        self.gamma_t_q = gamma.T @ q_bar
+        hessian = self.gamma_t_q @ gamma + r_bar
         hessian = 0.5 * (hessian + hessian.T)
         self.hessian = hessian
-        self.gamma_t_q = gamma.T @ q_bar
         self.phi = phi
         self.lam = lam
         chol = scipy.linalg.cho_factor(hessian)
@@ -93,7 +95,7 @@ class ReferenceQp:
         # Constraints on the increments: bounds on each du and on u_{-1} + cumulative sums.
         cumsum = np.kron(np.tril(np.ones((n_h, n_h))), np.eye(N_U))
         self.cumsum = cumsum
-        self.repeat = np.kron(np.ones((n_h, 1)), np.eye(N_U))  # u -> [u, u, ..., u]
+        self.repeat = np.tile(np.eye(N_U), (n_h, 1))  # u -> [u, u, ..., u]
         self.constraint_matrix = np.vstack([np.eye(n_h * N_U), cumsum])
         self.daqp_sense = np.zeros(2 * n_h * N_U, dtype=np.intc)  # all inequalities
         step_limit = np.array([config.steer_rate_radps * config.dt_s, config.drive_rate_nps * config.dt_s * KN])

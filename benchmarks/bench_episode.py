@@ -10,7 +10,7 @@ import numpy as np
 
 from driftlab.core import mpc
 from driftlab.core.config import Theta
-from driftlab.core.configure import preset_config
+from driftlab.core.configure import apply_overrides, preset_config
 from driftlab.core.episode import run_episode
 
 _solve = mpc.QpSession.solve_constrained
@@ -38,12 +38,16 @@ CASES = {
                                         k=0.0044283048858848135, model_mu_scale=1.0192568227741625,
                                         model_c_scale=0.954932013685166),
 }
+# MB's theta was tuned on the published model, whose wheels never leave the road; with the wheels free to lift (MB's
+# preset) the car tips within 0.3 s (docs/results.md), so it is timed on the model it ran on, its 23 s with a wheel
+# in tension counted but not ended on: a figure of the solver's cost, not of a valid drift.
+OVERRIDES = {("commonroad_mb", "default"): {"plant.wheel_liftoff": False, "failure.max_invalid_s": 300.0}}
 
 
 def main() -> None:
     medians = {}
     for (plant, controller), theta in CASES.items():
-        config = preset_config(plant, controller)
+        config = apply_overrides(preset_config(plant, controller), OVERRIDES.get((plant, controller), {}))
         OSQP_US.clear()
         run_episode(theta, config)  # warm-up: compiled code, cached QPs
         walls = []

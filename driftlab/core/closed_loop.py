@@ -3,9 +3,9 @@
 Each control step (paper Algorithm 1, inner loop): the sensors read the plant (with the episode's noise), the
 planner advances its phase on the tracked circle's trigger quantity c, the trajectory row and the failure
 rules are written from the true state, the disturbance estimate is updated, and the MPC's increments are
-formed. Where the unconstrained minimizer violates a limit, :func:`run_until_constrained` returns to Python,
-which solves the QP with OSQP and hands the increments to :func:`finish_step`; the loop then goes on. Between
-those returns (about one control step in twenty) no Python runs.
+formed. Where the unconstrained minimizer violates a limit (about one control step in twenty), the kernel solves the
+QP with DAQP itself (:func:`solve_constrained`); with OSQP, :func:`run_until_constrained` returns to Python, which
+solves it and hands the increments to :func:`finish_step`, and the loop then goes on.
 
 A step is two halves, each a function: :func:`observe` (sensors, planner, row, failure rules: the world's half)
 and :func:`control` with :func:`controller_commands` (the controller's half), the commands then sent and the plant
@@ -97,6 +97,7 @@ from driftlab.core.mpc import (
     unconstrained_increments,
     update_estimate,
 )
+from driftlab.core.mpc.daqp_kernel import quadprog
 from driftlab.core.planner import PLAN_LAST_FRACTION, PLAN_PHASE, advance_phase, phase_direction
 from driftlab.core.plant import (
     DRIVE,
@@ -325,14 +326,30 @@ def run_until_constrained(cfg, st, qa_left, qa_right, model_params, plant_params
         if observe(cfg, st, qa_left, qa_right, noise) != RUNNING:
             return DONE
         du, within = control(cfg, st, qa_left, qa_right, model_params)
-        if not within:
-            return NEEDS_QP
         qa = qa_left if st.ints[I_DIRECTION] == LEFT else qa_right
-        finish_step(cfg, st, qa, plant_params, actuator_params, du, True, False)
+        if within:
+            finish_step(cfg, st, qa, plant_params, actuator_params, du, True, False)
+        elif cfg.daqp_function != 0:
+            du, ok = solve_constrained(cfg, st, qa)
+            finish_step(cfg, st, qa, plant_params, actuator_params, du, ok, True)
+        else:
+            return NEEDS_QP
         if st.ints[I_STATUS] != RUNNING:
             return DONE
         if st.ints[I_PLANT_DUE] == 1:
             return NEEDS_PLANT
+
+
+@njit(cache=True)
+def solve_constrained(cfg, st, qa):
+    """(du, ok) of this step's constrained QP (its terms in ``st.qp_*``) by DAQP, as
+    :meth:`driftlab.core.mpc.QpSession.solve_constrained` returns them: du within the step limits, zero where the
+    solver failed."""
+    exitflag = quadprog(cfg.daqp_function, qa.hessian, st.qp_q, qa.cumsum, st.qp_upper, st.qp_lower, qa.daqp_sense,
+                        st.qp_x, st.qp_lam, st.daqp_problem, st.daqp_result, st.daqp_settings)
+    if exitflag <= 0 or not np.all(np.isfinite(st.qp_x)):
+        return np.zeros(qa.step_limit.shape[0]), False
+    return np.clip(st.qp_x, -qa.step_limit, qa.step_limit), True
 
 
 @njit(cache=True)

@@ -35,6 +35,7 @@ from driftlab.core.loop_state import (
 )
 from driftlab.core.metrics import EpisodeMetrics, compute_metrics
 from driftlab.core.mpc import QpSession
+from driftlab.core.mpc.daqp_kernel import quadprog_address
 from driftlab.core.planner import Phase, initial_plan_state
 from driftlab.core.plant import (
     DRIVE,
@@ -319,4 +320,4 @@ def _loop_settings(config: EpisodeConfig, theta: Theta, track: FigureEight, n_st
         max_lateral_error_m=float(failure.max_lateral_error_m), min_speed_mps=float(failure.min_speed_mps),
         gripup_sideslip_rad=float(failure.gripup_sideslip_rad), gripup_time_s=float(failure.gripup_time_s),
         gripup_grace_s=float(failure.gripup_grace_s), substep_s=float(config.plant.substep_s), noisy=bool(noisy),
-        plant_kind=int(plant_kind))
+        plant_kind=int(plant_kind), daqp_function=quadprog_address() if mpc.qp_solver == "daqp" else 0)

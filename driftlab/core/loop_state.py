@@ -8,6 +8,7 @@ from typing import NamedTuple
 
 import numpy as np
 
+from driftlab.core.mpc.daqp_kernel import PROBLEM_WORDS, RESULT_WORDS, SETTINGS_WORDS
 from driftlab.core.mpc_config import N_U
 from driftlab.core.planner import Phase
 from driftlab.core.plant import N_PLANT_STATES
@@ -78,6 +79,7 @@ class LoopSettings(NamedTuple):
     substep_s: float
     noisy: bool
     plant_kind: int  # PLANT_DRIFTLAB or PLANT_COMMONROAD_STD (stepped in the kernel) or PLANT_EXTERNAL
+    daqp_function: int  # daqp_quadprog's address: the kernel solves a constrained step itself (0: OSQP, in Python)
 
 
 class LoopState(NamedTuple):
@@ -103,6 +105,11 @@ class LoopState(NamedTuple):
     qp_q: np.ndarray  # OSQP's terms of that step
     qp_lower: np.ndarray
     qp_upper: np.ndarray
+    qp_x: np.ndarray  # DAQP's solution and multipliers of that step, where the kernel solves it
+    qp_lam: np.ndarray
+    daqp_problem: np.ndarray  # DAQP's C structs, as 64-bit words (driftlab.core.mpc.daqp_kernel)
+    daqp_result: np.ndarray
+    daqp_settings: np.ndarray
 
 
 def new_loop_state(plant_state: np.ndarray, plan: np.ndarray, start_inputs: np.ndarray, n_steps: int,
@@ -117,4 +124,7 @@ def new_loop_state(plant_state: np.ndarray, plan: np.ndarray, start_inputs: np.n
                      ref_linear=np.zeros((2, n_increments)), ref_valid=np.zeros(2, dtype=np.int64),
                      rows=np.zeros((n_steps + 1, len(COLUMNS))), events=np.zeros((MAX_EVENTS, 4)),
                      pending=np.zeros(N_U), qp_q=np.zeros(n_increments), qp_lower=np.zeros(2 * n_increments),
-                     qp_upper=np.zeros(2 * n_increments))
+                     qp_upper=np.zeros(2 * n_increments), qp_x=np.zeros(n_increments),
+                     qp_lam=np.zeros(2 * n_increments), daqp_problem=np.zeros(PROBLEM_WORDS, dtype=np.int64),
+                     daqp_result=np.zeros(RESULT_WORDS, dtype=np.int64),
+                     daqp_settings=np.zeros(SETTINGS_WORDS, dtype=np.int64))

@@ -47,3 +47,5 @@ class QpArrays(NamedTuple):
     steer_limit_rad: float
     drive_min_kn: float
     drive_max_kn: float
+    hessian: np.ndarray  # the condensed QP's H, and DAQP's constraint senses (all inequalities), for the kernel's solve
+    daqp_sense: np.ndarray

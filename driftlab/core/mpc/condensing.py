@@ -111,7 +111,8 @@ class ReferenceQp:
             phi=self.phi, lam=self.lam, repeat=self.repeat, cumsum=self.cumsum, step_limit=self.step_limit,
             input_lo=self.input_lo, input_hi=self.input_hi, path_states=bool(self.path_states),
             models_lag=bool(self.models_lag), horizon=int(n_h), steer_limit_rad=float(config.steer_limit_rad),
-            drive_min_kn=float(config.drive_min_n * KN), drive_max_kn=float(config.drive_max_n * KN))
+            drive_min_kn=float(config.drive_min_n * KN), drive_max_kn=float(config.drive_max_n * KN),
+            hessian=self.hessian, daqp_sense=self.daqp_sense)
 
     def augmented_reference(self, z_ref: np.ndarray) -> np.ndarray:
         """The 5-entry reference [V, beta, r, delta, Fxr kN] in this QP's state layout (path errors 0)."""

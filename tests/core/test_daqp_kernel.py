@@ -8,8 +8,7 @@ import driftlab.core.episode as episode_module
 from driftlab.core.config import Theta
 from driftlab.core.configure import apply_overrides, preset_config
 from driftlab.core.equilibrium import drift_equilibrium
-from driftlab.core.mpc import ReferenceQp, constrained_terms, reference_terms, unconstrained_increments
-from driftlab.core.mpc import daqp_kernel
+from driftlab.core.mpc import ReferenceQp, constrained_terms, daqp_kernel, reference_terms, unconstrained_increments
 from driftlab.core.mpc.daqp_kernel import PROBLEM_WORDS, RESULT_WORDS, SETTINGS_WORDS, quadprog, quadprog_address
 from driftlab.core.vehicle import VehicleParams, pack_params
 

@@ -32,13 +32,16 @@ class PackedTrajectory:
 
 
 def pack(trajectory: np.ndarray) -> bytes:
-    """Byte planes of the columns, zlib level 1. Interleaved float64 hardly compress (a default episode's 102 kB
-    gave 81 kB row-major at level 1, 80 kB at level 6 in twice the time); a signal's sign, exponent and leading
-    mantissa bytes change slowly along its column, and planes of them compress (65 kB, in less time than row-major
-    at level 1). Every byte a store writes is work in the server's process, for every evaluation."""
+    """Byte planes of the columns, zlib level 1 with run-length matches only. Interleaved float64 hardly compress (a
+    default episode's 102 kB gave 81 kB row-major at level 1, 80 kB at level 6 in twice the time); a signal's sign,
+    exponent and leading mantissa bytes change slowly along its column, and planes of them compress: 65 kB with
+    zlib's default matching, 68 kB matching runs only (Z_RLE) in half the time (0.55 against 1.2 ms, every episode a
+    worker runs). Any zlib stream reads back the same (:func:`unpack`), so trajectories stored before read as they
+    were. Every byte a store writes is work in the server's process, for every evaluation."""
     columns = np.ascontiguousarray(np.asarray(trajectory, dtype=_VALUE).T)
     planes = columns.view(np.uint8).reshape(-1, _VALUE.itemsize).T
-    return _SHUFFLED + zlib.compress(planes.tobytes(), 1)
+    stream = zlib.compressobj(1, zlib.DEFLATED, zlib.MAX_WBITS, zlib.DEF_MEM_LEVEL, zlib.Z_RLE)
+    return _SHUFFLED + stream.compress(planes.tobytes()) + stream.flush()
 
 
 def unpack(data: bytes, rows: int, n_columns: int) -> np.ndarray:

@@ -19,6 +19,8 @@ reproduce bit for bit (``tests/db/test_upgrade.py``).
 
 from __future__ import annotations
 
+import math
+
 import numpy as np
 from numba import njit
 
@@ -160,11 +162,29 @@ def _sides(qa_left, qa_right, direction):
 @njit(cache=True)
 def _reference(cfg, qa, qa_next, st, direction):
     """The reference of the side driven (:func:`drift_reference`), its speed moved toward the next circle's
-    drift speed as the trigger nears."""
+    drift speed as the trigger nears.
+
+    A step's sensing reads the reference the previous step's control computed: the same side, offset and estimate
+    (it changes only in control). It is kept in ``st.ref_memo`` under the bits of those inputs and handed out again
+    rather than solved again (the offset-free target is a 3 x 3 LAPACK solve, a few us a call)."""
     offset = cfg.speed_offset_left_mps if direction == LEFT else cfg.speed_offset_right_mps
     if cfg.speed_change_accel_mps2 > 0.0:
         offset += _approach_offset_mps(cfg, st, direction, qa.z_eq[0], qa_next.z_eq[0])
-    return drift_reference(qa, st.estimate, direction, offset, cfg.disturbance_gain > 0.0)
+    key = st.ref_memo_key
+    if not (st.ref_memo_valid[0] == 1 and key[0] == direction and _same_bits(key[1], offset)
+            and _same_bits(key[2], st.estimate[0]) and _same_bits(key[3], st.estimate[1])
+            and _same_bits(key[4], st.estimate[2])):
+        st.ref_memo[:] = drift_reference(qa, st.estimate, direction, offset, cfg.disturbance_gain > 0.0)
+        key[0], key[1], key[2], key[3], key[4] = direction, offset, st.estimate[0], st.estimate[1], st.estimate[2]
+        st.ref_memo_valid[0] = 1
+    return st.ref_memo.copy()
+
+
+@njit(cache=True)
+def _same_bits(a, b):
+    """a and b are the same float64 to the bit: equal, and of one sign where both are zero (a NaN never matches,
+    which only costs a solve)."""
+    return a == b and math.copysign(1.0, a) == math.copysign(1.0, b)
 
 
 @njit(cache=True)

@@ -105,6 +105,9 @@ class LoopState(NamedTuple):
     qp_q: np.ndarray  # OSQP's terms of that step
     qp_lower: np.ndarray
     qp_upper: np.ndarray
+    ref_memo: np.ndarray  # the last reference computed (5), its inputs' bits [direction, offset, estimate (3)], and
+    ref_memo_key: np.ndarray  # whether it is set (closed_loop._reference)
+    ref_memo_valid: np.ndarray
     qp_x: np.ndarray  # DAQP's solution and multipliers of that step, where the kernel solves it
     qp_lam: np.ndarray
     daqp_problem: np.ndarray  # DAQP's C structs, as 64-bit words (driftlab.core.mpc.daqp_kernel)
@@ -124,7 +127,8 @@ def new_loop_state(plant_state: np.ndarray, plan: np.ndarray, start_inputs: np.n
                      ref_linear=np.zeros((2, n_increments)), ref_valid=np.zeros(2, dtype=np.int64),
                      rows=np.zeros((n_steps + 1, len(COLUMNS))), events=np.zeros((MAX_EVENTS, 4)),
                      pending=np.zeros(N_U), qp_q=np.zeros(n_increments), qp_lower=np.zeros(2 * n_increments),
-                     qp_upper=np.zeros(2 * n_increments), qp_x=np.zeros(n_increments),
+                     qp_upper=np.zeros(2 * n_increments), ref_memo=np.zeros(5), ref_memo_key=np.zeros(5),
+                     ref_memo_valid=np.zeros(1, dtype=np.int64), qp_x=np.zeros(n_increments),
                      qp_lam=np.zeros(2 * n_increments), daqp_problem=np.zeros(PROBLEM_WORDS, dtype=np.int64),
                      daqp_result=np.zeros(RESULT_WORDS, dtype=np.int64),
                      daqp_settings=np.zeros(SETTINGS_WORDS, dtype=np.int64))

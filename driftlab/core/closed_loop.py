@@ -82,6 +82,9 @@ from driftlab.core.loop_state import (
     NEEDS_PLANT,
     NEEDS_QP,
     PHASE_FINISHED,
+    REF_BOTH,
+    REF_GAIN,
+    REF_NONE,
     RUNNING,
     SOLVER_FAILED,
     SPUN_OUT,
@@ -95,7 +98,8 @@ from driftlab.core.mpc import (
     constrained_terms,
     next_commands,
     pack_state,
-    reference_terms,
+    reference_gain_term,
+    reference_linear_term,
     unconstrained_increments,
     update_estimate,
 )
@@ -323,16 +327,19 @@ def control(cfg, st, qa_left, qa_right, model_params):
                        np.array([actuators[0], actuators[1] * KN]),
                        np.array([st.last_mpc[0], st.last_mpc[1] * KN]))
     z_ref = _reference(cfg, *_sides(qa_left, qa_right, direction), st, direction)
-    if st.ref_valid[side] == 0 or np.any(st.ref_key[side] != z_ref):  # the reference changes rarely
-        st.ref_gain[side], st.ref_linear[side] = reference_terms(qa, z_ref)
+    if st.ref_valid[side] == REF_NONE or np.any(st.ref_key[side] != z_ref):
+        st.ref_gain[side] = reference_gain_term(qa, z_ref)
         st.ref_key[side] = z_ref
-        st.ref_valid[side] = 1
+        st.ref_valid[side] = REF_GAIN  # the QP's linear term waits for a step with an active limit
     du, dz, offset, within = unconstrained_increments(qa, z_now, st.ref_gain[side], disturbance)
     st.last_measured[:] = measured
     st.last_actuators[:] = actuators
     ints[I_HAS_LAST] = 1
     st.pending[:] = z_now[-N_U:]
     if not within:
+        if st.ref_valid[side] == REF_GAIN:  # of the reference the gain term was computed for
+            st.ref_linear[side] = reference_linear_term(qa, st.ref_key[side])
+            st.ref_valid[side] = REF_BOTH
         q, lower, upper = constrained_terms(qa, dz, disturbance, st.ref_linear[side], offset)
         st.qp_q[:], st.qp_lower[:], st.qp_upper[:] = q, lower, upper
     return du, within

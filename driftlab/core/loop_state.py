@@ -44,6 +44,10 @@ F_LAST_TRIGGER_S, F_GRIPUP_SINCE_S, F_SEEN_E, F_SEEN_DPSI, F_SEEN_C = range(5)
 N_SENSED = N_PLANT_STATES  # what the sensors report: the loop's eight plant states
 MAX_EVENTS = 40  # 4 phase changes a lap, MAX_LAPS laps, and the finish
 
+# What LoopState.ref_valid says of a side's cached reference terms: none yet, the minimizer's gain term (every step
+# needs it), or that and the QP's linear term (only a step with an active limit needs it).
+REF_NONE, REF_GAIN, REF_BOTH = 0, 1, 2
+
 PHASE_FINISHED = int(Phase.FINISHED)  # a plain int: a compile-time constant in the kernels
 
 
@@ -98,7 +102,7 @@ class LoopState(NamedTuple):
     ref_key: np.ndarray  # (2, 5): the reference each side's cached terms belong to
     ref_gain: np.ndarray  # (2, 2 Nc): cached reference terms per side (index 0 left, 1 right)
     ref_linear: np.ndarray
-    ref_valid: np.ndarray
+    ref_valid: np.ndarray  # REF_NONE, REF_GAIN or REF_BOTH per side
     rows: np.ndarray  # (n_steps + 1, len(COLUMNS))
     events: np.ndarray  # (MAX_EVENTS, 4): t s, phase, x m, y m of each phase change
     pending: np.ndarray  # the step waiting for OSQP: [u_prev (2)]

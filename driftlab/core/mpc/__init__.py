@@ -37,6 +37,8 @@ from driftlab.core.mpc.kernels import (
     constrained_terms,
     next_commands,
     pack_state,
+    reference_gain_term,
+    reference_linear_term,
     reference_terms,
     unconstrained_increments,
 )
@@ -45,5 +47,6 @@ from driftlab.core.mpc.session import QpSession
 from driftlab.core.mpc_config import KN, N_PER_KN, N_U, N_X, N_Z, MpcConfig
 
 __all__ = ["KN", "N_PER_KN", "N_U", "N_X", "N_Z", "MpcConfig", "MpcSolution", "QpArrays", "QpSession", "ReferenceQp",
-           "clip", "constrained_terms", "discretize", "next_commands", "pack_state", "reference_terms", "scale_inputs",
+           "clip", "constrained_terms", "discretize", "next_commands", "pack_state", "reference_gain_term",
+           "reference_linear_term", "reference_terms", "scale_inputs",
            "to_scaled", "unconstrained_increments", "update_estimate"]

@@ -36,13 +36,32 @@ def pack_state(path_states, models_lag, state, path_errors, actuators_scaled, pr
 
 
 @njit(cache=True)
-def reference_terms(qa, z_ref):
-    """The reference's share of the unconstrained minimizer and of the QP's linear term."""
+def _reference_deviation(qa, z_ref):
+    """The reference's deviation from the linearization point, repeated over the horizon."""
     aug = pack_state(qa.path_states, qa.models_lag, z_ref[:N_X], np.zeros(2), z_ref[N_X:], z_ref[N_X:]) - qa.z_lin
     n_z = aug.shape[0]
     deviation = np.empty(qa.horizon * n_z)
     for k in range(qa.horizon):
         deviation[k * n_z:(k + 1) * n_z] = aug
+    return deviation
+
+
+@njit(cache=True)
+def reference_gain_term(qa, z_ref):
+    """The reference's share of the unconstrained minimizer (every step needs it)."""
+    return np.dot(qa.gain_reference, _reference_deviation(qa, z_ref))
+
+
+@njit(cache=True)
+def reference_linear_term(qa, z_ref):
+    """The reference's share of the QP's linear term (only a step with an active limit needs it)."""
+    return np.dot(qa.gamma_t_q, _reference_deviation(qa, z_ref))
+
+
+@njit(cache=True)
+def reference_terms(qa, z_ref):
+    """The reference's share of the unconstrained minimizer and of the QP's linear term."""
+    deviation = _reference_deviation(qa, z_ref)
     return np.dot(qa.gain_reference, deviation), np.dot(qa.gamma_t_q, deviation)
 
 

@@ -308,7 +308,7 @@ def observe(cfg, st, qa_left, qa_right, noise):
 def control(cfg, st, qa_left, qa_right, model_params):
     """The controller's half of a control step, after :func:`observe`: the disturbance estimate, the reference and
     the MPC's unconstrained increments. Returns (du, within); where ``within`` is False a limit is active and
-    OSQP's terms of the step are in ``st.qp_*`` (the increments are then the QP's solution, :func:`finish_step`)."""
+    the QP's terms of the step are in ``st.qp_*`` (the increments are then the QP's solution, :func:`finish_step`)."""
     ints, floats = st.ints, st.floats
     s, sensed = st.plant, st.sensed
     phase = int(st.plan[PLAN_PHASE])
@@ -347,8 +347,9 @@ def control(cfg, st, qa_left, qa_right, model_params):
 
 @njit(cache=True)
 def run_until_constrained(cfg, st, qa_left, qa_right, model_params, plant_params, actuator_params, noise):
-    """Steps the loop until the episode ends (returns DONE, the status in ``st.ints[I_STATUS]``) or a step's
-    QP has an active limit (returns NEEDS_QP with OSQP's terms in ``st.qp_*``; call :func:`finish_step`)."""
+    """Steps the loop until the episode ends (returns DONE, the status in ``st.ints[I_STATUS]``) or, where OSQP
+    solves (``cfg.daqp_function`` 0), a step's QP has an active limit (returns NEEDS_QP with the QP's terms in
+    ``st.qp_*``; call :func:`finish_step`). With DAQP the kernel solves such a step itself."""
     while True:
         if observe(cfg, st, qa_left, qa_right, noise) != RUNNING:
             return DONE

@@ -270,8 +270,8 @@ def run_episode(theta: Theta, config: EpisodeConfig, *, seed: int = 0) -> Episod
 def drive_episode(run: EpisodeRun) -> None:
     """Drive an episode to its end with its own controller (the MPC and the paper's steering feedback)."""
     model, settings, loop, noise = run.model, run.settings, run.loop, run.noise
-    # OSQP runs here, between stretches of the compiled loop; its warm start lives and dies with the episode.
-    # A fresh solver per episode: no OSQP warm start or cache survives into the next one.
+    # OSQP runs here, between stretches of the compiled loop (DAQP runs inside it); its warm start lives and dies
+    # with the episode. A fresh solver per episode: no OSQP warm start or cache survives into the next one.
     sessions = {LEFT: QpSession(model.left_qp), RIGHT: QpSession(model.right_qp)}
     qa_left, qa_right = model.left_qp.arrays, model.right_qp.arrays
     args = run.plant_args

@@ -105,8 +105,8 @@ class LoopState(NamedTuple):
     ref_valid: np.ndarray  # REF_NONE, REF_GAIN or REF_BOTH per side
     rows: np.ndarray  # (n_steps + 1, len(COLUMNS))
     events: np.ndarray  # (MAX_EVENTS, 4): t s, phase, x m, y m of each phase change
-    pending: np.ndarray  # the step waiting for OSQP: [u_prev (2)]
-    qp_q: np.ndarray  # OSQP's terms of that step
+    pending: np.ndarray  # the step waiting for its constrained QP: [u_prev (2)]
+    qp_q: np.ndarray  # that QP's terms (DAQP's or OSQP's)
     qp_lower: np.ndarray
     qp_upper: np.ndarray
     ref_memo: np.ndarray  # the last reference computed (5), its inputs' bits [direction, offset, estimate (3)], and

@@ -108,11 +108,13 @@ class ReferenceQp:
             z_eq=to_scaled(equilibrium.state, equilibrium.inputs), speed_mps=float(equilibrium.speed_mps),
             yaw_rate_radps=float(equilibrium.yaw_rate_radps), z_lin=self.z_lin, gain_state=self.gain_state,
             gain_disturbance=self.gain_disturbance, gain_reference=self.gain_reference, gamma_t_q=self.gamma_t_q,
-            phi=self.phi, lam=self.lam, repeat=self.repeat, cumsum=self.cumsum, step_limit=self.step_limit,
+            phi=self.phi, lam=self.lam, repeat=self.repeat, step_limit=self.step_limit,
             input_lo=self.input_lo, input_hi=self.input_hi, path_states=bool(self.path_states),
             models_lag=bool(self.models_lag), horizon=int(n_h), steer_limit_rad=float(config.steer_limit_rad),
             drive_min_kn=float(config.drive_min_n * KN), drive_max_kn=float(config.drive_max_n * KN),
-            hessian=self.hessian, daqp_sense=self.daqp_sense)
+            # DAQP reads these three through raw pointers in the compiled loop: C order, as the kernel assumes.
+            cumsum=np.ascontiguousarray(self.cumsum), hessian=np.ascontiguousarray(self.hessian),
+            daqp_sense=np.ascontiguousarray(self.daqp_sense))
 
     def augmented_reference(self, z_ref: np.ndarray) -> np.ndarray:
         """The 5-entry reference [V, beta, r, delta, Fxr kN] in this QP's state layout (path errors 0)."""

@@ -19,20 +19,18 @@ reproduce bit for bit (``tests/db/test_upgrade.py``).
 
 from __future__ import annotations
 
-import math
-
 import numpy as np
 from numba import njit
 
 from driftlab.core.commonroad.plant import std_plant_step
 from driftlab.core.controller import (
     DISTURBANCE_LIMIT,
-    drift_reference,
     hold_estimate,
     lookahead_error_m,
     mirror,
     predict_one_step,
 )
+from driftlab.core.loop_reference import step_reference
 from driftlab.core.loop_state import (
     C_BETA,
     C_BETA_REF,
@@ -104,7 +102,7 @@ from driftlab.core.mpc import (
     update_estimate,
 )
 from driftlab.core.mpc.daqp_kernel import quadprog
-from driftlab.core.planner import PLAN_LAST_FRACTION, PLAN_PHASE, advance_phase, phase_direction
+from driftlab.core.planner import PLAN_PHASE, advance_phase, phase_direction
 from driftlab.core.plant import (
     DRIVE,
     HEADING,
@@ -118,7 +116,7 @@ from driftlab.core.plant import (
     YAW_RATE,
     plant_step,
 )
-from driftlab.core.track import LEFT, TWO_PI, circle_errors
+from driftlab.core.track import LEFT, circle_errors
 from driftlab.core.variation import (
     NOISE_HEADING,
     NOISE_SIDESLIP,
@@ -155,64 +153,6 @@ def _failure(cfg, st, t_s, s, lateral_error_m, beta_ref_rad):
     elif t_s - st.floats[F_GRIPUP_SINCE_S] > cfg.gripup_time_s:
         return GRIPPED_UP
     return RUNNING
-
-
-@njit(cache=True)
-def _sides(qa_left, qa_right, direction):
-    """(this side's QP constants, the other side's)."""
-    return (qa_left, qa_right) if direction == LEFT else (qa_right, qa_left)
-
-
-@njit(cache=True)
-def _reference(cfg, qa, qa_next, st, direction):
-    """The reference of the side driven (:func:`drift_reference`), its speed moved toward the next circle's
-    drift speed as the trigger nears.
-
-    A step's sensing reads the reference the previous step's control computed: the same side, offset and estimate
-    (it changes only in control). It is kept in ``st.ref_memo`` under the bits of those inputs and handed out again
-    rather than solved again (the offset-free target is a 3 x 3 LAPACK solve, a few us a call)."""
-    offset = cfg.speed_offset_left_mps if direction == LEFT else cfg.speed_offset_right_mps
-    if cfg.speed_change_accel_mps2 > 0.0:
-        offset += _approach_offset_mps(cfg, st, direction, qa.z_eq[0], qa_next.z_eq[0])
-    key = st.ref_memo_key
-    if not (st.ref_memo_valid[0] == 1 and key[0] == direction and _same_bits(key[1], offset)
-            and _same_bits(key[2], st.estimate[0]) and _same_bits(key[3], st.estimate[1])
-            and _same_bits(key[4], st.estimate[2])):
-        st.ref_memo[:] = drift_reference(qa, st.estimate, direction, offset, cfg.disturbance_gain > 0.0)
-        key[0], key[1], key[2], key[3], key[4] = direction, offset, st.estimate[0], st.estimate[1], st.estimate[2]
-        st.ref_memo_valid[0] = 1
-    return st.ref_memo.copy()
-
-
-@njit(cache=True)
-def _same_bits(a, b):
-    """a and b are the same float64 to the bit: equal, and of one sign where both are zero (a NaN never matches,
-    which only costs a solve)."""
-    return a == b and math.copysign(1.0, a) == math.copysign(1.0, b)
-
-
-@njit(cache=True)
-def _approach_offset_mps(cfg, st, direction, speed_mps, next_speed_mps):
-    """The planned speed change between circles of different drift speeds: in a sustained drift that ends in a
-    flick, the reference speed follows V^2 = V_next^2 +- 2 a s, s the arc left to the trigger point, so that it
-    reaches the next circle's drift speed at the trigger; the flick itself cannot shed (or gain) the difference
-    (at 25/44 m 4.7 m/s: the car entered the small circle too fast and ran wide). 0 elsewhere."""
-    phase = int(st.plan[PLAN_PHASE])
-    if phase != 0 and phase != 2:
-        return 0.0
-    circle = cfg.left_circle if direction == LEFT else cfg.right_circle
-    fraction = st.plan[PLAN_LAST_FRACTION]  # c of this circle at the last step
-    trigger = cfg.c_lr if phase == 0 else cfg.c_rl
-    if fraction > 0.75:  # just past P0 (c jumps to ~1 there): the circle has only begun
-        return 0.0
-    if fraction < trigger:  # at the trigger: the flick is due
-        return next_speed_mps - speed_mps
-    arc_m = (fraction - trigger) * TWO_PI * circle[2]
-    accel = cfg.speed_change_accel_mps2 if next_speed_mps < speed_mps else -cfg.speed_change_accel_mps2
-    planned_sq = next_speed_mps * next_speed_mps + 2.0 * accel * arc_m
-    planned = np.sqrt(max(planned_sq, 0.0))
-    low, high = min(speed_mps, next_speed_mps), max(speed_mps, next_speed_mps)
-    return min(max(planned, low), high) - speed_mps
 
 
 @njit(cache=True)
@@ -269,7 +209,7 @@ def observe(cfg, st, qa_left, qa_right, noise):
     phase = int(st.plan[PLAN_PHASE])
     direction = phase_direction(phase)
     seen = _errors(cfg, direction, sensed[X_POS], sensed[Y_POS], sensed[HEADING] + sensed[SIDESLIP])
-    ref = _reference(cfg, *_sides(qa_left, qa_right, direction), st, direction)
+    ref = step_reference(cfg, st, qa_left, qa_right, direction)
     phase, changed = advance_phase(st.plan, seen[3], sensed[SIDESLIP] - ref[1], cfg.c_lr, cfg.c_rl,
                                    cfg.settle_tolerance_rad)
     if changed and ints[I_EVENTS] < MAX_EVENTS:
@@ -279,7 +219,7 @@ def observe(cfg, st, qa_left, qa_right, noise):
     if phase != PHASE_FINISHED and phase_direction(phase) != direction:
         direction = phase_direction(phase)
         seen = _errors(cfg, direction, sensed[X_POS], sensed[Y_POS], sensed[HEADING] + sensed[SIDESLIP])
-        ref = _reference(cfg, *_sides(qa_left, qa_right, direction), st, direction)
+        ref = step_reference(cfg, st, qa_left, qa_right, direction)
         floats[F_LAST_TRIGGER_S] = t
     errors = _errors(cfg, direction, s[X_POS], s[Y_POS], s[HEADING] + s[SIDESLIP]) if cfg.noisy else seen
     row = st.rows[ints[I_ROWS]]
@@ -326,7 +266,7 @@ def control(cfg, st, qa_left, qa_right, model_params):
     z_now = pack_state(qa.path_states, qa.models_lag, measured, np.array([floats[F_SEEN_E], floats[F_SEEN_DPSI]]),
                        np.array([actuators[0], actuators[1] * KN]),
                        np.array([st.last_mpc[0], st.last_mpc[1] * KN]))
-    z_ref = _reference(cfg, *_sides(qa_left, qa_right, direction), st, direction)
+    z_ref = step_reference(cfg, st, qa_left, qa_right, direction)
     if st.ref_valid[side] == REF_NONE or np.any(st.ref_key[side] != z_ref):
         st.ref_gain[side] = reference_gain_term(qa, z_ref)
         st.ref_key[side] = z_ref

@@ -58,7 +58,7 @@ class LoopSettings(NamedTuple):
     n_steps: int
     speed_offset_left_mps: float  # dV on each circle (scaled by its drift speed where the radii differ)
     speed_offset_right_mps: float
-    speed_change_accel_mps2: float  # > 0: the planned speed change before a flick (see _approach_offset_mps)
+    speed_change_accel_mps2: float  # > 0: the planned speed change before a flick (see driftlab.core.loop_reference)
     feedback_gain_radpm: float
     lookahead_m: float
     steer_limit_rad: float
@@ -109,9 +109,8 @@ class LoopState(NamedTuple):
     qp_q: np.ndarray  # that QP's terms (DAQP's or OSQP's)
     qp_lower: np.ndarray
     qp_upper: np.ndarray
-    ref_memo: np.ndarray  # the last reference computed (5), its inputs' bits [direction, offset, estimate (3)], and
-    ref_memo_key: np.ndarray  # whether it is set (closed_loop._reference)
-    ref_memo_valid: np.ndarray
+    ref_memo: np.ndarray  # the last reference computed (5; driftlab.core.loop_reference)
+    ref_memo_key: np.ndarray  # its inputs: [direction (0: none yet), offset m/s, estimate (3)]
     qp_x: np.ndarray  # DAQP's solution and multipliers of that step, where the kernel solves it
     qp_lam: np.ndarray
     daqp_problem: np.ndarray  # DAQP's C structs, as 64-bit words (driftlab.core.mpc.daqp_kernel)
@@ -132,7 +131,7 @@ def new_loop_state(plant_state: np.ndarray, plan: np.ndarray, start_inputs: np.n
                      rows=np.zeros((n_steps + 1, len(COLUMNS))), events=np.zeros((MAX_EVENTS, 4)),
                      pending=np.zeros(N_U), qp_q=np.zeros(n_increments), qp_lower=np.zeros(2 * n_increments),
                      qp_upper=np.zeros(2 * n_increments), ref_memo=np.zeros(5), ref_memo_key=np.zeros(5),
-                     ref_memo_valid=np.zeros(1, dtype=np.int64), qp_x=np.zeros(n_increments),
+                     qp_x=np.zeros(n_increments),
                      qp_lam=np.zeros(2 * n_increments), daqp_problem=np.zeros(PROBLEM_WORDS, dtype=np.int64),
                      daqp_result=np.zeros(RESULT_WORDS, dtype=np.int64),
                      daqp_settings=np.zeros(SETTINGS_WORDS, dtype=np.int64))

@@ -2,11 +2,11 @@
 
 import numpy as np
 
-from driftlab.core.closed_loop import _reference
 from driftlab.core.config import Theta
 from driftlab.core.configure import preset_config
 from driftlab.core.controller import drift_reference
 from driftlab.core.episode import start_episode
+from driftlab.core.loop_reference import step_reference
 from driftlab.core.track import LEFT, RIGHT
 
 
@@ -18,12 +18,12 @@ def test_the_memo_hands_out_what_a_fresh_solve_gives_for_the_inputs_of_the_momen
                  np.array([0.1, -0.02, -0.0]), np.array([0.1, -0.02, -0.0]), np.array([0.2, 0.0, 0.0]),
                  np.array([0.1, -0.02, 0.05])]
     for direction in (LEFT, RIGHT, LEFT):
-        qa, qa_next = (left, right) if direction == LEFT else (right, left)
+        qa = left if direction == LEFT else right
         offset = cfg.speed_offset_left_mps if direction == LEFT else cfg.speed_offset_right_mps
         for estimate in estimates:
             st.estimate[:] = estimate  # control changes the estimate in place
-            got = _reference(cfg, qa, qa_next, st, direction)
+            got = step_reference(cfg, st, left, right, direction)
             want = drift_reference(qa, st.estimate, direction, offset, True)
             assert got.tobytes() == want.tobytes()
             got[:] = 0.0  # the caller's copy: changing it leaves the memo as it was
-            assert _reference(cfg, qa, qa_next, st, direction).tobytes() == want.tobytes()
+            assert step_reference(cfg, st, left, right, direction).tobytes() == want.tobytes()

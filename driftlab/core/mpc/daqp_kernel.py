@@ -1,8 +1,8 @@
 """DAQP called from the compiled loop: the C function ``daqp.solve`` calls, with the arguments it passes.
 
-A step whose unconstrained minimizer breaks a limit (about one in twenty) used to return to Python for DAQP: the
-kernel's return and re-entry (~20 us each, numba unboxing the loop's settings and arrays) and ``daqp.solve``'s own
-wrapper (~45 us of a ~70 us solve) were ~15 % of a default episode. Here the kernel calls ``daqp_quadprog`` itself,
+A step whose unconstrained minimizer breaks a limit (about one in twenty) is solved without leaving the kernel: a
+return to Python and back costs ~20 us (numba unboxing the loop's settings and arrays), and ``daqp.solve``'s own
+wrapper ~45 us of a ~70 us solve. The kernel calls ``daqp_quadprog`` itself,
 through its address in the binding, on structs laid out as the binding's C sources (daqp 0.11.0, csrc/include/types.h
 and api.h) lay them out and filled as ``daqp.solve`` fills them: the same setup, the same solve, the same bits
 (tests/core/test_daqp_kernel.py compares x and the exit flag with ``daqp.solve``). Another daqp release may lay the

@@ -150,31 +150,29 @@ class _Lease:
             return
         with storage.transaction(self.factory) as session:
             self.held = lifecycle.heartbeat(session, job_id=self.job_id, runner=self.runner)
-            job = session.get(Job, self.job_id)
+            job = storage.job_for_store(session, job_id=self.job_id)  # its status and budget, not the whole row
             if job is not None:
-                self.observe(job.status, int(job.spec["iterations"]))
+                self.observe(job.status, job.iterations)
             self.enqueued = enqueued.any_waiting(session, job_id=self.job_id)
         self._last = time.monotonic()
 
 
-def _fitted_spec(factory: sessionmaker[Session], job_id: int) -> TuningSpec:
-    """The job's document, parsed once for this run. A job queued with its config still to be fitted to its plant
+def _fitted_spec(factory: sessionmaker[Session], job_id: int, document: dict, first_run: bool) -> TuningSpec:
+    """The job's ``document``, parsed once for this run. A job queued with its config still to be fitted to its plant
     (parsing does no physics: POST /api/jobs and `driftlab tune` store it so) is fitted once, here, off the server's
     request path, and stored fitted: what every episode of it runs, and what re-runs it, is the stored config
     (driftlab.core.configure.fitted)."""
-    with storage.snapshot(factory) as session:
-        spec = TuningSpec.from_dict(storage.get_job(session, job_id=job_id).spec)
-        first_run = storage.count_evaluations(session, job_id=job_id) == 0
+    spec = TuningSpec.from_dict(document)
     if first_run:  # a job posted while the server compiled its check was stored unchecked (server/drift_check.py)
         check_drivable(spec.config)
     if not spec.config.to_fit:
         return spec
     spec = spec.fitted()
-    document = spec.to_dict()
+    fitted_document = spec.to_dict()
     with storage.transaction(factory) as session:
         job = storage.get_job(session, job_id=job_id)
         # the config and the document's version and "fitted"; a budget raised meanwhile stays
-        job.spec = {**job.spec, **{k: document[k] for k in ("version", "fitted", "config")}}
+        job.spec = {**job.spec, **{k: fitted_document[k] for k in ("version", "fitted", "config")}}
         return replace(spec, iterations=int(job.spec["iterations"]))
 
 
@@ -224,15 +222,10 @@ def _run(factory: sessionmaker[Session], job_id: int, executor: EpisodeExecutor,
          owner: object, wake: threading.Event, should_stop: Callable[[], bool],
          on_progress: Callable[[Progress], None] | None, optimizers: OptimizerHost | None,
          max_trajectories: int) -> str:
-    try:
-        spec = _fitted_spec(factory, job_id)
-    except ConfigError as exc:  # the car cannot be fitted at this drift after all: the job fails, saying why
-        status, error = interrupted_status(exc)
-        with storage.transaction(factory) as session:
-            lifecycle.release(session, job_id=job_id, runner=runner, status=status, error=error)
-        return status
-    with storage.transaction(factory) as session:
+    # One read of what the run starts from (this runner holds the lease: nobody else appends to the job meanwhile).
+    with storage.snapshot(factory) as session:
         job = storage.get_job(session, job_id=job_id)
+        document = job.spec
         stored = storage.evaluations(session, job_id=job_id)
         history = [(e.theta, e.J if e.completed else None, e.J) for e in stored]
         curve = best_so_far([e.J for e in stored], [e.completed for e in stored])  # what the stop rules read
@@ -242,6 +235,13 @@ def _run(factory: sessionmaker[Session], job_id: int, executor: EpisodeExecutor,
         leader = min((e for e in stored if e.completed), key=lambda e: (e.J, e.index), default=None)
         incumbent_J = None if leader is None else {int(s["seed"]): float(s["J"]) for s in leader.seeds or []}
         ran_before_s = job.run_s or 0.0
+    try:
+        spec = _fitted_spec(factory, job_id, document, first_run=not stored)
+    except ConfigError as exc:  # the car cannot be fitted at this drift after all: the job fails, saying why
+        status, error = interrupted_status(exc)
+        with storage.transaction(factory) as session:
+            lifecycle.release(session, job_id=job_id, runner=runner, status=status, error=error)
+        return status
     optimizer = optimizers.open(spec, history) if optimizers is not None else restore_optimizer(spec, history)
     config_doc = spec.to_dict()["config"]
     seeds, confirm_seeds = spec.episode_seeds, spec.confirm_seeds

@@ -62,6 +62,10 @@ class JobRunner:
         # loop then looks at every kind of work. A job that ends frees its share for the next job, nothing else,
         # and at 8 jobs on 16 workers the other looks were a quarter of the server's CPU (bench_concurrency.py).
         self._look_everywhere = True
+        self._look_lock = threading.Lock()
+        # Whether the last claim left claimable jobs behind (it had less room than the queue had jobs): only then can
+        # a job's end find one to start. A claim that finds none is a transaction per job's end (8 a seeds study).
+        self._jobs_left = True
         self._thread: threading.Thread | None = None
         self._executor: EpisodeExecutor | None = None
         self._slots: EpisodeSlots | None = None
@@ -99,7 +103,7 @@ class JobRunner:
         self._slots = EpisodeSlots(capacity_of(self._executor, given, self.workers))
         self._jobs = JobPool(self.factory, self._executor, self._slots, runner=self.runner_id,
                              should_stop=self._stop.is_set, max_trajectories=self.max_trajectories_per_job,
-                             optimizers=self._optimizers, on_done=lambda job_id, status: self._wake.set())
+                             optimizers=self._optimizers, on_done=self._job_ended)
         if self._optimizers is not None:  # one a job, for as many jobs as the executor runs at once (at most 8)
             self._optimizers.start(processes=min(self.workers, OPTIMIZER_PROCESSES_AT_START))
         self._thread = threading.Thread(target=self._loop, name="driftlab-job-runner", daemon=True)
@@ -107,7 +111,20 @@ class JobRunner:
 
     def wake(self) -> None:
         """Look for work of every kind now (a request queued some)."""
-        self._look_everywhere = True
+        with self._look_lock:
+            self._look_everywhere = True
+        self._wake.set()
+
+    def _take_look_everywhere(self) -> bool:
+        """Whether a look everywhere is due, and it is taken (a wake meanwhile is not lost: it sets it again)."""
+        with self._look_lock:
+            look, self._look_everywhere = self._look_everywhere, False
+        return look
+
+    def _job_ended(self, _job_id: int, status: str | None) -> None:
+        """A job's share is free: the next claimable job may start (one the runner handed back is claimable again)."""
+        if status == lifecycle.WorkStatus.QUEUED:
+            self._jobs_left = True
         self._wake.set()
 
     def stop(self) -> None:
@@ -160,10 +177,15 @@ class JobRunner:
                 claimed.append(job_id)
         return claimed
 
-    def _start_claimable_jobs(self) -> bool:
+    def _start_claimable_jobs(self, look_everywhere: bool) -> bool:
         """Claims what it can (no more jobs at once than the executor has workers) and starts them together; a job
-        that stops wakes the loop: its share is free for the next."""
-        claimed = self._claim_jobs(self._jobs.free) if self._jobs.free > 0 else []
+        that stops wakes the loop: its share is free for the next. Between looks everywhere (``look_everywhere``
+        False) it claims only while the last claim left jobs behind."""
+        room = self._jobs.free
+        if room <= 0 or not (self._jobs_left or look_everywhere):
+            return False
+        claimed = self._claim_jobs(room)
+        self._jobs_left = len(claimed) == room
         self._jobs.start(claimed)
         return bool(claimed)
 
@@ -198,14 +220,14 @@ class JobRunner:
     def _loop(self) -> None:
         try:
             while not self._stop.is_set():
-                if self._look_everywhere:
-                    self._look_everywhere = False
+                look_everywhere = self._take_look_everywhere()
+                if look_everywhere:
                     self._requeue_jobs_waiting_for_the_cluster()
                     self._start_side_tasks()
-                if self._start_claimable_jobs():
+                if self._start_claimable_jobs(look_everywhere):
                     continue
                 if not self._wake.wait(self.busy_poll_s if self.running_job_ids else self.poll_s):
-                    self._look_everywhere = True  # work queued elsewhere (another server, the CLI, a dead runner)
+                    self.wake()  # work queued elsewhere (another server, the CLI, a dead runner)
                 self._wake.clear()
         finally:  # each hands itself back at its next look at should_stop; stop() hands back what has not
             self._jobs.join(timeout_s=self._left())

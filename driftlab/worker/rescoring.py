@@ -36,7 +36,7 @@ def run_rescore(factory: sessionmaker[Session], rescore_id: int, executor: Episo
     def store(_index: int, outcome: EpisodeOutcome) -> None:
         with storage.transaction(factory) as session:
             lease_kept.held = rescores.add_sample(session, rescore_id=rescore_id, runner=runner,
-                                                  sample=outcome.sample().as_dict())
+                                                  sample=outcome.sample.as_dict())
     try:
         with SlottedEpisodes(executor, slots, owner) as episodes:
             episodes.run([(theta, config, seed) for seed in seeds if seed not in back], store, lease_kept)

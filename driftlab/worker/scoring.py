@@ -18,7 +18,7 @@ def score_thetas(executor: EpisodeExecutor, thetas: list[dict[str, float]], conf
                  seeds: list[int]) -> list[list[SampleResult]]:
     """Each theta run once per seed; all episodes submitted at once so that every worker stays busy."""
     futures = [[executor.submit(theta, config_doc, seed) for seed in seeds] for theta in thetas]
-    return [[f.result().sample() for f in row] for row in futures]
+    return [[f.result().sample for f in row] for row in futures]
 
 
 def rescore_job(*, db_url: str, name: str, samples: int = 30, workers: int | None = 2,

@@ -30,7 +30,7 @@ class PendingEvaluation:
 
     def score(self) -> tuple[RobustScore, list[SampleResult], EpisodeOutcome]:
         ordered = [self.outcomes[s] for s in self.seeds]
-        samples = [o.sample() for o in ordered]
+        samples = [o.sample for o in ordered]
         score = aggregate(samples)
         return score, samples, ordered[score.representative]
 

@@ -42,7 +42,7 @@ class _PendingCell:
 
 def _store_cell(factory: sessionmaker[Session], study_id: int, runner: str, cell: _PendingCell) -> bool:
     """Commits the cell if this runner still holds the study (False: stop)."""
-    samples = [cell.outcomes[s].sample() for s in cell.seeds]
+    samples = [cell.outcomes[s].sample for s in cell.seeds]
     score = aggregate(samples)
     with storage.transaction(factory) as session:
         if not studies.heartbeat_study(session, study_id=study_id, runner=runner):

@@ -17,7 +17,7 @@ def outcome():
 
 def test_a_real_episodes_phase_errors_are_those_of_its_steps_in_the_drifts_and_the_flicks(outcome):
     assert outcome.completed, outcome.status
-    sample = outcome.sample()
+    sample = outcome.sample
     rows = outcome.trajectory
     column = {name: i for i, name in enumerate(outcome.columns)}
     phase = rows[:, column["phase"]].astype(int)

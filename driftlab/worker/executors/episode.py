@@ -7,7 +7,7 @@ import json
 import math
 from concurrent.futures import Future
 from dataclasses import dataclass
-from functools import lru_cache
+from functools import cached_property, lru_cache
 from typing import Any, Protocol
 
 import numpy as np
@@ -43,8 +43,10 @@ class EpisodeOutcome:
     def completed(self) -> bool:
         return self.status == EpisodeStatus.COMPLETED
 
+    @cached_property
     def sample(self) -> SampleResult:
-        """This episode as one sample of a robust evaluation."""
+        """This episode as one sample of a robust evaluation (read once: a job scores an evaluation again when it
+        asks for confirmation seeds)."""
         error = self.metrics.get("mean_abs_e_m")
         validity = self.metrics.get("plant_validity") or {}
         negative, one_side = validity.get("negative_wheel_load_s"), validity.get("one_side_off_s")

@@ -220,12 +220,17 @@ def measure(mode: str, db_dir: str, spec: dict, executor, workers: int) -> dict:
         assert [e.index for e in evaluations] == list(range(spec["iterations"]))
     n = sum(len(evaluations) for evaluations in stored)
     episodes_s = sum(e.wall_ms for evaluations in stored for e in evaluations) / 1000
+    # The wall time's floor while each job keeps its even share of the workers: the job with the most episode time
+    # on its share (jobs differ by how many thetas are pruned, confirmed or fail, not by their budget).
+    busiest_s = max(sum(e.wall_ms for e in evaluations) for evaluations in stored) / 1000
+    floor_s = max(busiest_s / max(workers // len(jobs), 1), episodes_s / workers)
     storage.engine_of(factory).dispose()
     return {"wall": wall, "rate": n / wall, "ask_ms": 1000 * statistics.median(meter.ask_s),
             "store_ms": 1000 * statistics.median(meter.store_s),
             "job": max(meter.thread_s.values()) / wall, "db": sum(meter.store_s) / wall, "cpu": cpu / wall,
             "work": episodes_s / (workers * wall), "cpu_ms": 1000 * cpu / n, "server_cpu_ms": 1000 * server_cpu / n,
-            "episodes": sum(len(e.seeds or ()) for evaluations in stored for e in evaluations) / n}
+            "episodes": sum(len(e.seeds or ()) for evaluations in stored for e in evaluations) / n,
+            "floor": floor_s}
 
 
 def _row(label: str, seq: dict, conc: dict) -> str:
@@ -263,7 +268,9 @@ def _limits(rows: list[tuple[int, dict, dict]]) -> None:
         print(f"  {n:>2} workers: {conc['rate']:6.1f} of {capacity:6.0f} evaluations/s ({share:3.0f} %), "
               f"{conc['server_cpu_ms']:5.1f} ms of the server's CPU an evaluation ({conc['cpu_ms']:.1f}); "
               f"the workers busy {100 * conc['work']:3.0f} % "
-              f"({conc['episodes']:.2f} episodes an evaluation: a would-be best runs its confirmation seeds too)")
+              f"({conc['episodes']:.2f} episodes an evaluation: a would-be best runs its confirmation seeds too); "
+              f"the busiest job's episodes on its share of the workers {conc['floor']:.2f} s of the "
+              f"{conc['wall']:.2f} s wall")
 
 
 def simulated(workers: list[int], evaluations: int, db_dir: str) -> None:

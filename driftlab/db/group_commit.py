@@ -19,6 +19,7 @@ from collections.abc import Callable
 from concurrent.futures import Future
 from typing import Any, TypeVar
 
+from sqlalchemy import Connection
 from sqlalchemy.orm import Session, sessionmaker
 
 from driftlab.db import storage
@@ -32,8 +33,20 @@ class _Writer:
         self.factory = factory
         self.waiting: queue.SimpleQueue[tuple[Callable[[Session], Any], Future]] = queue.SimpleQueue()
         self.thread: threading.Thread | None = None
+        self.connection: Connection | None = None  # kept open while the thread runs (storage.transaction_on)
 
     def loop(self) -> None:
+        try:
+            self._loop()
+        finally:
+            self._close()
+
+    def _close(self) -> None:
+        if self.connection is not None:
+            self.connection.close()
+            self.connection = None
+
+    def _loop(self) -> None:
         while True:
             try:
                 batch = [self.waiting.get(timeout=_IDLE_S)]
@@ -54,9 +67,12 @@ class _Writer:
 
     def commit(self, batch: list[tuple[Callable[[Session], Any], Future]]) -> None:
         try:
-            with storage.transaction(self.factory) as session:
+            if self.connection is None:
+                self.connection = storage.writer_connection(self.factory)
+            with storage.transaction_on(self.connection) as session:
                 results = [write(session) for write, _ in batch]
         except Exception as exc:  # noqa: BLE001  # a write's error goes to its caller, the others run again
+            self._close()  # the next transaction on a new connection, whatever state this one is in
             if len(batch) == 1:
                 batch[0][1].set_exception(exc)
             else:

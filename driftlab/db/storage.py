@@ -25,7 +25,7 @@ from datetime import datetime
 from typing import Any, cast
 
 import numpy as np
-from sqlalchemy import Engine, Table, bindparam, create_engine, event, func, insert, select
+from sqlalchemy import Connection, Engine, Table, bindparam, create_engine, event, func, insert, select
 from sqlalchemy.orm import Session, sessionmaker
 
 from driftlab.core.statuses import EpisodeStatus
@@ -146,6 +146,22 @@ def transaction(factory: sessionmaker[Session]) -> Iterator[Session]:
     writers = _writers_of(engine_of(factory))
     with writers if writers is not None else nullcontext(), factory() as session, session.begin():
         session.connection(execution_options={_BEGIN_OPTION: "IMMEDIATE"})
+        yield session
+
+
+def writer_connection(factory: sessionmaker[Session]) -> Connection:
+    """A connection whose transactions hold the write lock from their start, for :func:`transaction_on`."""
+    return engine_of(factory).connect().execution_options(**{_BEGIN_OPTION: "IMMEDIATE"})
+
+
+@contextmanager
+def transaction_on(connection: Connection) -> Iterator[Session]:
+    """:func:`transaction` on a :func:`writer_connection` its caller keeps open across transactions (a thread that
+    writes one transaction after another: a pool checkout and a session's own transaction are ~90 us of CPU a
+    transaction). The session joins the connection's transaction, committed when the block ends."""
+    writers = _writers_of(connection.engine)
+    with (writers if writers is not None else nullcontext(), connection.begin(),
+          Session(bind=connection, expire_on_commit=False) as session):
         yield session
 
 

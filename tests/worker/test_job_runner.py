@@ -240,6 +240,29 @@ def test_a_wake_looks_for_every_kind_of_work_while_jobs_run(factory):
         runner.stop()
 
 
+def test_jobs_beyond_the_workers_start_as_jobs_end_and_one_queued_without_a_wake_at_the_poll(factory):
+    """A job's end claims the next job while the last claim left some behind (three jobs, two workers: the third
+    starts when one ends, long before the runner's poll); once a claim found the queue empty, a job's end claims
+    nothing, and a job queued elsewhere (no wake: the CLI, another server) starts at the runner's poll."""
+    jobs = [_job(factory, f"queued-{i}", i + 1, 6) for i in range(3)]
+    cluster = FakeCluster(workers=2, gate_s=0.0)
+    runner = JobRunner(factory, workers=cluster.workers, poll_s=60.0, busy_poll_s=60.0)
+    runner.start(executor=cluster)
+    try:
+        _wait(lambda: all(_status(factory, j)[0] == "finished" for j in jobs), timeout_s=30,
+              what="three jobs on two workers to finish without a poll")
+        runner.busy_poll_s = runner.poll_s = 0.05
+        runner.wake()  # the loop's wait takes the shorter poll from its next look
+        long_job = _job(factory, "long", 7, 400)
+        _wait(lambda: runner.running_job_ids == [long_job], timeout_s=30, what="the long job to start at a poll")
+        later = _job(factory, "queued-later", 8, 4)
+        _wait(lambda: _status(factory, later)[0] == "finished", timeout_s=30,
+              what="a job queued without a wake to start at a poll while another runs")
+    finally:
+        runner.stop()
+        cluster.shutdown()
+
+
 def test_the_cli_runs_a_seeds_studys_jobs_at_once_too(factory):
     """`driftlab study seeds` runs the study's jobs as the server's runner does: side by side on the shared
     workers, never more episodes in flight than workers, each job numbered once; a finished job is not rerun."""

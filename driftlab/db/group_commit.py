@@ -68,7 +68,7 @@ class _Writer:
     def commit(self, batch: list[tuple[Callable[[Session], Any], Future]]) -> None:
         try:
             if self.connection is None:
-                self.connection = storage.writer_connection(self.factory)
+                self.connection = storage.engine_of(self.factory).connect()
             with storage.transaction_on(self.connection) as session:
                 results = [write(session) for write, _ in batch]
         except Exception as exc:  # noqa: BLE001  # a write's error goes to its caller, the others run again

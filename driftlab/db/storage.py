@@ -109,9 +109,7 @@ def _sqlite_pragmas(dbapi_connection, _record) -> None:
 
 def _sqlite_begin(connection) -> None:
     mode = connection.get_execution_options().get(_BEGIN_OPTION, "DEFERRED")
-    # On the driver's connection: SQLAlchemy's statement path (~40 us) is a tenth of a store's CPU, for a BEGIN
-    # that has no parameters and no rows.
-    connection.connection.driver_connection.execute(f"BEGIN {mode}")
+    connection.exec_driver_sql(f"BEGIN {mode}")
 
 
 def _postgresql_begin(connection) -> None:
@@ -149,18 +147,12 @@ def transaction(factory: sessionmaker[Session]) -> Iterator[Session]:
         yield session
 
 
-def writer_connection(factory: sessionmaker[Session]) -> Connection:
-    """A connection whose transactions hold the write lock from their start, for :func:`transaction_on`."""
-    return engine_of(factory).connect().execution_options(**{_BEGIN_OPTION: "IMMEDIATE"})
-
-
 @contextmanager
 def transaction_on(connection: Connection) -> Iterator[Session]:
-    """:func:`transaction` on a :func:`writer_connection` its caller keeps open across transactions (a thread that
-    writes one transaction after another: a pool checkout and a session's own transaction are ~90 us of CPU a
-    transaction). The session joins the connection's transaction, committed when the block ends."""
-    writers = _writers_of(connection.engine)
-    with (writers if writers is not None else nullcontext(), connection.begin(),
+    """:func:`transaction` on a connection its caller keeps open across transactions (a pool checkout and a
+    session's own transaction are ~90 us of CPU each time); the session joins the connection's transaction."""
+    with (_writers_of(connection.engine) or nullcontext(),
+          connection.execution_options(**{_BEGIN_OPTION: "IMMEDIATE"}).begin(),  # the options set in place
           Session(bind=connection, expire_on_commit=False) as session):
         yield session
 
@@ -239,9 +231,8 @@ class JobForStore:
 
 
 def job_for_store(session: Session, *, job_id: int) -> JobForStore | None:
-    """:class:`JobForStore` in one query, reading the budget out of the stored spec in SQL: decoding the whole
-    spec (its config) at every store was a tenth of the server's work per evaluation. On the session's connection:
-    the ORM's execution adds ~50 us to a statement whose rows are plain values."""
+    """:class:`JobForStore` in one query on the session's connection (the ORM's execution adds ~50 us), the budget
+    read out of the stored spec in SQL (decoding the spec at every store was a tenth of the server's work)."""
     row = session.connection().execute(_JOB_FOR_STORE, {"job_id": job_id}).one_or_none()
     return None if row is None else JobForStore(row[0], row[1], int(row[2]), int(row[3] or 0))
 

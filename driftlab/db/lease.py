@@ -101,13 +101,14 @@ def claim(session: Session, table: Any, *, row_id: int, runner: str, also: Any =
 
 
 def take(session: Session, table: Any, *, row_id: int, runner: str, from_statuses: tuple[str, ...], now: datetime,
-         also: Any = True) -> bool:
+         also: Any = True, **values: Any) -> bool:
     """Take the lease of ``table`` row ``row_id`` from one of ``from_statuses`` or from a dead runner, where ``also``
-    (an SQL condition) holds; False if the row is not claimable (or another runner was quicker)."""
+    (an SQL condition) holds, setting ``values`` too in the same UPDATE; False if the row is not claimable (or another
+    runner was quicker)."""
     claimable = or_(table.status.in_([str(s) for s in from_statuses]),
                     (table.status == RUNNING) & is_stale(table, now)) & also
     return rows_updated(session, update(table).where(table.id == row_id, claimable)
-                        .values(status=RUNNING, runner_id=runner, heartbeat_at=naive(now), error=None)
+                        .values(status=RUNNING, runner_id=runner, heartbeat_at=naive(now), error=None, **values)
                         .execution_options(synchronize_session=False)) == 1
 
 

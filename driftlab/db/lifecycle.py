@@ -12,8 +12,9 @@ from __future__ import annotations
 
 from datetime import datetime
 
-from sqlalchemy import delete, or_, select, update
+from sqlalchemy import bindparam, delete, func, or_, select, update
 from sqlalchemy.orm import Session
+from sqlalchemy.orm.util import identity_key
 
 from driftlab.core.statuses import StudyKind
 from driftlab.db import lease
@@ -46,8 +47,9 @@ def lease_is_live(job: Job, now: datetime | None = None) -> bool:
 
 
 def claim(session: Session, *, job_id: int, runner: str, from_statuses: tuple[WorkStatus, ...] = (WorkStatus.QUEUED,)
-          ) -> Job:
-    """Take the job for ``runner``: from one of ``from_statuses``, or from a dead runner's stale lease.
+          ) -> None:
+    """Take the job for ``runner``: from one of ``from_statuses``, or from a dead runner's stale lease. One UPDATE
+    when it is free (the job's row is read only to say why it is not: a runner claims every job it runs).
 
     Raises:
         NotFound: no such job.
@@ -55,14 +57,13 @@ def claim(session: Session, *, job_id: int, runner: str, from_statuses: tuple[Wo
         TransitionError: the job's status allows no claim.
     """
     now = utcnow()
-    taken = lease.take(session, Job, row_id=job_id, runner=runner, from_statuses=from_statuses, now=now,
-                       also=~_study_held_by_another(now, runner))
+    # started_at: this run's start, so the ETA counts only the time since (pauses excluded)
+    if lease.take(session, Job, row_id=job_id, runner=runner, from_statuses=from_statuses, now=now,
+                  also=~_study_held_by_another(now, runner), started_at=now, stop_reason=None):
+        _reload_if_loaded(session, job_id)
+        return
     job = get_job(session, job_id=job_id)
     session.refresh(job)
-    if taken:
-        job.started_at = now  # this run's start: the ETA counts only the time since (pauses excluded)
-        job.stop_reason = None
-        return job
     if lease_is_live(job, now):
         age = (lease.naive(now) - lease.naive(job.heartbeat_at or now)).total_seconds()
         raise LeaseHeld(f"job {job.name!r} is being run by {job.runner_id} (last heartbeat {age:.1f} s ago); "
@@ -94,15 +95,29 @@ def release(session: Session, *, job_id: int, runner: str, status: WorkStatus, e
     run's wall time to the time it has run in all (``run_s``, what a time budget counts), and keeps the stop rule
     that finished it, if one did. A job the runner would finish goes back to the queue instead when its budget
     was raised after the runner last read it (a PATCH between the runner's last look and this transaction)."""
-    job = session.get(Job, job_id)
+    job = session.execute(_FOR_RELEASE, {"job_id": job_id}).one_or_none()  # not the row's documents: no ORM load
     if job is not None and job.runner_id == runner and job.started_at is not None:
         ran_s = (lease.naive(utcnow()) - lease.naive(job.started_at)).total_seconds()
-        job.run_s = (job.run_s or 0.0) + max(ran_s, 0.0)
-        job.stop_reason = stop_reason
-        if (status == WorkStatus.FINISHED and stop_reason is None
-                and int(job.spec["iterations"]) > count_evaluations(session, job_id=job_id)):
+        session.execute(update(Job).where(Job.id == job_id)
+                        .values(run_s=(job.run_s or 0.0) + max(ran_s, 0.0), stop_reason=stop_reason)
+                        .execution_options(synchronize_session=False))
+        if status == WorkStatus.FINISHED and stop_reason is None and int(job.iterations) > job.n_evaluations:
             status = WorkStatus.QUEUED
     lease.release(session, Job, row_id=job_id, runner=runner, status=status, error=error)
+    _reload_if_loaded(session, job_id)
+
+
+def _reload_if_loaded(session: Session, job_id: int) -> None:
+    """The caller's loaded copy of the job, if it has one, reads what the UPDATEs wrote when next used."""
+    loaded = session.identity_map.get(identity_key(Job, job_id))
+    if loaded is not None:
+        session.expire(loaded)
+
+
+_FOR_RELEASE = (select(Job.runner_id, Job.started_at, Job.run_s, Job.spec["iterations"].as_integer().label("iterations"),
+                       select(func.count()).select_from(Evaluation).where(Evaluation.job_id == Job.id)
+                       .scalar_subquery().label("n_evaluations"))
+                .where(Job.id == bindparam("job_id")))
 
 
 def request_pause(session: Session, *, job_id: int) -> Job:

@@ -13,6 +13,7 @@ from collections.abc import Callable, Hashable
 from concurrent.futures import CancelledError, Future
 from dataclasses import dataclass, replace
 
+from sqlalchemy import select
 from sqlalchemy.orm import Session, sessionmaker
 
 from driftlab.core.config import Theta
@@ -145,8 +146,19 @@ class _Lease:
         if status != WorkStatus.RUNNING:
             self.held = False
 
-    def renew_if_due(self, force: bool = False) -> None:
-        if not self.held or (not force and time.monotonic() - self._last < lifecycle.HEARTBEAT_S):
+    def look_again(self) -> None:
+        """What the stored job says now, read without renewing (the run is about to end, and its release writes)."""
+        if not self.held:
+            return
+        with storage.snapshot(self.factory) as session:
+            job = storage.job_for_store(session, job_id=self.job_id)
+        if job is None or job.runner_id != self.runner:
+            self.held = False
+        else:
+            self.observe(job.status, job.iterations)
+
+    def renew_if_due(self) -> None:
+        if not self.held or time.monotonic() - self._last < lifecycle.HEARTBEAT_S:
             return
         with storage.transaction(self.factory) as session:
             self.held = lifecycle.heartbeat(session, job_id=self.job_id, runner=self.runner)
@@ -272,7 +284,7 @@ def _run(factory: sessionmaker[Session], job_id: int, executor: EpisodeExecutor,
                 stop_reason = spec.stop.reason(ran_before_s + time.perf_counter() - started,
                                                curve[max(n_at_start - 1, spec.seed_points - 1, 0):])
             if n_done >= lease.iterations and not episodes and not waiting:
-                lease.renew_if_due(force=True)  # a budget raised at the last moment still counts
+                lease.look_again()  # a budget raised at the last moment still counts
                 if n_done >= lease.iterations or not lease.held:
                     break
             lease.renew_if_due()
@@ -355,5 +367,5 @@ def _run(factory: sessionmaker[Session], job_id: int, executor: EpisodeExecutor,
     with storage.transaction(factory) as session:
         lifecycle.release(session, job_id=job_id, runner=runner, status=status,
                           stop_reason=stop_reason if n_done < lease.iterations else None)
-        job = session.get(Job, job_id)
-        return WorkStatus(job.status) if job is not None else status
+        stored = session.scalar(select(Job.status).where(Job.id == job_id))
+        return WorkStatus(stored) if stored is not None else status

@@ -114,7 +114,8 @@ def _reload_if_loaded(session: Session, job_id: int) -> None:
         session.expire(loaded)
 
 
-_FOR_RELEASE = (select(Job.runner_id, Job.started_at, Job.run_s, Job.spec["iterations"].as_integer().label("iterations"),
+_FOR_RELEASE = (select(Job.runner_id, Job.started_at, Job.run_s,
+                       Job.spec["iterations"].as_integer().label("iterations"),
                        select(func.count()).select_from(Evaluation).where(Evaluation.job_id == Job.id)
                        .scalar_subquery().label("n_evaluations"))
                 .where(Job.id == bindparam("job_id")))

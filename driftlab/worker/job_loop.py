@@ -128,16 +128,17 @@ def claim_job(factory: sessionmaker[Session], job_id: int, runner: str,
 
 class _Lease:
     """Renews the job's lease every HEARTBEAT_S; tells when it is lost, what the budget is now, and whether thetas
-    are enqueued for the job (``enqueued``: looked for at the start and at each heartbeat, not at every ask, which
-    would add a read to every evaluation)."""
+    are enqueued for the job (``enqueued``: looked for in the run's first read and at each heartbeat, not at every
+    ask, which would add a read to every evaluation)."""
 
     def __init__(self, factory: sessionmaker[Session], job_id: int, runner: str, iterations: int,
-                 max_trajectories: int) -> None:
+                 max_trajectories: int, enqueued: bool) -> None:
+        """``enqueued``: whether thetas waited for the job when the run read it first."""
         self.factory, self.job_id, self.runner = factory, job_id, runner
         self.iterations = iterations
         self.max_trajectories = max_trajectories
         self.held = True
-        self.enqueued = True  # until the first ask has looked
+        self.enqueued = enqueued
         self._last = time.monotonic()
 
     def observe(self, status: str, iterations: int) -> None:
@@ -247,6 +248,7 @@ def _run(factory: sessionmaker[Session], job_id: int, executor: EpisodeExecutor,
         leader = min((e for e in stored if e.completed), key=lambda e: (e.J, e.index), default=None)
         incumbent_J = None if leader is None else {int(s["seed"]): float(s["J"]) for s in leader.seeds or []}
         ran_before_s = job.run_s or 0.0
+        any_enqueued = enqueued.any_waiting(session, job_id=job_id)
     try:
         spec = _fitted_spec(factory, job_id, document, first_run=not stored)
     except ConfigError as exc:  # the car cannot be fitted at this drift after all: the job fails, saying why
@@ -257,7 +259,7 @@ def _run(factory: sessionmaker[Session], job_id: int, executor: EpisodeExecutor,
     optimizer = optimizers.open(spec, history) if optimizers is not None else restore_optimizer(spec, history)
     config_doc = spec.to_dict()["config"]
     seeds, confirm_seeds = spec.episode_seeds, spec.confirm_seeds
-    lease = _Lease(factory, job_id, runner, spec.iterations, max_trajectories)
+    lease = _Lease(factory, job_id, runner, spec.iterations, max_trajectories, any_enqueued)
     n_done = len(history)
     evaluations: list[PendingEvaluation] = []
     episodes: dict[Future[EpisodeOutcome], PendingEvaluation] = {}

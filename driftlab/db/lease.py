@@ -120,13 +120,15 @@ def renew(session: Session, table: Any, *, row_id: int, runner: str, now: dateti
                         .execution_options(synchronize_session=False)) == 1
 
 
-def release(session: Session, table: Any, *, row_id: int, runner: str, status: str, error: str | None = None) -> None:
+def release(session: Session, table: Any, *, row_id: int, runner: str, status: str, error: str | None = None,
+            **values: Any) -> None:
     """The runner stops: the row takes ``status`` unless someone changed it meanwhile (a pause request stays
-    paused; a row taken over stays with its new runner), and the lease is cleared."""
+    paused; a row taken over stays with its new runner), and the lease is cleared, with ``values`` set in the same
+    UPDATE (only while ``runner`` still holds the row)."""
     session.execute(update(table).where(table.id == row_id, table.runner_id == runner, table.status == RUNNING)
                     .values(status=status, error=error).execution_options(synchronize_session=False))
     session.execute(update(table).where(table.id == row_id, table.runner_id == runner)
-                    .values(runner_id=None, heartbeat_at=None).execution_options(synchronize_session=False))
+                    .values(runner_id=None, heartbeat_at=None, **values).execution_options(synchronize_session=False))
 
 
 def hand_back(session: Session, table: Any, *, runner: str) -> int:

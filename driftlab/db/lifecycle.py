@@ -11,6 +11,7 @@ The lease (``runner_id``, ``heartbeat_at``) is driftlab.db.lease's, the same for
 from __future__ import annotations
 
 from datetime import datetime
+from typing import Any
 
 from sqlalchemy import bindparam, delete, func, or_, select, update
 from sqlalchemy.orm import Session
@@ -96,14 +97,13 @@ def release(session: Session, *, job_id: int, runner: str, status: WorkStatus, e
     that finished it, if one did. A job the runner would finish goes back to the queue instead when its budget
     was raised after the runner last read it (a PATCH between the runner's last look and this transaction)."""
     job = session.execute(_FOR_RELEASE, {"job_id": job_id}).one_or_none()  # not the row's documents: no ORM load
+    ran: dict[str, Any] = {}
     if job is not None and job.runner_id == runner and job.started_at is not None:
         ran_s = (lease.naive(utcnow()) - lease.naive(job.started_at)).total_seconds()
-        session.execute(update(Job).where(Job.id == job_id)
-                        .values(run_s=(job.run_s or 0.0) + max(ran_s, 0.0), stop_reason=stop_reason)
-                        .execution_options(synchronize_session=False))
+        ran = {"run_s": (job.run_s or 0.0) + max(ran_s, 0.0), "stop_reason": stop_reason}
         if status == WorkStatus.FINISHED and stop_reason is None and int(job.iterations) > job.n_evaluations:
             status = WorkStatus.QUEUED
-    lease.release(session, Job, row_id=job_id, runner=runner, status=status, error=error)
+    lease.release(session, Job, row_id=job_id, runner=runner, status=status, error=error, **ran)
     _reload_if_loaded(session, job_id)
 
 

@@ -150,6 +150,34 @@ def test_nothing_is_stored_past_a_budget_lowered_while_evaluations_run(tmp_path)
     assert done == ["finished"]
 
 
+def test_a_budget_raised_after_the_last_store_is_run_on_in_the_same_run(tmp_path, monkeypatch):
+    """The run reads the budget once more before it ends (without a write: its release follows), so evaluations
+    added by a PATCH between its last store and its end run at once, not after a trip through the queue."""
+    from driftlab.db import lifecycle
+    from driftlab.worker import job_loop
+
+    factory = storage.open_database(f"sqlite:///{tmp_path / 'raised.db'}")
+    spec = TuningSpec(iterations=4, seed_points=4, seed=1, robust_samples=1, confirm_samples=0)
+    with storage.transaction(factory) as session:
+        job_id = storage.create_job(session, name="raised", spec=spec.to_dict(), seed=spec.seed).id
+    claim_job(factory, job_id, "runner")
+    real_look, raised = job_loop._Lease.look_again, []
+
+    def raise_then_look(lease):
+        if not raised:  # the first time the run has spent its budget: a client raises it now
+            with storage.transaction(factory) as session:
+                lifecycle.extend(session, job_id=job_id, iterations=6)
+            raised.append(True)
+        real_look(lease)
+
+    monkeypatch.setattr(job_loop._Lease, "look_again", raise_then_look)
+    assert run_job(factory, job_id, ShuffledExecutor(1), runner="runner") == "finished"
+    with storage.snapshot(factory) as session:
+        job = storage.get_job(session, job_id=job_id)
+        assert storage.count_evaluations(session, job_id=job_id) == 6 and job.runner_id is None
+        assert job.status == "finished" and job.run_s > 0.0
+
+
 def test_a_long_job_keeps_a_bounded_number_of_trajectories_and_every_best(tmp_path):
     factory = storage.open_database(f"sqlite:///{tmp_path / 'bounded.db'}")
     spec = TuningSpec(iterations=30, seed_points=4, seed=3, robust_samples=1, confirm_samples=0, deterministic=True)

@@ -13,7 +13,7 @@ from __future__ import annotations
 from datetime import datetime
 from typing import Any
 
-from sqlalchemy import bindparam, delete, func, or_, select, update
+from sqlalchemy import delete, or_, select, update
 from sqlalchemy.orm import Session
 from sqlalchemy.orm.util import identity_key
 
@@ -21,7 +21,7 @@ from driftlab.core.statuses import StudyKind
 from driftlab.db import lease
 from driftlab.db.lease import HEARTBEAT_S, LEASE_TIMEOUT_S, TransitionError, new_runner_id
 from driftlab.db.models import EnqueuedTheta, Evaluation, Job, Rescore, Study, Trajectory, WorkStatus, utcnow
-from driftlab.db.storage import count_evaluations, get_job
+from driftlab.db.storage import count_evaluations, get_job, job_for_store
 
 __all__ = ["HEARTBEAT_S", "LEASE_TIMEOUT_S", "WorkStatus", "LeaseHeld", "TransitionError", "claim", "claimable",
            "delete_job", "extend", "heartbeat", "lease_is_live", "new_runner_id", "release", "request_pause",
@@ -96,12 +96,13 @@ def release(session: Session, *, job_id: int, runner: str, status: WorkStatus, e
     run's wall time to the time it has run in all (``run_s``, what a time budget counts), and keeps the stop rule
     that finished it, if one did. A job the runner would finish goes back to the queue instead when its budget
     was raised after the runner last read it (a PATCH between the runner's last look and this transaction)."""
-    job = session.execute(_FOR_RELEASE, {"job_id": job_id}).one_or_none()  # not the row's documents: no ORM load
+    session.flush()  # a change the caller made in this session (a new budget) is what the read below sees
+    job = job_for_store(session, job_id=job_id)  # not the row's documents: no ORM load
     ran: dict[str, Any] = {}
     if job is not None and job.runner_id == runner and job.started_at is not None:
         ran_s = (lease.naive(utcnow()) - lease.naive(job.started_at)).total_seconds()
         ran = {"run_s": (job.run_s or 0.0) + max(ran_s, 0.0), "stop_reason": stop_reason}
-        if status == WorkStatus.FINISHED and stop_reason is None and int(job.iterations) > job.n_evaluations:
+        if status == WorkStatus.FINISHED and stop_reason is None and job.iterations > job.n_evaluations:
             status = WorkStatus.QUEUED
     lease.release(session, Job, row_id=job_id, runner=runner, status=status, error=error, **ran)
     _reload_if_loaded(session, job_id)
@@ -112,13 +113,6 @@ def _reload_if_loaded(session: Session, job_id: int) -> None:
     loaded = session.identity_map.get(identity_key(Job, job_id))
     if loaded is not None:
         session.expire(loaded)
-
-
-_FOR_RELEASE = (select(Job.runner_id, Job.started_at, Job.run_s,
-                       Job.spec["iterations"].as_integer().label("iterations"),
-                       select(func.count()).select_from(Evaluation).where(Evaluation.job_id == Job.id)
-                       .scalar_subquery().label("n_evaluations"))
-                .where(Job.id == bindparam("job_id")))
 
 
 def request_pause(session: Session, *, job_id: int) -> Job:

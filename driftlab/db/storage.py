@@ -221,20 +221,21 @@ def count_evaluations(session: Session, *, job_id: int) -> int:
 
 @dataclass(frozen=True)
 class JobForStore:
-    """What a runner reads of its job before it appends an evaluation: who holds it, its status, its budget and
-    how many evaluations it has."""
+    """A runner's read of its job to store an evaluation or release it (``run_s``: its runs before this one)."""
 
     runner_id: str | None
     status: str
     iterations: int
     n_evaluations: int
+    started_at: datetime | None
+    run_s: float | None
 
 
 def job_for_store(session: Session, *, job_id: int) -> JobForStore | None:
     """:class:`JobForStore` in one query on the session's connection (the ORM's execution adds ~50 us), the budget
     read out of the stored spec in SQL (decoding the spec at every store was a tenth of the server's work)."""
     row = session.connection().execute(_JOB_FOR_STORE, {"job_id": job_id}).one_or_none()
-    return None if row is None else JobForStore(row[0], row[1], int(row[2]), int(row[3] or 0))
+    return None if row is None else JobForStore(row[0], row[1], int(row[2]), int(row[3] or 0), *row[4:])
 
 
 def count_and_best(session: Session, *, job_id: int) -> tuple[int, Evaluation | None]:
@@ -368,9 +369,8 @@ def _lowest_j(status_filter) -> Any:
 
 # Built once: a dashboard and every script poll these, and building a statement costs more than SQLite's answer.
 _COUNT = select(func.count()).select_from(Evaluation).where(Evaluation.job_id == bindparam("job_id"))
-_JOB_FOR_STORE = (select(Job.runner_id, Job.status,
-                         Job.spec["iterations"].as_integer(), _COUNT.scalar_subquery())
-                  .where(Job.id == bindparam("job_id")))
+_JOB_FOR_STORE = (select(Job.runner_id, Job.status, Job.spec["iterations"].as_integer(), _COUNT.scalar_subquery(),
+                         Job.started_at, Job.run_s).where(Job.id == bindparam("job_id")))
 _COUNT_AND_BEST = select(func.count(), _lowest_j(Evaluation.status == EpisodeStatus.COMPLETED),
                          _lowest_j(Evaluation.status != EpisodeStatus.COMPLETED)
                          ).select_from(Evaluation).where(Evaluation.job_id == bindparam("job_id"))

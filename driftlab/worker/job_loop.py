@@ -101,7 +101,7 @@ def _store(factory: sessionmaker[Session], lease: _Lease, evaluation: PendingEva
         job = storage.job_for_store(session, job_id=lease.job_id)
         if job is None or job.runner_id != lease.runner:
             return LOST
-        lease.observe(job.status, job.iterations)
+        lease.observe(job)
         if job.n_evaluations >= lease.iterations:
             return OVER_BUDGET
         storage.add_evaluation(session, job_id=lease.job_id, index=job.n_evaluations, theta=evaluation.theta,
@@ -141,31 +141,28 @@ class _Lease:
         self.enqueued = enqueued
         self._last = time.monotonic()
 
-    def observe(self, status: str, iterations: int) -> None:
-        """What the stored job says now: paused (by a request) means stop; the budget may have changed."""
-        self.iterations = iterations
-        if status != WorkStatus.RUNNING:
+    def observe(self, job: storage.JobForStore | None) -> None:
+        """What the stored job says now: gone, taken over or paused (by a request) means stop; the budget may have
+        changed."""
+        if job is None or job.runner_id != self.runner:
+            self.held = False
+            return
+        self.iterations = job.iterations
+        if job.status != WorkStatus.RUNNING:
             self.held = False
 
     def look_again(self) -> None:
         """What the stored job says now, read without renewing (the run is about to end, and its release writes)."""
-        if not self.held:
-            return
-        with storage.snapshot(self.factory) as session:
-            job = storage.job_for_store(session, job_id=self.job_id)
-        if job is None or job.runner_id != self.runner:
-            self.held = False
-        else:
-            self.observe(job.status, job.iterations)
+        if self.held:
+            with storage.snapshot(self.factory) as session:
+                self.observe(storage.job_for_store(session, job_id=self.job_id))
 
     def renew_if_due(self) -> None:
         if not self.held or time.monotonic() - self._last < lifecycle.HEARTBEAT_S:
             return
         with storage.transaction(self.factory) as session:
             self.held = lifecycle.heartbeat(session, job_id=self.job_id, runner=self.runner)
-            job = storage.job_for_store(session, job_id=self.job_id)  # its status and budget, not the whole row
-            if job is not None:
-                self.observe(job.status, job.iterations)
+            self.observe(storage.job_for_store(session, job_id=self.job_id))  # its status and budget, not the row
             self.enqueued = enqueued.any_waiting(session, job_id=self.job_id)
         self._last = time.monotonic()
 

@@ -13,7 +13,9 @@ optimizer host process at once, timed as the job's thread waits for it) and the 
 transaction: the evaluation, its trajectory), and prints their medians, with how busy each resource was:
 "job" the busiest job thread's share of the wall time spent asking, telling and storing (near 100 %: that job's
 optimizer is the limit), "db" the write transactions' share of the wall time (near 100 %: storage is), "work" the
-workers' (episode time / (N x wall)), and "cpu" this process's CPU seconds per wall second (2 cores here).
+workers' (episode time / (N x wall)), and "cpu" this process's CPU seconds per wall second (2 cores here). The
+summary adds the workers' share while all 8 jobs still run (until the first job's last store): the capacity the
+server keeps in use, apart from the study's drain, where the jobs left have fewer evaluations in flight than workers.
 
 Run: OMP_NUM_THREADS=1 python benchmarks/bench_concurrency.py [--workers 1 2 4 8 16 32] [--evaluations 30]
      [--real-evaluations 6] [--real-repeats 3] [--skip-real] [--skip-simulated] [--optimizer-process] [--db URL]
@@ -30,6 +32,7 @@ import threading
 import time
 from concurrent.futures import Future, ThreadPoolExecutor
 from dataclasses import replace
+from math import nan
 
 os.environ.setdefault("OMP_NUM_THREADS", "1")
 
@@ -53,10 +56,12 @@ class SleepingCluster:
         self.workers, self.template, self.episode_s = workers, template, episode_s
         self.pool = ThreadPoolExecutor(workers)
         self.cpu_s = 0.0  # CPU its episodes took in this process (a real cluster's run elsewhere)
+        self.starts_s: list[float] = []  # each episode's start (perf_counter)
         self._lock = threading.Lock()
 
     def _episode(self, theta, seed) -> EpisodeOutcome:
         cpu0 = time.thread_time()
+        self.starts_s.append(time.perf_counter())
         time.sleep(self.episode_s)
         j = sum((v - 0.5) ** 2 for v in theta.values()) + 0.01 * (seed % 7) - 2.0
         outcome = replace(self.template, theta=dict(theta), seed=seed, J=j, wall_ms=self.episode_s * 1000)
@@ -78,6 +83,7 @@ class Meter:
         self.ask_s: list[float] = []
         self.store_s: list[float] = []
         self.thread_s: dict[int, float] = {}
+        self.last_store_s: dict[int, float] = {}  # per job: when its latest store ended (perf_counter)
         self._real_restore, self._real_store = job_loop.restore_optimizer, job_loop._store
         self._real_open = OptimizerHost.open
 
@@ -115,6 +121,7 @@ class Meter:
         def store(*args):
             t0 = time.perf_counter()
             out = meter._real_store(*args)
+            meter.last_store_s[args[1].job_id] = time.perf_counter()
             meter.store_s.append(time.perf_counter() - t0)
             meter._add(meter.store_s[-1])
             return out
@@ -225,12 +232,25 @@ def measure(mode: str, db_dir: str, spec: dict, executor, workers: int) -> dict:
     busiest_s = max(sum(e.wall_ms for e in evaluations) for evaluations in stored) / 1000
     floor_s = max(busiest_s / max(workers // len(jobs), 1), episodes_s / workers)
     storage.engine_of(factory).dispose()
+    steady = _steady_busy(executor, workers, wall0, min(meter.last_store_s.values())) if runner is not None else nan
     return {"wall": wall, "rate": n / wall, "ask_ms": 1000 * statistics.median(meter.ask_s),
             "store_ms": 1000 * statistics.median(meter.store_s),
             "job": max(meter.thread_s.values()) / wall, "db": sum(meter.store_s) / wall, "cpu": cpu / wall,
             "work": episodes_s / (workers * wall), "cpu_ms": 1000 * cpu / n, "server_cpu_ms": 1000 * server_cpu / n,
             "episodes": sum(len(e.seeds or ()) for evaluations in stored for e in evaluations) / n,
-            "floor": floor_s}
+            "floor": floor_s, "steady": steady}
+
+
+def _steady_busy(cluster, workers: int, since_s: float, first_end_s: float) -> float:
+    """The workers' busy share while every job of the study still runs (from the study's start to its first job's
+    last store): the cluster's capacity the server keeps in use, without the study's drain, where the jobs left
+    have fewer evaluations in flight than the workers (the whole study's share counts it)."""
+    episode_s = getattr(cluster, "episode_s", None)
+    if episode_s is None or first_end_s <= since_s:
+        return nan
+    starts = [t for t in cluster.starts_s if t >= since_s]
+    busy = sum(max(0.0, min(t + episode_s, first_end_s) - t) for t in starts)
+    return busy / (workers * (first_end_s - since_s))
 
 
 def _row(label: str, seq: dict, conc: dict) -> str:
@@ -267,7 +287,7 @@ def _limits(rows: list[tuple[int, dict, dict]]) -> None:
         share = 100 * conc["rate"] / capacity
         print(f"  {n:>2} workers: {conc['rate']:6.1f} of {capacity:6.0f} evaluations/s ({share:3.0f} %), "
               f"{conc['server_cpu_ms']:5.1f} ms of the server's CPU an evaluation ({conc['cpu_ms']:.1f}); "
-              f"the workers busy {100 * conc['work']:3.0f} % "
+              f"the workers busy {100 * conc['work']:3.0f} % ({100 * conc['steady']:3.0f} % while all 8 jobs run) "
               f"({conc['episodes']:.2f} episodes an evaluation: a would-be best runs its confirmation seeds too); "
               f"the busiest job's episodes on its share of the workers {conc['floor']:.2f} s of the "
               f"{conc['wall']:.2f} s wall")

@@ -18,7 +18,7 @@ from driftlab.web.scene import set_chase_camera
 from driftlab.web.view_app import ViewApp
 from driftlab.worker.executors import evaluate_episode
 from tests.server_process import free_port
-from tests.web.chromium import WAIT_S
+from tests.web.chromium import WAIT_S, click_until_shown
 
 pytestmark = pytest.mark.e2e  # a browser
 
@@ -95,9 +95,10 @@ def test_the_chase_camera_follows_the_car_when_paused_and_scrubbed(dashboard, br
     view, url, first_trigger_s = dashboard
     page = browser.new_page(viewport={"width": 900, "height": 600})
     page.goto(url)
-    page.get_by_role("button", name="Play best").click()
-    page.get_by_role("button", name="Pause").click()
-    page.get_by_role("button", name="Play", exact=True).wait_for()
+    # The panel fills in under the buttons as the page lays out its data: a pointer click can wait for a button to
+    # stand still longer than a loaded machine gives it (120 s once), so each is clicked until what it shows is there.
+    click_until_shown(page.get_by_role("button", name="Play best"), page.get_by_role("button", name="Pause"))
+    click_until_shown(page.get_by_role("button", name="Pause"), page.get_by_role("button", name="Play", exact=True))
     _wait(lambda: len(view.sessions) == 1, "the tab's session")
     session = next(iter(view.sessions.values()))
     frames = session.playback.player.frames

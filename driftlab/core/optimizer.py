@@ -34,6 +34,7 @@ from scipy.optimize import minimize
 from scipy.stats import qmc
 
 from driftlab.core.acquisition import constrained_ei, expected_improvement, failure_clearance
+from driftlab.core.acquisition_gradient import NegativeConstrainedEI
 from driftlab.core.errors import ConfigError
 from driftlab.core.failure_model import LabelKernel, SuccessProbability
 from driftlab.core.limits import check_int
@@ -338,17 +339,10 @@ class BayesianOptimizer:
             return candidates[int(np.argmax(classifier(candidates)))]
         starts = candidates[np.argsort(-values)[:_LOCAL_STARTS]]
         best_x, best_v = starts[0], float(values.max())
-
-        step = 1e-5
-
-        def negative_with_gradient(u):
-            # Value and forward-difference gradient in one batched prediction (one GP solve, not d + 1).
-            probes = np.vstack([u, u + step * np.eye(self.dim)])
-            values = -self._acquisition(gp, classifier, best, failed, probes)
-            return float(values[0]), (values[1:] - values[0]) / step
-
+        negative = NegativeConstrainedEI(gp, classifier, best, _EI_XI, failed, _FAILURE_CLEARANCE,
+                                         _MIN_SUCCESS_PROBABILITY)
         for start in starts:
-            res = minimize(negative_with_gradient, start, jac=True, method="L-BFGS-B",
+            res = minimize(negative, start, jac=True, method="L-BFGS-B",
                            bounds=list(zip(low, high, strict=True)),
                            options={"maxiter": _LOCAL_ITERATIONS, "maxfun": _LOCAL_EVALUATIONS})
             if np.all(np.isfinite(res.x)) and -res.fun > best_v:

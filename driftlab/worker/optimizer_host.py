@@ -86,12 +86,14 @@ def _close(key: str) -> None:
 def _warm() -> int:
     """What a job's first open and ask would load otherwise, while the server starts: the optimizer (scipy's
     optimize and stats) and the episode module its known constraint calls (a theta whose corrected model has no drift
-    is not asked) with that check's compiled functions (~1 s)."""
+    is not asked) with that check's compiled functions (~1 s), and the local searches' compiled acquisition."""
     import driftlab.core.optimizer  # noqa: F401
+    from driftlab.core.acquisition_gradient import warm_up
     from driftlab.core.config import EpisodeConfig
     from driftlab.core.episode import runs
 
     runs(EpisodeConfig(), {})
+    warm_up()
     return os.getpid()
 
 

@@ -74,35 +74,58 @@ def _cho_solve(dpotrs, chol, b, scratch):
 
 
 @njit(cache=True)
-def _gp(dpotrs, u, x, alpha, chol, length_scales, signal_variance, y_mean, y_std, scratch):
-    """The GP's posterior mean and standard deviation at ``u`` and their gradients in ``u``."""
+def _scaled_squared_distances(u, x, length_scales):
+    """|(u - x_i) / l|^2 for each row x_i of ``x``."""
     n, d = x.shape
-    k = np.empty(n)
-    dk = np.empty((n, d))
+    r2 = np.zeros(n)
     for i in range(n):
-        r2 = 0.0
         for j in range(d):
             step = (u[j] - x[i, j]) / length_scales[j]
-            r2 += step * step
-        r = math.sqrt(r2)
-        e = math.exp(-_SQRT5 * r)
-        k[i] = signal_variance * (1.0 + _SQRT5 * r + (5.0 / 3.0) * r2) * e
-        radial = -(5.0 / 3.0) * signal_variance * (1.0 + _SQRT5 * r) * e
+            r2[i] += step * step
+    return r2
+
+
+@njit(cache=True)
+def _kernel_gradient(radial, u, x, length_scales):
+    """dk_i/du for a stationary kernel whose derivative is ``radial[i]`` (u - x_i) / l^2."""
+    n, d = x.shape
+    dk = np.empty((n, d))
+    for i in range(n):
         for j in range(d):
-            dk[i, j] = radial * (u[j] - x[i, j]) / (length_scales[j] * length_scales[j])
-    w = k.copy()
-    _cho_solve(dpotrs, chol, w, scratch)
+            dk[i, j] = radial[i] * (u[j] - x[i, j]) / (length_scales[j] * length_scales[j])
+    return dk
+
+
+@njit(cache=True)
+def _moments(k, dk, weights, solved):
+    """The posterior mean k^T weights, the explained variance k^T solved (solved = the kernel matrix's inverse times
+    k), and their gradients (the second one's with the factor 2 of d(k^T A^-1 k) = 2 (A^-1 k)^T dk, negated)."""
+    n, d = dk.shape
     mean, explained = 0.0, 0.0
     dmean, dvar = np.zeros(d), np.zeros(d)
     for i in range(n):
-        mean += k[i] * alpha[i]
-        explained += k[i] * w[i]
+        mean += k[i] * weights[i]
+        explained += k[i] * solved[i]
         for j in range(d):
-            dmean[j] += alpha[i] * dk[i, j]
-            dvar[j] -= 2.0 * w[i] * dk[i, j]
+            dmean[j] += weights[i] * dk[i, j]
+            dvar[j] -= 2.0 * solved[i] * dk[i, j]
+    return mean, explained, dmean, dvar
+
+
+@njit(cache=True)
+def _gp(dpotrs, u, x, alpha, chol, length_scales, signal_variance, y_mean, y_std, scratch):
+    """The GP's posterior mean and standard deviation at ``u`` and their gradients in ``u``."""
+    r2 = _scaled_squared_distances(u, x, length_scales)
+    r = np.sqrt(r2)
+    e = np.exp(-_SQRT5 * r)
+    k = signal_variance * (1.0 + _SQRT5 * r + (5.0 / 3.0) * r2) * e
+    dk = _kernel_gradient(-(5.0 / 3.0) * signal_variance * (1.0 + _SQRT5 * r) * e, u, x, length_scales)
+    w = k.copy()
+    _cho_solve(dpotrs, chol, w, scratch)
+    mean, explained, dmean, dvar = _moments(k, dk, alpha, w)
     variance = signal_variance - explained
     if variance <= 1e-18:  # the batched prediction's floor: flat there
-        return y_mean + y_std * mean, y_std * 1e-9, y_std * dmean, np.zeros(d)
+        return y_mean + y_std * mean, y_std * 1e-9, y_std * dmean, np.zeros(u.shape[0])
     std = math.sqrt(variance)
     return y_mean + y_std * mean, y_std * std, y_std * dmean, (y_std / (2.0 * std)) * dvar
 
@@ -110,28 +133,12 @@ def _gp(dpotrs, u, x, alpha, chol, length_scales, signal_variance, y_mean, y_std
 @njit(cache=True)
 def _success(dpotrs, u, x, coef, w_sr, chol, length_scales, constant, lambdas, coefs, scratch):
     """The classifier's P(success) at ``u`` and its gradient in ``u``."""
-    n, d = x.shape
-    k = np.empty(n)
-    dk = np.empty((n, d))
-    for i in range(n):
-        r2 = 0.0
-        for j in range(d):
-            step = (u[j] - x[i, j]) / length_scales[j]
-            r2 += step * step
-        k[i] = constant * math.exp(-0.5 * r2)
-        for j in range(d):
-            dk[i, j] = -k[i] * (u[j] - x[i, j]) / (length_scales[j] * length_scales[j])
+    k = constant * np.exp(-0.5 * _scaled_squared_distances(u, x, length_scales))
+    dk = _kernel_gradient(-k, u, x, length_scales)
     w = w_sr * k
     _cho_solve(dpotrs, chol, w, scratch)
-    mean, explained = 0.0, 0.0
-    dmean, dvar = np.zeros(d), np.zeros(d)
-    for i in range(n):
-        w[i] *= w_sr[i]
-        mean += k[i] * coef[i]
-        explained += k[i] * w[i]
-        for j in range(d):
-            dmean[j] += coef[i] * dk[i, j]
-            dvar[j] -= 2.0 * w[i] * dk[i, j]
+    w *= w_sr  # (W^-1 + K)^-1 k = W^1/2 B^-1 W^1/2 k
+    mean, explained, dmean, dvar = _moments(k, dk, coef, w)
     variance = constant - explained
     p, dp_dmean, dp_dvar = 0.0, 0.0, 0.0
     for m in range(lambdas.shape[0]):

@@ -6,7 +6,9 @@ success when some evaluations failed (as MATLAB bayesopt's error constraint does
 enters the regression as an invented number. P(success) comes from a Laplace GP classifier (scikit-learn's
 arithmetic, :mod:`driftlab.core.failure_model`; a least-squares label GP, tried, let twice as many proposals into a
 failing region) conditioned on at most ``_CLASSIFIER_POINTS`` evaluations: every failure and a spread of the
-successes. Seed points: a scrambled Latin hypercube.
+successes. The candidates are rated in one batched prediction; the local searches from the best of them
+(L-BFGS-B) read the acquisition and its exact gradient at one point, compiled
+(:mod:`driftlab.core.acquisition_gradient`). Seed points: a scrambled Latin hypercube.
 
 Determinism and resume: every proposal is a function of (seed, told history, pending points) only. The GP's
 hyperparameters are refit from a fixed starting point at history sizes that are multiples of ``refit_every``
@@ -46,9 +48,9 @@ _LOCAL_CANDIDATES = 128
 _LOCAL_STARTS = 2
 _LOCAL_ITERATIONS = 10
 # A local search also stops after this many evaluations of the acquisition: where it steps (P(success) crossing
-# _MIN_SUCCESS_PROBABILITY, the clearance from a failure) its forward-difference gradient misleads the line search,
-# which spent up to 133 evaluations (median 14) on a 500-run's asks; capped, a replay of 480 of them proposed the
-# same theta in 440 and an acquisition value within 1 % of the uncapped one in all but 20, for 27 % fewer.
+# _MIN_SUCCESS_PROBABILITY) no gradient sees the step, and the line search spent up to 133 evaluations (median 14) on
+# a 500-run's asks (measured with the forward-difference gradient the searches had then); capped, a replay of 480 of
+# them proposed the same theta in 440 and an acquisition value within 1 % of the uncapped one in all but 20.
 _LOCAL_EVALUATIONS = 30
 _HYPER_FIT_POINTS = 80  # hyperparameters from at most this many points; the GPs then condition on all
 _EI_XI = 0.0

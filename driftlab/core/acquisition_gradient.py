@@ -13,9 +13,9 @@ it for the candidates (to rounding); the gradient is analytic:
 - EI (Jones et al. 1998): dEI/dmean = -Phi(z), dEI/dstd = phi(z); the clearance 1 - exp(-d^2 / rho^2) through its
   nearest failure.
 
-One point costs two n x n triangular solve pairs (LAPACK's dpotrs, called from the kernel through scipy's
-``cython_lapack``), where a forward-difference gradient in d dimensions predicted d + 1 points through the batched
-path: the local searches of the job default's 500-run took ~140 us a call that way, ~2.7 s of its ~8 s of asks.
+One point costs two pairs of n x n triangular solves (LAPACK's dpotrs, called from the kernel through scipy's
+``cython_lapack``), where a forward-difference gradient in d dimensions predicts d + 1 points through the batched
+path (the two, measured: docs/benchmarks.md, "Exact gradients in the local searches").
 """
 
 from __future__ import annotations
